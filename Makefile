@@ -1,0 +1,45 @@
+# physgnn — `make help` lists the targets.
+.DEFAULT_GOAL := help
+SHELL := /bin/bash
+VENV ?= .venv
+PY := $(VENV)/bin/python
+PIP := $(VENV)/bin/pip
+TORCH_PIN ?= torch==2.13.0
+PRESET ?= small
+ARGS ?=
+
+help: ## List the targets
+	@grep -hE '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-12s\033[0m %s\n", $$1, $$2}'
+
+install: ## Make .venv and install physgnn with its dev tools (CPU torch wheel, nothing compiled)
+	test -x $(PY) || python3 -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+	$(PIP) install -q "$(TORCH_PIN)"
+	$(PIP) install -q -e ".[dev]"
+	$(PY) -c "import torch, torch_geometric, lightning, pybullet, h5py; print('physgnn environment ready: torch', torch.__version__)"
+
+test: ## Run the fast test suite
+	$(PY) -m pytest $(ARGS)
+
+test-slow: ## Run only the slow tests
+	$(PY) -m pytest -m slow $(ARGS)
+
+lint: ## Lint and check formatting with ruff
+	$(VENV)/bin/ruff check physgnn tests
+	$(VENV)/bin/ruff format --check physgnn tests
+
+format: ## Format and autofix with ruff
+	$(VENV)/bin/ruff format physgnn tests
+	$(VENV)/bin/ruff check --fix physgnn tests
+
+data: ## Generate the dataset (PRESET=small|tiny|paper) under outputs/data/<preset>
+	$(PY) -m physgnn.generate data=$(PRESET) $(ARGS)
+
+data-report: ## Print Table 1 of the dataset (PRESET=small)
+	$(PY) -m physgnn.data_report dataset=outputs/data/$(PRESET) $(ARGS)
+
+clean: ## Remove caches (keeps outputs/)
+	rm -rf .pytest_cache .ruff_cache .hypothesis
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +
+
+.PHONY: help install test test-slow lint format data data-report clean

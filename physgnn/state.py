@@ -1,0 +1,83 @@
+"""The simulator's view of scenes at one frame, as a PyG ``Data`` that batches many scenes.
+
+One :class:`SceneState` is one scene; ``Batch.from_data_list`` (or the PyG DataLoader) joins
+many into one disconnected graph: node tensors are concatenated, ``batch`` says the scene of
+each sphere, ``plane_batch`` the scene of each plane, and ``num_graphs`` the scene count.
+Graph edges are *not* stored here: they depend on the (noisy, predicted) state and are
+rebuilt from it at every step by :mod:`physgnn.graph`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch_geometric.data import Data
+
+from physgnn.features import finite_difference_velocities, history
+from physgnn.scene import EFFECT_NAMES, Effects, Trajectory
+
+
+class SceneState(Data):
+    """Fields (N spheres, S planes, H history; after batching, B scenes):
+
+    - ``pos [N, 3]``, ``quat [N, 4]`` (w, x, y, z)
+    - ``vel [N, H+1, 3]``, ``angvel [N, H+1, 3]``: latest first (``vel[:, 0]`` is ``v_t``)
+    - ``radius [N]``, ``mass [N]``, ``material [N]`` (long)
+    - ``planes [S, 11]``, ``plane_kind [S]`` (long), ``plane_batch [S]`` (scene of each plane)
+    - ``dt [B]``, ``effects [B, 5]`` (bool, order of ``scene.EFFECT_NAMES``)
+    - optional targets ``target_vel [N, 3]``, ``target_angvel [N, 3]`` (``v_{t+1}``, ``ω_{t+1}``)
+    """
+
+    @property
+    def scene_dt(self) -> torch.Tensor:
+        """Frame interval of every sphere's scene, ``[N]``."""
+        batch = self.batch if getattr(self, "batch", None) is not None else None
+        return self.dt[batch] if batch is not None else self.dt.expand(self.pos.shape[0])
+
+
+def effects_tensor(effects: Effects) -> torch.Tensor:
+    """``[1, 5]`` bool row in the order of ``EFFECT_NAMES``."""
+    return torch.tensor([[getattr(effects, k) for k in EFFECT_NAMES]], dtype=torch.bool)
+
+
+class TrajectoryFrames:
+    """A trajectory as float32 tensors with its finite-difference velocities precomputed.
+
+    ``state(t, h)`` is the :class:`SceneState` at frame ``t`` with ``h + 1`` velocities of
+    history (needs ``t ≥ h``) and, when ``t + 1`` exists, the targets of frame ``t + 1``.
+    """
+
+    def __init__(self, traj: Trajectory):
+        self.traj = traj
+        f32 = lambda a: torch.as_tensor(np.asarray(a, dtype=np.float32))  # noqa: E731
+        self.pos, self.quat = f32(traj.pos), f32(traj.quat)
+        self.vel, self.angvel = finite_difference_velocities(
+            self.pos, self.quat, f32(traj.vel[0]), f32(traj.angvel[0]), traj.dt
+        )
+        self.static = dict(
+            radius=f32(traj.radius),
+            mass=f32(traj.mass),
+            material=torch.as_tensor(np.asarray(traj.material), dtype=torch.long),
+            planes=f32(traj.planes),
+            plane_kind=torch.as_tensor(np.asarray(traj.plane_kind), dtype=torch.long),
+            plane_batch=torch.zeros(len(traj.planes), dtype=torch.long),
+            dt=torch.tensor([traj.dt], dtype=torch.float32),
+            effects=effects_tensor(traj.effects),
+        )
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.pos.shape[0])
+
+    def state(self, t: int, h: int) -> SceneState:
+        s = SceneState(
+            pos=self.pos[t].clone(),
+            quat=self.quat[t].clone(),
+            vel=history(self.vel, t, h),
+            angvel=history(self.angvel, t, h),
+            **self.static,
+        )
+        if t + 1 < self.n_frames:
+            s.target_vel = self.vel[t + 1].clone()
+            s.target_angvel = self.angvel[t + 1].clone()
+        return s
