@@ -67,7 +67,9 @@ def make_plane(centre, normal, ref_dir, half_x: float, half_y: float) -> np.ndar
     d = np.asarray(ref_dir, dtype=np.float64)
     n, d = n / np.linalg.norm(n), d / np.linalg.norm(d)
     if abs(float(n @ d)) > 1e-6:
-        raise SceneError(f"plane reference direction {d.tolist()} is not perpendicular to its normal")
+        raise SceneError(
+            f"plane reference direction {d.tolist()} is not perpendicular to its normal"
+        )
     row = np.concatenate([np.asarray(centre, dtype=np.float64), n, d, [half_x, half_y]])
     return row.astype(np.float32)
 
@@ -111,14 +113,24 @@ class Scene:
         n = self.n_spheres
         if n < 1:
             raise SceneError(f"scene '{self.name}' has no sphere (a scene needs at least one)")
-        shapes = {"mass": (n,), "material": (n,), "pos": (n, 3), "quat": (n, 4),
-                  "vel": (n, 3), "angvel": (n, 3)}
+        shapes = {
+            "mass": (n,),
+            "material": (n,),
+            "pos": (n, 3),
+            "quat": (n, 4),
+            "vel": (n, 3),
+            "angvel": (n, 3),
+        }
         for key, shape in shapes.items():
             if getattr(self, key).shape != shape:
-                raise SceneError(f"scene '{self.name}': {key} has shape "
-                                 f"{getattr(self, key).shape}, expected {shape}")
+                raise SceneError(
+                    f"scene '{self.name}': {key} has shape "
+                    f"{getattr(self, key).shape}, expected {shape}"
+                )
         if not np.all(self.radius > 0):
-            raise SceneError(f"scene '{self.name}': radius must be > 0 (got min {self.radius.min()})")
+            raise SceneError(
+                f"scene '{self.name}': radius must be > 0 (got min {self.radius.min()})"
+            )
         if not np.all(self.mass > 0):
             raise SceneError(f"scene '{self.name}': mass must be > 0 (got min {self.mass.min()})")
         if self.planes.ndim != 2 or self.planes.shape[1] != PLANE_DIM:
@@ -128,7 +140,9 @@ class Scene:
         if self.dt <= 0 or self.n_frames < 2:
             raise SceneError(f"scene '{self.name}': need dt > 0 and n_frames >= 2")
         if self.material.min() < 0 or self.material.max() >= len(self.materials):
-            raise SceneError(f"scene '{self.name}': material id out of range [0, {len(self.materials)})")
+            raise SceneError(
+                f"scene '{self.name}': material id out of range [0, {len(self.materials)})"
+            )
         for key in ("radius", "mass", "pos", "quat", "vel", "angvel"):
             if not np.all(np.isfinite(getattr(self, key))):
                 raise SceneError(f"scene '{self.name}': {key} contains NaN or inf")
