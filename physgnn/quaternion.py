@@ -64,14 +64,20 @@ def log(q: torch.Tensor) -> torch.Tensor:
     The input is normalised first. ``[..., 4] → [..., 3]``, angle in ``[0, π]``.
     """
     q = normalize(q)
-    q = torch.where(q[..., :1] < 0, -q, q)
+    # Canonical sign: w > 0, or at exactly a half turn (w = 0) the first non-zero of x, y, z
+    # positive, so that q and −q give the same rotation vector even there.
+    w, x, y, z = q.unbind(-1)
+    lead = torch.where(w != 0, w, torch.where(x != 0, x, torch.where(y != 0, y, z)))
+    q = torch.where((lead < 0).unsqueeze(-1), -q, q)
     w, xyz = q[..., 0], q[..., 1:]
     s = xyz.norm(dim=-1)
     half = torch.atan2(s, w)  # in [0, π/2]
-    # θ·u = 2·half·xyz/s; near 0, half/s → 1/w·(1 + s²/(3w²)…) ≈ 1/w.
+    # θ·u = 2·half·xyz/s; near 0, half/s = atan(s/w)/s = 1/w·(1 − s²/(3w²) + O(s⁴)).
     small = half < _SMALL_ANGLE
     safe_s = torch.where(small, torch.ones_like(s), s)
-    scale = torch.where(small, 2.0 / w.clamp_min(1e-12), 2.0 * half / safe_s)
+    w_safe = w.clamp_min(1e-12)
+    taylor = 2.0 / w_safe * (1.0 - (s / w_safe) ** 2 / 3.0)
+    scale = torch.where(small, taylor, 2.0 * half / safe_s)
     return xyz * scale.unsqueeze(-1)
 
 

@@ -1,0 +1,147 @@
+"""``python -m physgnn.data_report dataset=outputs/data/small``: Table 1 of a dataset.
+
+The report's Table 1 measures the physics of the ground truth itself: normalised cumulative
+energy gain and penetration (depth and percentage of spheres; sphere–sphere, sphere–ground,
+sphere–other surfaces), mean ± std over the trajectories of the test and OOD splits (std with
+ddof = 0). The energy uses the engine's velocities (the physics of the data), as the
+``ground_truth`` rows of ``make eval`` do; the gain with finite-difference velocities (what a
+rollout records, so what a perfect model would show) is printed below the table. Prints the
+table beside the report's Blender figures and writes ``<dataset>/report.json``:
+``{"test": {"energy_gain": {"mean": .., "std": ..}, "depth_sphere": {..}, …}, "ood": {..}}``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig
+from rich.console import Console
+from rich.table import Table
+
+# torch, h5py and scipy are imported when needed: a bad command line fails fast.
+KEYS = (
+    "energy_gain",
+    "depth_sphere",
+    "depth_ground",
+    "depth_static",
+    "pct_sphere",
+    "pct_ground",
+    "pct_static",
+)
+LABELS = {
+    "energy_gain": "Normalised cumulative energy gain",
+    "depth_sphere": "Normalised mean depth (sphere)",
+    "depth_ground": "Normalised mean depth (ground)",
+    "depth_static": "Normalised mean depth (static)",
+    "pct_sphere": "% spheres intersecting (sphere-sphere)",
+    "pct_ground": "% spheres intersecting (sphere-ground)",
+    "pct_static": "% spheres intersecting (sphere-static)",
+}
+# The report's Table 1 (Blender ground truth): metric -> split -> (mean, std).
+REPORT = {
+    "energy_gain": {"test": (2.11e-2, 1.86e-2), "ood": (2.83e-2, 5.46e-2)},
+    "depth_sphere": {"test": (4.22e-3, 2.17e-3), "ood": (1.65e-3, 1.28e-3)},
+    "depth_ground": {"test": (1.75e-2, 5.31e-3), "ood": (5.11e-7, 2.87e-7)},
+    "depth_static": {"test": (5.91e-5, 1.56e-4), "ood": (9.31e-4, 1.86e-3)},
+    "pct_sphere": {"test": (48.41, 22.97), "ood": (48.70, 49.84)},
+    "pct_ground": {"test": (10.66, 4.98), "ood": (100.0, 0.0)},
+    "pct_static": {"test": (0.198, 0.322), "ood": (8.80, 17.59)},
+}
+
+
+class DataReportError(ValueError):
+    """The dataset cannot be reported (one line naming the problem)."""
+
+
+def split_summary(trajectories: list, tol: float = 0.0, velocities: str = "engine") -> dict:
+    """``{metric: {"mean": float, "std": float}}`` over the trajectories of one split
+    (energy from the engine's or the finite-difference ``velocities``)."""
+    from physgnn.metrics import trajectory_dict, trajectory_metrics
+
+    if not trajectories:
+        raise DataReportError("split has no trajectory")
+    rows = [trajectory_metrics(trajectory_dict(t, velocities), None, tol=tol) for t in trajectories]
+    values = {k: np.array([row[k] for row in rows], dtype=np.float64) for k in KEYS}
+    return {k: {"mean": float(v.mean()), "std": float(v.std())} for k, v in values.items()}
+
+
+def fmt(mean: float, std: float) -> str:
+    """``mean ± std`` with 3 significant digits (scientific for small or large numbers)."""
+    if mean != 0 and not 1e-2 <= abs(mean) < 1e3:
+        return f"{mean:.2e} ± {std:.2e}"
+    return f"{mean:.3g} ± {std:.3g}"
+
+
+def table(summary: dict) -> Table:
+    """Rich table: metric, ours per split, the report's per split."""
+    splits = list(summary)
+    t = Table(title="Table 1: physics of the ground truth (mean ± std over trajectories)")
+    t.add_column("metric")
+    for split in splits:
+        t.add_column(f"ours {split}", justify="right")
+    for split in splits:
+        t.add_column(f"report (Blender) {split}", justify="right")
+    for key in KEYS:
+        ours = [fmt(**summary[s][key]) for s in splits]
+        theirs = [fmt(*REPORT[key][s]) if s in REPORT[key] else "—" for s in splits]
+        t.add_row(LABELS[key], *ours, *theirs)
+    return t
+
+
+def data_report(cfg: DictConfig) -> dict:
+    """Compute, print and write ``report.json`` for ``cfg.dataset``; returns its content."""
+    folder = Path(cfg.dataset)
+    if not folder.is_dir():
+        raise DataReportError(f"dataset folder {folder} not found: run `make data` first")
+    from physgnn.dataset import read_split
+
+    summary, finite = {}, {}
+    for split in cfg.splits:
+        trajectories = read_split(folder / f"{split}.h5")
+        try:
+            summary[split] = split_summary(trajectories, float(cfg.tol))
+        except DataReportError as e:
+            raise DataReportError(f"{folder / f'{split}.h5'}: {e}") from None
+        finite[split] = split_summary(trajectories, float(cfg.tol), "finite")["energy_gain"]
+    console = Console()
+    console = console if console.is_terminal else Console(width=160)  # files and pipes
+    console.print(table(summary))
+    gains = ", ".join(f"{s} {fmt(**v)}" for s, v in finite.items())
+    console.print(
+        f"Energy from the engine's velocities. With finite-difference velocities, as a "
+        f"rollout records them (the gain a perfect rollout would show): {gains}."
+    )
+    out = folder / "report.json"
+    out.write_text(json.dumps(summary, indent=2) + "\n")
+    print(f"wrote {out}")
+    return summary
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="data_report")
+def main(cfg: DictConfig) -> None:
+    """Entry point: errors of the user's making are one ``error: ...`` line, exit 2."""
+    try:
+        data_report(cfg)
+    except Exception as e:
+        if not _user_error(e):
+            raise
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
+
+
+def _user_error(e: Exception) -> bool:
+    """A bad dataset or command line (not a bug)."""
+    if isinstance(e, DataReportError):
+        return True
+    from physgnn.dataset import DatasetError
+    from physgnn.metrics import MetricError
+
+    return isinstance(e, (DatasetError, MetricError))
+
+
+if __name__ == "__main__":
+    main()

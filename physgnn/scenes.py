@@ -1,0 +1,287 @@
+"""Scene families built from a config (Hydra group ``scene/``) and a numpy ``Generator``.
+
+``build_scene(cfg, rng)`` dispatches on ``cfg.name``. Every config has ``dt``, ``n_frames``,
+``effects`` (dict of :data:`physgnn.scene.EFFECT_NAMES`), ``materials`` (list of dicts of
+:class:`physgnn.scene.Material` fields) and ``density`` (kg/m³, mass = density·4/3·π·r³).
+Arenas are squares of side ``side`` centred at the origin, closed by 4 walls of height
+``wall_height`` (planes of kind wall, normals inward); the ground is always plane row 0.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+
+import numpy as np
+from omegaconf import DictConfig, OmegaConf
+
+from physgnn.scene import (
+    GROUND,
+    STATIC,
+    WALL,
+    Effects,
+    Material,
+    Scene,
+    SceneError,
+    ground_plane,
+    make_plane,
+)
+
+
+def _plain(cfg) -> dict:
+    if isinstance(cfg, DictConfig):
+        return OmegaConf.to_container(cfg, resolve=True)
+    return dict(cfg)
+
+
+def materials_array(materials: list[Mapping]) -> np.ndarray:
+    """``[K, 4]`` (restitution, lateral, rolling, spinning friction) from a list of dicts."""
+    if not materials:
+        raise SceneError("scene config needs at least one material")
+    rows = [Material(**dict(m)).as_array() for m in materials]
+    arr = np.stack(rows)
+    if np.any(arr < 0) or np.any(arr[:, 0] > 1):
+        raise SceneError("material coefficients must be >= 0 and restitution <= 1")
+    return arr
+
+
+def random_quaternions(rng: np.random.Generator, n: int) -> np.ndarray:
+    """Uniformly random unit quaternions ``[n, 4]`` (w, x, y, z) with w ≥ 0."""
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return np.where(q[:, :1] < 0, -q, q)
+
+
+def arena_planes(side: float, wall_height: float) -> tuple[np.ndarray, np.ndarray]:
+    """Ground + 4 inward-facing walls around ``[-side/2, side/2]²``: planes ``[5, 11]``,
+    kinds ``[5]``."""
+    h = side / 2
+    rows, kinds = [ground_plane()], [GROUND]
+    for normal, ref in (
+        ((-1, 0, 0), (0, 1, 0)),
+        ((1, 0, 0), (0, -1, 0)),
+        ((0, -1, 0), (-1, 0, 0)),
+        ((0, 1, 0), (1, 0, 0)),
+    ):
+        centre = -h * np.asarray(normal, dtype=np.float64) + [0, 0, wall_height / 2]
+        rows.append(make_plane(centre, normal, ref, h, wall_height / 2))
+        kinds.append(WALL)
+    return np.stack(rows), np.asarray(kinds, dtype=np.int64)
+
+
+def ground_only() -> tuple[np.ndarray, np.ndarray]:
+    return ground_plane()[None], np.asarray([GROUND], dtype=np.int64)
+
+
+def ramp_plane(centre, slope_deg: float, half_length: float, half_width: float) -> np.ndarray:
+    """A bounded plane tilted by ``slope_deg`` about the y axis, descending towards +x."""
+    a = np.deg2rad(slope_deg)
+    normal = (np.sin(a), 0.0, np.cos(a))
+    downhill = (np.cos(a), 0.0, -np.sin(a))
+    return make_plane(centre, normal, downhill, half_length, half_width)
+
+
+def _finish(
+    c: dict, pos, radius, rng, planes, kinds, vel=None, angvel=None, material=None
+) -> Scene:
+    """Common tail: masses, orientations, materials, effects; validates the scene."""
+    pos = np.asarray(pos, dtype=np.float64).reshape(-1, 3)
+    n = len(pos)
+    radius = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n,))
+    if np.any(radius <= 0):
+        raise SceneError(f"scene '{c['name']}': radius must be > 0 (got {radius.min()})")
+    mats = materials_array(c["materials"])
+    if material is None:
+        material = rng.integers(0, len(mats), size=n)
+    zeros = np.zeros((n, 3))
+    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
+    scene = Scene(
+        name=c["name"],
+        radius=f32(radius),
+        mass=f32(c["density"] * 4 / 3 * np.pi * radius**3),
+        material=np.asarray(material, dtype=np.int64),
+        pos=f32(pos),
+        quat=f32(random_quaternions(rng, n)),
+        vel=f32(zeros if vel is None else vel),
+        angvel=f32(zeros if angvel is None else angvel),
+        planes=f32(planes),
+        plane_kind=np.asarray(kinds, dtype=np.int64),
+        materials=mats,
+        dt=float(c["dt"]),
+        n_frames=int(c["n_frames"]),
+        effects=Effects.from_dict(c.get("effects")),
+    )
+    return scene.validate()
+
+
+def spawn_without_overlap(
+    rng, radius: np.ndarray, low: np.ndarray, high: np.ndarray, tries: int
+) -> np.ndarray:
+    """Reject-sample centres ``[N, 3]`` with centre ∈ [low + r, high − r] (per axis; the z
+    range is [low_z + r, high_z]) and no two spheres overlapping. Raises SceneError after
+    ``tries`` failed draws for one sphere."""
+    pos = np.empty((len(radius), 3))
+    for i, r in enumerate(radius):
+        lo = low + r
+        hi = np.array([high[0] - r, high[1] - r, high[2]])
+        if np.any(hi < lo):
+            raise SceneError(f"sphere of radius {r:.3g} does not fit in the spawn volume")
+        for _ in range(tries):
+            x = rng.uniform(lo, hi)
+            gap = np.linalg.norm(pos[:i] - x, axis=1) - radius[:i] - r
+            if np.all(gap > 0):
+                pos[i] = x
+                break
+        else:
+            raise SceneError(
+                f"could not place sphere {i + 1} of {len(radius)} without overlap "
+                f"in {tries} tries (use a larger arena, more height or fewer spheres)"
+            )
+    return pos
+
+
+def random_box(c: dict, rng: np.random.Generator) -> Scene:
+    """N ~ U{n_min..n_max} spheres of radius U[radius_min, radius_max] at heights in
+    (r, h_max] over a square arena of side U[side_min, side_max] with 4 walls. Initial
+    horizontal velocities are uniform in a disc of radius ``max_speed0`` and angular
+    velocities uniform in a ball of radius ``max_angvel0`` (more rolling and wall hits)."""
+    if c["n_min"] < 1 or c["n_max"] < c["n_min"]:
+        raise SceneError(
+            f"random_box: need 1 <= n_min <= n_max (got {c['n_min']}, {c['n_max']}): "
+            "a scene needs at least one sphere"
+        )
+    if c["radius_min"] <= 0 or c["radius_max"] < c["radius_min"]:
+        raise SceneError(
+            f"random_box: need 0 < radius_min <= radius_max "
+            f"(got {c['radius_min']}, {c['radius_max']})"
+        )
+    n = int(rng.integers(c["n_min"], c["n_max"] + 1))
+    side = float(rng.uniform(c["side_min"], c["side_max"]))
+    radius = rng.uniform(c["radius_min"], c["radius_max"], size=n)
+    half = side / 2
+    pos = spawn_without_overlap(
+        rng,
+        radius,
+        np.array([-half, -half, 0.0]),
+        np.array([half, half, c["h_max"]]),
+        int(c["spawn_tries"]),
+    )
+    ang = rng.uniform(0, 2 * np.pi, size=n)
+    speed = c["max_speed0"] * np.sqrt(rng.uniform(size=n))
+    vel = np.stack([speed * np.cos(ang), speed * np.sin(ang), np.zeros(n)], axis=1)
+    w = rng.normal(size=(n, 3))
+    w *= (c["max_angvel0"] * rng.uniform(size=(n, 1)) ** (1 / 3)) / np.linalg.norm(
+        w, axis=1, keepdims=True
+    )
+    planes, kinds = arena_planes(side, c["wall_height"])
+    return _finish(c, pos, radius, rng, planes, kinds, vel=vel, angvel=w)
+
+
+def cube_positions(corner, k: int, radius: float, gap: float) -> np.ndarray:
+    """Centres ``[k³, 3]`` of a k×k×k cube of spheres, bottom-front-left centre at
+    ``corner``, neighbours ``gap`` apart (surface to surface)."""
+    step = 2 * radius + gap
+    idx = np.stack(np.meshgrid(*[np.arange(k)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    return np.asarray(corner, dtype=np.float64) + step * idx
+
+
+def _cubes(c: dict) -> np.ndarray:
+    k, r, gap = int(c["k"]), float(c["radius"]), float(c["gap"])
+    if k < 1:
+        raise SceneError(f"{c['name']}: k must be >= 1 (got {k})")
+    return np.concatenate([cube_positions(x, k, r, gap) for x in c["cube_corners"]])
+
+
+def _arena(c: dict):
+    return arena_planes(c["side"], c["wall_height"]) if c.get("walls", True) else ground_only()
+
+
+def ood_cubes(c: dict, rng: np.random.Generator) -> Scene:
+    """(a) 4 cubes of k×k×k spheres, ``gap`` apart, falling from ``cube_corners``."""
+    planes, kinds = _arena(c)
+    return _finish(c, _cubes(c), c["radius"], rng, planes, kinds)
+
+
+def check_clear_of_planes(
+    name: str, pos: np.ndarray, radius, planes: np.ndarray, depth: float = 1.0
+) -> None:
+    """Raise SceneError if a sphere starts on or inside a bounded plane (or the ``depth`` m
+    of solid behind it, as the engine builds it)."""
+    radius = np.broadcast_to(np.asarray(radius, dtype=np.float64), (len(pos),))
+    for row in planes[1:]:
+        centre, n, d = row[:3], row[3:6], row[6:9]
+        rel = pos - centre
+        along, across, normal = rel @ d, rel @ np.cross(n, d), rel @ n
+        inside = (np.abs(along) <= row[9] + radius) & (np.abs(across) <= row[10] + radius)
+        hit = inside & (normal > -depth - radius) & (normal < radius)
+        if np.any(hit):
+            i = int(np.argmax(hit))
+            raise SceneError(
+                f"scene '{name}': sphere {i} at {np.round(pos[i], 2).tolist()} "
+                "starts on or inside a plane; move it"
+            )
+
+
+def ood_cubes_ramps(c: dict, rng: np.random.Generator) -> Scene:
+    """(b) (a) plus bounded inclined planes in the air (kind static), from ``ramps``: a list
+    of ``{centre, slope_deg, half_length, half_width}`` descending towards +x."""
+    planes, kinds = _arena(c)
+    ramps = [
+        ramp_plane(q["centre"], q["slope_deg"], q["half_length"], q["half_width"])
+        for q in c["ramps"]
+    ]
+    planes = np.concatenate([planes, np.stack(ramps)])
+    kinds = np.concatenate([kinds, np.full(len(ramps), STATIC)])
+    pos = _cubes(c)
+    check_clear_of_planes(c["name"], pos, c["radius"], planes.astype(np.float64))
+    return _finish(c, pos, c["radius"], rng, planes, kinds)
+
+
+def ood_resting_hit(c: dict, rng: np.random.Generator) -> Scene:
+    """(c) Groups of touching spheres resting on the ground (rows of ``group_size`` along x
+    starting at each ``group_starts``), a lone target sphere before each group, and a sphere
+    dropped from each of ``drop_heights`` just off the target's centre (by ``drop_offset``
+    along −x) so it glances off it and sends it rolling (+x) into its group."""
+    r = float(c["radius"])
+    pos = []
+    for start in c["group_starts"]:
+        for j in range(int(c["group_size"])):
+            pos.append([start[0] + 2 * r * j, start[1], r])
+    for target, h in zip(c["targets"], c["drop_heights"], strict=True):
+        pos.append([target[0], target[1], r])
+        pos.append([target[0] - c["drop_offset"], target[1], h])
+    planes, kinds = _arena(c)
+    return _finish(c, pos, r, rng, planes, kinds)
+
+
+def ood_spaced_drop(c: dict, rng: np.random.Generator) -> Scene:
+    """(d) A ``grid``×``grid`` layer of spheres ``spacing`` apart (centre to centre), all at
+    ``height``, dropped from rest: they bounce without touching each other."""
+    g, r, s = int(c["grid"]), float(c["radius"]), float(c["spacing"])
+    if s <= 2 * r:
+        raise SceneError(f"ood_spaced_drop: spacing {s} must exceed the diameter {2 * r}")
+    xy = (np.arange(g) - (g - 1) / 2) * s
+    gx, gy = np.meshgrid(xy, xy, indexing="ij")
+    pos = np.stack([gx.ravel(), gy.ravel(), np.full(g * g, float(c["height"]))], axis=1)
+    planes, kinds = _arena(c)
+    return _finish(c, pos, r, rng, planes, kinds)
+
+
+BUILDERS: dict[str, Callable[[dict, np.random.Generator], Scene]] = {
+    "random_box": random_box,
+    "ood_cubes": ood_cubes,
+    "ood_cubes_ramps": ood_cubes_ramps,
+    "ood_resting_hit": ood_resting_hit,
+    "ood_spaced_drop": ood_spaced_drop,
+}
+
+
+def build_scene(cfg: Mapping | DictConfig, rng: np.random.Generator) -> Scene:
+    """Build the scene family ``cfg.name`` with random draws from ``rng``."""
+    c = _plain(cfg)
+    name = c.get("name")
+    if name not in BUILDERS:
+        raise SceneError(f"unknown scene '{name}'; known: {', '.join(BUILDERS)}")
+    try:
+        return BUILDERS[name](c, rng)
+    except KeyError as e:
+        raise SceneError(f"scene '{name}': missing config key {e}") from None

@@ -1,0 +1,215 @@
+"""Rollout engine (physgnn.rollout) against hand-computed integrations."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+from physgnn import metrics as M
+from physgnn.rollout import RolloutError, rollout
+from physgnn.scene import Effects, Trajectory, ground_plane
+from physgnn.state import TrajectoryFrames
+
+DT = 0.1
+
+
+def linear_traj(p0, v0, frames=12, name="lin", effects=None, radius=0.5):
+    """Spheres moving at constant velocity ``v0 [N, 3]`` from ``p0 [N, 3]``, identity quats."""
+    p0, v0 = np.asarray(p0, np.float64), np.asarray(v0, np.float64)
+    n = len(p0)
+    pos = p0 + v0 * DT * np.arange(frames)[:, None, None]
+    quat = np.zeros((frames, n, 4), np.float32)
+    quat[..., 0] = 1
+    return Trajectory(
+        name=name, pos=pos.astype(np.float32), quat=quat,
+        vel=np.broadcast_to(v0, (frames, n, 3)).astype(np.float32),
+        angvel=np.zeros((frames, n, 3), np.float32),
+        radius=np.full(n, radius, np.float32), mass=np.ones(n, np.float32),
+        material=np.zeros(n, np.int64), planes=ground_plane()[None],
+        plane_kind=np.zeros(1, np.int64), materials=np.zeros((1, 4), np.float32), dt=DT,
+        effects=effects or Effects(),
+    )  # fmt: skip
+
+
+class Constant(nn.Module):
+    """Predicts the same v and ω for every sphere; records the velocity histories it sees."""
+
+    def __init__(self, v, w, H=1):
+        super().__init__()
+        self.v, self.w, self.H, self.seen = torch.tensor(v), torch.tensor(w), H, []
+
+    def forward(self, state):
+        self.seen.append(state.vel.clone())
+        n = state.pos.shape[0]
+        return self.v.expand(n, 3).clone(), self.w.expand(n, 3).clone()
+
+
+class Exploding(nn.Module):
+    """``v̂ = factor · v_t``: grows geometrically, so its divergence step is known."""
+
+    H = 0
+
+    def __init__(self, factor=10.0):
+        super().__init__()
+        self.factor = factor
+
+    def forward(self, state):
+        return self.factor * state.vel[:, 0], state.angvel[:, 0]
+
+
+class Replay(nn.Module):
+    """Returns the true next velocities of one trajectory (the rollout replays the truth)."""
+
+    def __init__(self, traj, H):
+        super().__init__()
+        self.frames, self.H, self.t = TrajectoryFrames(traj), H, H
+
+    def forward(self, state):
+        self.t += 1
+        return self.frames.vel[self.t], self.frames.angvel[self.t]
+
+
+def test_constant_velocity_rollout_matches_the_integrator_by_hand():
+    traj = linear_traj([[0, 0, 5], [3, 0, 5]], [[0, 0, 0], [0, 0, 0]], frames=8)
+    sim = Constant([1.0, -2.0, 0.5], [0.0, 0.0, 2.0], H=1)
+    (res,) = rollout(sim, [traj])
+    assert res.n_frames == 8 and res.diverged_at is None and res.start == 1
+    k = np.arange(8)[:, None, None] - 1.0  # steps after the start frame H = 1
+    expect = traj.pos[1] + np.clip(k, 0, None) * DT * np.array([1.0, -2.0, 0.5])
+    np.testing.assert_allclose(res.pos, expect, atol=1e-5)
+    np.testing.assert_allclose(res.vel[2:], np.broadcast_to([1.0, -2.0, 0.5], (6, 2, 3)), atol=2e-5)
+    # q ← normalise(q + ½·dt·(0, ω)⊗q) about z: the half angle grows by atan(½·dt·ω) a step.
+    half = np.clip(k[:, :, 0], 0, None) * math.atan(0.5 * DT * 2.0)
+    quat = np.stack([np.cos(half), 0 * half, 0 * half, np.sin(half)], -1)
+    np.testing.assert_allclose(res.quat, np.broadcast_to(quat, (8, 2, 4)), atol=1e-6)
+    # Histories are shifted: the second call sees [v̂, v_H] (latest first).
+    assert len(sim.seen) == 6
+    torch.testing.assert_close(sim.seen[1][:, 0], torch.tensor([[1.0, -2.0, 0.5]] * 2))
+    torch.testing.assert_close(sim.seen[1][:, 1], torch.zeros(2, 3))
+
+
+def test_rotation_off_leaves_orientation_untouched():
+    traj = linear_traj([[0, 0, 5]], [[0, 0, 0]], frames=5, effects=Effects(rotation=False))
+    traj.quat[:] = np.array([0.5, 0.5, 0.5, 0.5], np.float32)
+    (res,) = rollout(Constant([0.0, 0, 0], [3.0, 1.0, 0.0], H=0), [traj])
+    assert np.array_equal(res.quat, traj.quat)
+
+
+def test_exploding_simulator_stops_at_the_step_computed_by_hand():
+    # Speed 1 m/s at the start, ×10 per step: 1e5 > 1e4 at the 5th step, frame H + 5 = 5.
+    boom = linear_traj([[0, 0, 5]], [[1.0, 0, 0]], frames=20, name="boom")
+    rest = linear_traj([[0, 0, 0.5]], [[0.0, 0, 0]], frames=20, name="rest")
+    res_boom, res_rest = rollout(Exploding(), [boom, rest])
+    assert res_boom.diverged_at == 5 and res_boom.n_frames == 5 and res_boom.pos.shape[0] == 5
+    assert np.isfinite(res_boom.pos).all()
+    assert res_rest.diverged_at is None and res_rest.n_frames == 20  # the other scene goes on
+    np.testing.assert_allclose(res_boom.pos[:, 0, 0], [0, 1, 11, 111, 1111], rtol=1e-6)
+    out = M.trajectory_metrics(res_boom.as_dict(), boom)
+    assert out["diverged_at"] == 5 and out["n_frames"] == 5 and np.isfinite(out["mse"])
+    # The bound relative to the truth: 10 × max(1 m/s, 1) = 10 m/s, exceeded by 100 m/s.
+    (res,) = rollout(Exploding(), [boom], speed_factor=10.0)
+    assert res.diverged_at == 2
+
+
+def test_non_finite_prediction_stops_the_scene():
+    class NanAt3(Exploding):
+        calls = 0
+
+        def forward(self, state):
+            self.calls += 1
+            v = state.vel[:, 0] + (float("nan") if self.calls == 3 else 0.0)
+            return v, state.angvel[:, 0]
+
+    (res,) = rollout(NanAt3(), [linear_traj([[0, 0, 5]], [[1.0, 0, 0]])])
+    assert res.diverged_at == 3 and res.pos.shape == (3, 1, 3) and np.isfinite(res.vel).all()
+
+
+def test_replayed_truth_has_the_metrics_of_the_truth():
+    rng = np.random.default_rng(3)
+    frames, n = 30, 6
+    t = np.arange(frames)[:, None, None] * DT
+    pos = rng.uniform(0, 2, (1, n, 3)) + [0, 0, 1] + rng.normal(0, 1, (1, n, 3)) * t
+    pos[..., 2] = np.abs(pos[..., 2] - 4.9 * t[..., 0] ** 2)  # fall, reflect at the ground
+    traj = linear_traj(pos[0], np.zeros((n, 3)), frames=frames)
+    traj.pos = pos.astype(np.float32)
+    H = 2
+    (res,) = rollout(Replay(traj, H), [traj])
+    direct = M.trajectory_metrics(M.trajectory_dict(traj, "finite"), traj)
+    through = M.trajectory_metrics(res.as_dict(), traj)
+    assert direct["pct_sphere"] > 0 and direct["pct_ground"] > 0 and direct["energy_gain"] > 0
+    assert through["mse"] < 1e-10 and through["rotation_error"] == 0.0
+    for key in ("energy_gain", *M.PENETRATION_KEYS):
+        assert through[key] == pytest.approx(direct[key], rel=1e-4, abs=1e-6), key
+
+
+def test_batched_scenes_of_different_lengths_and_longer_than_the_truth():
+    a = linear_traj([[0, 0, 5]], [[1.0, 0, 0]], frames=6, name="a")
+    b = linear_traj([[0, 0, 5], [4, 0, 5]], [[0, 1.0, 0], [0, 1.0, 0]], frames=9, name="b")
+    ra, rb = rollout(Constant([0.0, 0, 1.0], [0.0, 0, 0], H=0), [a, b])
+    assert ra.pos.shape == (6, 1, 3) and rb.pos.shape == (9, 2, 3)
+    np.testing.assert_allclose(rb.pos[-1, :, 2], 5 + 8 * DT, rtol=1e-6)
+    (long,) = rollout(Constant([0.0, 0, 0], [0.0, 0, 0], H=0), [a], n_frames=15)
+    assert long.n_frames == 15
+    one_by_one = rollout(Constant([0.0, 0, 1.0], [0.0, 0, 0], H=0), [a, b], batch_size=1)
+    np.testing.assert_allclose(one_by_one[1].pos, rb.pos)
+
+
+def test_timings_split_graph_network_integration():
+    class Timed(Constant):
+        def forward(self, state):
+            self.timings["graph"] += 0.25  # cumulative, as LearnedSimulator's
+            return super().forward(state)
+
+    sim = Timed([0.0, 0, 0], [0.0, 0, 0], H=0)
+    sim.timings = {"graph": 0.0, "network": 0.0}
+    (res,) = rollout(sim, [linear_traj([[0, 0, 5]], [[0.0, 0, 0]], frames=5)])
+    assert res.timings["steps"] == 4 and res.timings["graph"] == pytest.approx(1.0)
+    assert res.timings["network"] < 0  # the fake graph seconds exceed the real call time
+    assert res.fps == pytest.approx(4 / res.timings["total"])
+
+
+def test_bad_input_is_one_clear_error():
+    short = linear_traj([[0, 0, 5]], [[0.0, 0, 0]], frames=2)
+    with pytest.raises(RolloutError, match="H\\+1 = 3 frames"):
+        rollout(Constant([0.0, 0, 0], [0.0, 0, 0], H=2), [short])
+    nan = linear_traj([[0, 0, 5]], [[0.0, 0, 0]], frames=4)
+    nan.pos[0, 0, 0] = np.nan
+    with pytest.raises(RolloutError, match="NaN"):
+        rollout(Constant([0.0, 0, 0], [0.0, 0, 0], H=0), [nan])
+    with pytest.raises(RolloutError, match="history=H"):
+        rollout(lambda s: (s.pos, s.pos), [short])
+
+
+def test_sleeping_freezes_resting_spheres_and_keeps_the_result():
+    # Sphere 0 rests on the ground, sphere 1 flies away at 1 m/s: still at 2 calls (k = 2),
+    # sphere 0 sleeps and the simulator sees only sphere 1; positions are unchanged.
+    traj = linear_traj([[0, 0, 0.5], [5, 0, 5]], [[0, 0, 0], [1.0, 0, 0]], frames=10)
+
+    class Keep(Constant):
+        def forward(self, state):
+            self.seen.append(state.vel.clone())
+            return state.vel[:, 0].clone(), torch.zeros_like(state.pos)
+
+    plain, sleepy = Keep([0.0] * 3, [0.0] * 3, H=0), Keep([0.0] * 3, [0.0] * 3, H=0)
+    (ref,) = rollout(plain, [traj])
+    (res,) = rollout(sleepy, [traj], sleeping=True, sleep=dict(threshold=0.01, k=2))
+    np.testing.assert_array_equal(res.pos, ref.pos)
+    assert [v.shape[0] for v in plain.seen] == [2] * 9
+    assert [v.shape[0] for v in sleepy.seen] == [2] + [1] * 8  # still at calls 1 and 2
+
+
+def test_unseen_effect_warns_once_and_seen_effects_are_silent():
+    import warnings
+
+    sim = Constant([0.0] * 3, [0.0] * 3, H=0)
+    sim.effects_trained = torch.tensor([True, True, True, True, False])  # never rotated
+    trajs = [linear_traj([[0, 0, 5]], [[0.0, 0, 0]], frames=3, name=f"s{i}") for i in range(3)]
+    with pytest.warns(UserWarning, match=r"\['rotation'\].*never saw") as record:
+        rollout(sim, trajs, batch_size=1)
+    assert len(record) == 1
+    still = [linear_traj([[0, 0, 5]], [[0.0, 0, 0]], frames=3, effects=Effects(rotation=False))]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rollout(sim, still)
