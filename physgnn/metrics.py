@@ -275,6 +275,21 @@ def rest_drift(pos, radius, mask) -> float | None:
     return float(disp.max())
 
 
+def drift_before_hit(pred, true, radius, start: int, tol: float = 0.01) -> np.ndarray:
+    """Rest drift of spheres that rest until something hits them: for each sphere the truth
+    keeps within ``tol`` radii of its first position through the seed frames ``0..start``,
+    the largest displacement (in radii) of ``pred`` from its first frame over the frames
+    before the truth moves it. pred / true ``[T, N, 3]`` → ``[R]`` (R such spheres, maybe 0)."""
+    pred, true = _frames(pred, "pred pos"), _frames(true, "true pos")
+    radius = _per_sphere(radius, pred.shape[1], "radius")
+    t = min(len(pred), len(true))
+    moved = np.linalg.norm(true[:t] - true[0], axis=-1) > tol * radius  # [T, N]
+    rest_until = np.where(moved.any(0), moved.argmax(0), t)  # first frame moved, [N]
+    before = np.arange(t)[:, None] < rest_until[None, :]
+    disp = np.linalg.norm(pred[:t] - pred[0], axis=-1) / radius
+    return np.where(before, disp, 0.0).max(0)[rest_until > start]
+
+
 # ------------------------------------------------------------------------------- one rollout
 _SCENE_KEYS = ("radius", "mass", "planes", "plane_kind", "effects")
 
@@ -324,7 +339,8 @@ def trajectory_metrics(
     ``mse{horizon}`` is the MSE at frame ``start + horizon``; None when not reached.
     ``momentum_drift`` only for scenes without gravity or surface contact. ``rest_drift`` for
     the spheres of ``rest_mask``, by default those that move less than ``rest_tol`` radii in
-    the truth. Keys with nothing to measure are None.
+    the truth; ``drift_before_hit`` (:func:`drift_before_hit`) for those that rest until hit.
+    Keys with nothing to measure are None.
     """
     scene = {k: getattr(true, k) if true is not None else pred.get(k) for k in _SCENE_KEYS}
     missing = [k for k in _SCENE_KEYS[:4] if scene[k] is None]
@@ -350,7 +366,8 @@ def trajectory_metrics(
     free = effects is not None and not (effects.gravity or effects.surface_contact)
     out["momentum_drift"] = momentum_drift(vel, mass) if free else None
     mse_key = f"mse{horizon}"
-    out.update(mse=None, **{mse_key: None}, chamfer=None, rotation_error=None, rest_drift=None)
+    out.update(mse=None, **{mse_key: None}, chamfer=None, rotation_error=None)
+    out.update(rest_drift=None, drift_before_hit=None)
     if true is None:
         if rest_mask is not None:
             out["rest_drift"] = rest_drift(pos, radius, rest_mask)
@@ -366,4 +383,6 @@ def trajectory_metrics(
     if rest_mask is None:
         rest_mask = resting_mask(true.pos, radius, rest_tol)
     out["rest_drift"] = rest_drift(pos, radius, rest_mask)
+    hit = drift_before_hit(pos, true.pos, radius, start, rest_tol)
+    out["drift_before_hit"] = float(hit.max()) if hit.size else None
     return out

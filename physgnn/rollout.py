@@ -154,6 +154,13 @@ def _sleeping(simulator, sleep: dict | None):
     return SleepingSimulator(simulator, **(sleep or {}))
 
 
+def _select(simulator, b: Batch, keep: list[int]) -> None:
+    """Tell a simulator with per-sphere state (sleeping) which spheres of batch ``b`` stay."""
+    select = getattr(simulator, "select", None)
+    if select is not None:
+        select(torch.isin(b.batch, torch.tensor(keep, dtype=torch.long, device=b.batch.device)))
+
+
 def _parameters(simulator):
     """The simulator's parameters (also through a wrapper that delegates ``parameters``)."""
     parameters = getattr(simulator, "parameters", None)
@@ -304,6 +311,7 @@ def _rollout_batch(simulator, trajs, lengths, h, bounds, max_pos, device, dtype)
             elif t + 1 < lengths[i]:
                 keep.append(k)
         if len(keep) < len(state.active):
+            _select(simulator, state.batch, keep)
             state.keep(keep)
             nodes = _nodes(offsets, state.active)
     total = _clock(device) - start_time

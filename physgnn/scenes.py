@@ -266,12 +266,41 @@ def ood_spaced_drop(c: dict, rng: np.random.Generator) -> Scene:
     return _finish(c, pos, r, rng, planes, kinds)
 
 
+def pile_positions(n: int, layers: int, radius: float) -> np.ndarray:
+    """Centres ``[K, 3]`` of a square pyramid of touching spheres resting on the ground: layer
+    ``l`` is ``(n − l)²`` spheres ``2r`` apart, in the hollows of the layer below (shifted by
+    ``(r, r)``, raised by ``√2·r``); the bottom layer touches the ground. ``layers = 1``: a flat
+    n×n layer."""
+    pos = []
+    for layer in range(layers):
+        k = n - layer
+        xy = (np.arange(k) - (k - 1) / 2) * 2 * radius
+        gx, gy = np.meshgrid(xy, xy, indexing="ij")
+        z = radius + layer * np.sqrt(2.0) * radius
+        pos.append(np.stack([gx.ravel(), gy.ravel(), np.full(k * k, z)], axis=1))
+    return np.concatenate(pos)
+
+
+def resting_pile(c: dict, rng: np.random.Generator) -> Scene:
+    """A pile of touching spheres at rest on the ground (:func:`pile_positions` with ``n``,
+    ``layers``, ``radius``): nothing should move."""
+    n, layers, r = int(c["n"]), int(c["layers"]), float(c["radius"])
+    if n < 1 or not 1 <= layers <= n:
+        raise SceneError(f"resting_pile: need n >= 1 and 1 <= layers <= n (got {n}, {layers})")
+    planes, kinds = _arena(c)
+    return _finish(c, pile_positions(n, layers, r), r, rng, planes, kinds)
+
+
 BUILDERS: dict[str, Callable[[dict, np.random.Generator], Scene]] = {
     "random_box": random_box,
     "ood_cubes": ood_cubes,
     "ood_cubes_ramps": ood_cubes_ramps,
     "ood_resting_hit": ood_resting_hit,
     "ood_spaced_drop": ood_spaced_drop,
+    # hard scenes of the stability suite (conf/scene/{resting_pile,drop_1000,tight_pack}.yaml)
+    "resting_pile": resting_pile,
+    "drop_1000": ood_spaced_drop,
+    "tight_pack": ood_cubes,
 }
 
 

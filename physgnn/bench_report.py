@@ -1,0 +1,326 @@
+"""``bench.md``: the tables of ``make bench`` and the speed targets of issue 5 (met or not)."""
+
+from __future__ import annotations
+
+import math
+import os
+
+from physgnn.report import fmt, md_table
+
+BASELINE = "baseline"
+TARGET_FPS, TARGET_SHARE, TARGET_GRAPH, TARGET_LINEAR = 250.0, 0.60, 0.25, 1.5
+
+
+def _f(x, digits: int = 3) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "–"
+    return f"{x:.{digits}g}" if isinstance(x, float) else str(x)
+
+
+def machine_table(extra: dict) -> str:
+    m = extra["machine"]
+    start, end = m.get("loadavg_start", math.nan), extra.get("loadavg_end", math.nan)
+    load = f"{start:.1f} at start, {end:.1f} at end"
+    rates = ", ".join(f"{k}: {v:.1f}" for k, v in m.get("matmul_by_shape", {}).items())
+    body = [
+        ["CPU", m["cpu"]],
+        ["torch threads", str(m["threads"])],
+        ["fp32 matmul rate (best, GFLOP/s)", f"{m['matmul_gflops']:.1f}"],
+        ["per shape [m×k×n] (GFLOP/s)", rates],
+        ["torch", m.get("torch", "?")],
+        ["same, first shape on 1 thread (GFLOP/s)", f"{m.get('matmul_gflops_1_thread', 0):.1f}"],
+        ["1-min load average (other processes compete for the cores)", load],
+        ["OMP_WAIT_POLICY", m.get("omp_wait_policy", "?")],
+    ]
+    table = md_table(["machine", ""], body)
+    if m["threads"] > 1 and start > os.cpu_count():
+        table += (
+            f"\n\n⚠ The load average ({start:.1f}) exceeds the {os.cpu_count()} cores: "
+            "other processes share them and multi-threaded timings suffer most."
+        )
+    return table
+
+
+def learned_table(extra: dict) -> str:
+    body = []
+    for r in extra["learned"]:
+        frame = r["total_ms"]
+        body.append(
+            [
+                r["config"],
+                str(r["n_spheres"]),
+                f"{r['fps']:.1f}",
+                f"{frame:.2f}",
+                f"{r['graph_ms']:.2f}",
+                f"{r['network_ms']:.2f}",
+                f"{r['integrate_ms']:.2f}",
+                f"{r['graph_ms'] / frame:.0%}",
+                f"{1000 * frame / r['n_spheres']:.2f}",
+                f"{r['pp_edges']:.0f}",
+                f"{r['ps_edges']:.0f}",
+                f"{r['gflop_per_step']:.3f}",
+                f"{r['share_of_matmul']:.0%}",
+            ]
+        )
+    return md_table(
+        [
+            "config",
+            "spheres",
+            "FPS",
+            "ms/frame",
+            "graph ms",
+            "network ms",
+            "integrate ms",
+            "graph share",
+            "µs/sphere",
+            "pp edges",
+            "ps edges",
+            "GFLOP/step",
+            "share of matmul",
+        ],
+        body,
+    )
+
+
+def pybullet_table(result: dict) -> str:
+    body = [
+        [
+            str(r["n_spheres"]),
+            str(r["substeps"]),
+            f"{r['fps']:.1f}",
+            f"{1000 / r['fps']:.2f}",
+            fmt(r["mse_vs_reference"]),
+        ]
+        for r in result["pybullet"]
+    ]
+    return md_table(["spheres", "substeps", "FPS", "ms/frame", "position MSE vs reference"], body)
+
+
+def accuracy_table(extra: dict) -> str:
+    body = []
+    for r in extra["pybullet_accuracy"]:
+        name = f"{r['substeps']} (reference)" if r["reference"] else str(r["substeps"])
+        body.append(
+            [
+                name,
+                _f(r["fps"]),
+                fmt(r.get("mse")),
+                fmt(r.get("mse5")),
+                fmt(r.get("chamfer")),
+                fmt(r["energy_gain"]),
+                fmt(r["depth_sphere"]),
+                fmt(r["depth_ground"]),
+                fmt(r["pct_sphere"]),
+            ]
+        )
+    return md_table(
+        [
+            "substeps",
+            "FPS",
+            "MSE (all frames)",
+            "MSE at frame 5",
+            "Chamfer",
+            "energy gain",
+            "depth sphere",
+            "depth ground",
+            "% spheres intersecting",
+        ],
+        body,
+    )
+
+
+def training_table(extra: dict) -> str:
+    t = extra["training"]
+    return md_table(
+        ["pairs/s", "nodes/s", "batch", "nodes per pair", "steps timed"],
+        [
+            [
+                f"{t['pairs_per_s']:.1f}",
+                f"{t['nodes_per_s']:.0f}",
+                str(t["batch_size"]),
+                f"{t['mean_nodes_per_pair']:.1f}",
+                str(t["steps_timed"]),
+            ]
+        ],
+    )
+
+
+def activity_table(extra: dict) -> str:
+    body = [
+        [
+            r["case"],
+            str(r["n_spheres"]),
+            f"{r['total_ms']:.2f}",
+            f"{r['graph_ms']:.2f}",
+            f"{r['network_ms']:.2f}",
+            f"{r['nodes']:.0f}",
+            f"{r['pp_edges']:.0f}",
+            f"{r['ps_edges']:.0f}",
+        ]
+        for r in extra["activity"]
+    ]
+    return md_table(
+        [
+            "case",
+            "spheres",
+            "ms/frame",
+            "graph ms",
+            "network ms",
+            "nodes in network",
+            "pp edges",
+            "ps edges",
+        ],
+        body,
+    )
+
+
+def rollout_table(extra: dict) -> str:
+    body = [
+        [
+            str(r["n_spheres"]),
+            str(r["frames"]),
+            f"{r['fps']:.1f}",
+            f"{r['total_ms']:.2f}",
+            f"{r['graph_ms']:.2f}",
+            f"{r['network_ms']:.2f}",
+            f"{r['integration_ms']:.2f}",
+        ]
+        for r in extra.get("rollout", [])
+    ]
+    return md_table(
+        ["spheres", "frames", "FPS", "ms/frame", "graph ms", "network ms", "integration ms"], body
+    )
+
+
+def batched_table(extra: dict) -> str:
+    body = [
+        [
+            str(r["scenes"]),
+            str(r["n_spheres"]),
+            f"{r['batch_ms']:.2f}",
+            f"{r['ms_per_scene']:.2f}",
+            f"{r['scene_fps']:.1f}",
+        ]
+        for r in extra.get("batched", [])
+    ]
+    return md_table(
+        [
+            "scenes in the batch",
+            "spheres each",
+            "ms per batch step",
+            "ms per scene-frame",
+            "scene-frames per s",
+        ],
+        body,
+    )
+
+
+def _row(extra: dict, n: int) -> dict | None:
+    rows = [r for r in extra["learned"] if r["config"] == BASELINE and r["n_spheres"] == n]
+    return rows[0] if rows else None
+
+
+def _short(factor: float) -> str:
+    """ " (needs ×k)" when a measured value is ``factor`` short of its target (> 1)."""
+    return f" (needs ×{factor:.1f})" if factor > 1 else ""
+
+
+def targets(result: dict, extra: dict, n_ref: int = 154) -> list[list[str]]:
+    """``[target, measured, met]`` rows for issue 5 item 3 (baseline configuration)."""
+    rows = []
+    base = sorted(
+        (r for r in extra["learned"] if r["config"] == BASELINE), key=lambda r: r["n_spheres"]
+    )
+    ref = _row(extra, n_ref) or (base[0] if base else None)
+    if ref is None:
+        return [["baseline not measured", "–", "–"]]
+    n = ref["n_spheres"]
+    ok = lambda b: "met" if b else "not met"  # noqa: E731
+    rows.append(
+        [
+            f"≥ {TARGET_FPS:.0f} FPS at {n} spheres",
+            f"{ref['fps']:.1f} FPS" + _short(TARGET_FPS / ref["fps"]),
+            ok(ref["fps"] >= TARGET_FPS),
+        ]
+    )
+    shares = ", ".join(f"{r['n_spheres']}: {r['share_of_matmul']:.0%}" for r in base)
+    rows.append(
+        [
+            f"network ≥ {TARGET_SHARE:.0%} of the matmul rate",
+            shares,
+            ok(ref["share_of_matmul"] >= TARGET_SHARE)
+            + f" (at {n})"
+            + _short(TARGET_SHARE / max(ref["share_of_matmul"], 1e-9)),
+        ]
+    )
+    graph = ", ".join(f"{r['n_spheres']}: {r['graph_ms'] / r['total_ms']:.0%}" for r in base)
+    rows.append(
+        [
+            f"graph ≤ {TARGET_GRAPH:.0%} of a frame",
+            graph,
+            ok(all(r["graph_ms"] <= TARGET_GRAPH * r["total_ms"] for r in base)),
+        ]
+    )
+    per = {r["n_spheres"]: r["total_ms"] / r["n_spheres"] for r in base}
+    big = [k for k in per if k >= 1000] or list(per)
+    lo, hi = min(big), max(big)
+    ratio = per[hi] / per[lo]
+    rows.append(
+        [
+            f"cost ~ linear: (ms/sphere at {hi}) / (ms/sphere at {lo}) ≤ {TARGET_LINEAR}",
+            f"{ratio:.2f}",
+            ok(ratio <= TARGET_LINEAR),
+        ]
+    )
+    pyb = {r["n_spheres"]: r["fps"] for r in result["pybullet"] if r["substeps"] == 10}
+    big = [r for r in base if r["n_spheres"] >= 300 and r["n_spheres"] in pyb]
+    text = ", ".join(f"{r['n_spheres']}: {r['fps']:.1f} vs {pyb[r['n_spheres']]:.1f}" for r in big)
+    rows.append(
+        [
+            "≥ pybullet FPS (10 substeps) from 300 spheres up",
+            text or "–",
+            ok(bool(big) and all(r["fps"] >= pyb[r["n_spheres"]] for r in big)),
+        ]
+    )
+    return rows
+
+
+def write_markdown(result: dict, extra: dict) -> str:
+    """The whole ``bench.md`` text."""
+    s = extra.get("settings", {})
+    parts = [
+        "# physgnn bench: accuracy versus time",
+        f"One run of `python -m physgnn.bench` ({extra.get('wall_s', 0):.0f} s). Learned "
+        "simulators have random weights (cost does not depend on them) and are timed one step "
+        "per pybullet frame of the same scene in motion (random_box, "
+        f"{s.get('area_per_sphere', '?')} m² of floor per sphere, after "
+        f"{s.get('warmup_frames', '?')} warm-up frames).",
+        "Seconds per phase: "
+        + (", ".join(f"{k} {v:.0f}" for k, v in extra.get("phase_s", {}).items()) or "–")
+        + ".",
+        "## Machine",
+        machine_table(extra),
+        "## Targets (issue 5, baseline M=5 H=2 vi h=128)",
+        md_table(["target", "measured", "status"], targets(result, extra)),
+        "## Learned simulator per configuration and size",
+        "ms/frame = graph + network (incl. normalisation) + integration; share of matmul = "
+        "network FLOP rate / best measured matmul rate.",
+        learned_table(extra),
+        "### The same baseline through `physgnn.rollout` (random weights: the spheres drift)",
+        rollout_table(extra),
+        "### Batching scenes (baseline, copies of the same scene in one graph)",
+        batched_table(extra),
+        "## pybullet frame rate",
+        pybullet_table(result),
+        "## pybullet: substeps versus accuracy",
+        f"From the same state in motion, {s.get('accuracy', {}).get('frames', '?')} frames; "
+        "reference: the most substeps. Physics metrics are of each run itself.",
+        accuracy_table(extra),
+        "## Training throughput (baseline, Lightning, noise on)",
+        training_table(extra),
+        "## Cost follows activity (issue 7)",
+        activity_table(extra),
+        "## Speed work in the measured code",
+        "\n".join(f"- {note}" for note in s.get("notes", [])) or "–",
+    ]
+    return "\n\n".join(parts) + "\n"

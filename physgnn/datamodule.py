@@ -1,0 +1,148 @@
+"""Lightning data: random one-step state pairs ``(X_t, v_{t+1}, ω_{t+1})`` from a dataset.
+
+A *pair* is a frame ``t`` of a training trajectory with ``t ∈ [H, T − 2]``: the state at ``t``
+with ``H + 1`` velocities of history, and the finite-difference velocities of frame ``t + 1``
+as targets (:class:`physgnn.state.TrajectoryFrames`). An epoch is ``pairs_per_epoch`` pairs
+drawn uniformly with replacement by a sampler seeded by (seed, epoch); validation is a fixed
+seeded subset of the validation split. Input noise is added by the Lightning module, not
+here, so the data stream is the same with or without noise.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import lightning as L
+import torch
+from torch.utils.data import Dataset, Sampler
+from torch_geometric.loader import DataLoader
+
+from physgnn.dataset import DatasetError, read_split, read_stats
+from physgnn.scene import EFFECT_NAMES
+from physgnn.state import TrajectoryFrames
+
+
+class PairDataset(Dataset):
+    """Every valid ``(trajectory, t)`` pair of a list of trajectories; item = ``SceneState``."""
+
+    def __init__(self, trajectories: list, H: int):
+        self.frames = [TrajectoryFrames(traj) for traj in trajectories]
+        self.H = int(H)
+        pairs = [(i, t) for i, f in enumerate(self.frames) for t in range(self.H, f.n_frames - 1)]
+        self.pairs = torch.tensor(pairs, dtype=torch.long).reshape(-1, 2)
+
+    def __len__(self) -> int:
+        return int(self.pairs.shape[0])
+
+    def __getitem__(self, k: int):
+        i, t = self.pairs[k].tolist()
+        return self.frames[i].state(t, self.H)
+
+
+class EpochSampler(Sampler):
+    """``num_samples`` indices drawn uniformly with replacement from ``range(size)``, seeded by
+    ``(seed, epoch)``: epoch k draws the same pairs whether training ran straight through or
+    resumed from a checkpoint. Lightning calls ``set_epoch`` before each epoch; without it
+    (e.g. inside a distributed wrapper) each iteration moves on to the next epoch."""
+
+    def __init__(self, size: int, num_samples: int, seed: int):
+        self.size, self.num_samples, self.seed = int(size), int(num_samples), int(seed)
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return self.num_samples
+
+    def __iter__(self):
+        generator = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
+        self.epoch += 1
+        yield from torch.randint(self.size, (self.num_samples,), generator=generator).tolist()
+
+
+class StatePairDataModule(L.LightningDataModule):
+    """Reads ``<data_dir>/{train,val}.h5`` and ``stats.json`` (written by ``physgnn.generate``).
+
+    ``preset`` only names the dataset in error messages. ``H`` must equal the model's history.
+    """
+
+    def __init__(
+        self,
+        data_dir: str,
+        preset: str = "small",
+        H: int = 2,
+        batch_size: int = 256,
+        pairs_per_epoch: int = 6400,
+        val_pairs: int = 512,
+        num_workers: int = 0,
+        seed: int = 0,
+    ):
+        super().__init__()
+        if batch_size < 1 or pairs_per_epoch < 1 or val_pairs < 1:
+            raise ValueError("batch_size, pairs_per_epoch and val_pairs must be >= 1")
+        self.data_dir = Path(data_dir)
+        self.preset = preset
+        self.H = int(H)
+        self.batch_size = int(batch_size)
+        self.pairs_per_epoch = int(pairs_per_epoch)
+        self.val_pairs = int(val_pairs)
+        self.num_workers = int(num_workers)
+        self.seed = int(seed)
+        self.train_set: PairDataset | None = None
+        self.val_set: PairDataset | None = None
+
+    def _path(self, name: str) -> Path:
+        path = self.data_dir / name
+        if not path.exists():
+            raise DatasetError(
+                f"dataset '{self.preset}' not found ({path} is missing): run `make data "
+                f"PRESET={self.preset}` or `python -m physgnn.generate data={self.preset}`"
+            )
+        return path
+
+    def stats(self) -> dict:
+        """The training split's normalisation statistics (``stats.json``)."""
+        self._path("stats.json")
+        return read_stats(self.data_dir)
+
+    def setup(self, stage: str | None = None) -> None:
+        if self.train_set is None:
+            self.train_set = self._load("train.h5")
+            self.val_set = self._load("val.h5")
+
+    def _load(self, name: str) -> PairDataset:
+        pairs = PairDataset(read_split(self._path(name)), self.H)
+        if len(pairs) == 0:
+            raise DatasetError(f"{self.data_dir / name} has no trajectory longer than H + 2 frames")
+        return pairs
+
+    def effects_trained(self) -> torch.Tensor:
+        """``[5]`` bool: effects present in at least one training scene."""
+        self.setup()
+        effects = torch.zeros(len(EFFECT_NAMES), dtype=torch.bool)
+        for f in self.train_set.frames:
+            effects |= f.static["effects"][0]
+        return effects
+
+    def _loader(self, dataset, **kwargs) -> DataLoader:
+        return DataLoader(
+            dataset,
+            batch_size=self.batch_size,
+            num_workers=self.num_workers,
+            persistent_workers=self.num_workers > 0,
+            **kwargs,
+        )
+
+    def train_dataloader(self) -> DataLoader:
+        self.setup()
+        sampler = EpochSampler(len(self.train_set), self.pairs_per_epoch, self.seed)
+        return self._loader(self.train_set, sampler=sampler)
+
+    def val_dataloader(self) -> DataLoader:
+        self.setup()
+        generator = torch.Generator().manual_seed(self.seed + 1)
+        n = min(self.val_pairs, len(self.val_set))
+        index = torch.randperm(len(self.val_set), generator=generator)[:n].sort().values
+        subset = torch.utils.data.Subset(self.val_set, index.tolist())
+        return self._loader(subset, shuffle=False)

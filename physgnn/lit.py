@@ -1,0 +1,161 @@
+"""Lightning module: one-step loss, energy-increase penalty and input noise.
+
+Loss of a batch of state pairs:
+
+``L = MSE(normalised prediction, normalised target)
++ λ · mean_scenes max(E_{t+1} − E_t, 0) / Σ m g``
+
+- MSE over the 6 normalised outputs of every sphere (:mod:`physgnn.simulator` explains the
+  target); the 3 angular outputs of spheres whose scene has rotation off are left out.
+- ``E`` = kinetic + potential energy of a scene (:mod:`physgnn.energy`, potential from the
+  ground contact height); ``E_{t+1}`` is the energy after integrating the predicted
+  ``v̂_{t+1}`` with :func:`physgnn.integrator.euler_step`. Dividing a scene's energy increase by
+  its weight ``Σ m·g`` turns joules into *metres of height gained per sphere mass*, so ``λ``
+  means the same for a scene of 1 or 300 spheres, light or heavy.
+- Noise (training only): ``noise_std`` is in normalised units: positions get
+  ``σ · length_scale`` metres, velocity histories ``σ · std(v)`` and ``σ · std(ω)``,
+  orientations ``σ`` per component then renormalised. Spheres of scenes without rotation keep
+  their orientation and angular velocity. Targets stay the clean ``v_{t+1}, ω_{t+1}``.
+"""
+
+from __future__ import annotations
+
+import lightning as L
+import torch
+
+from physgnn import quaternion as Q
+from physgnn.energy import scene_energy, scene_weight
+from physgnn.integrator import euler_step
+from physgnn.simulator import LearnedSimulator
+
+
+class NonFiniteLossError(RuntimeError):
+    """The training loss became NaN or infinite (the model exploded)."""
+
+
+def add_noise(state, simulator: LearnedSimulator, std: float, generator=None):
+    """A copy of ``state`` with Gaussian noise on pos, quat, vel and angvel (see module doc)."""
+
+    def randn_like(x: torch.Tensor) -> torch.Tensor:
+        return torch.randn(x.shape, generator=generator, dtype=x.dtype, device=x.device)
+
+    noisy = state.clone()
+    rot = simulator.rotating(state)[:, None]
+    noisy.pos = state.pos + std * simulator.length_scale * randn_like(state.pos)
+    noisy.vel = state.vel + std * simulator.vel_std * randn_like(state.vel)
+    quat = Q.normalize(state.quat + std * randn_like(state.quat))
+    noisy.quat = torch.where(rot, quat, state.quat)
+    angvel = state.angvel + std * simulator.angvel_std * randn_like(state.angvel)
+    noisy.angvel = torch.where(rot[:, :, None], angvel, state.angvel)
+    return noisy
+
+
+def energy_increase(state, vel_next: torch.Tensor) -> torch.Tensor:
+    """``[B]``: ``max(E_{t+1} − E_t, 0) / Σ m g`` of every scene (metres of height).
+
+    ``vel_next [N, 3]`` is the predicted ``v̂_{t+1}``; ``E_{t+1}`` uses the Euler-integrated
+    position ``p_t + dt·v̂_{t+1}`` and ``v̂_{t+1}``; ``E_t`` uses ``p_t`` and ``v_t``."""
+    n_scenes = state.num_graphs if hasattr(state, "num_graphs") else 1
+    batch = getattr(state, "batch", None)
+    if batch is None:
+        batch = torch.zeros(state.pos.shape[0], dtype=torch.long, device=state.pos.device)
+    pos_next, _ = euler_step(
+        state.pos, state.quat, vel_next, vel_next, state.scene_dt, rotate=False
+    )
+    args = (state.mass, state.radius, batch, n_scenes)
+    e_now = scene_energy(state.pos, state.vel[:, 0], *args)
+    e_next = scene_energy(pos_next, vel_next, *args)
+    return torch.relu(e_next - e_now) / scene_weight(state.mass, batch, n_scenes)
+
+
+def masked_mse(pred: torch.Tensor, target: torch.Tensor, rotating: torch.Tensor) -> torch.Tensor:
+    """Mean squared error of ``[N, 6]`` outputs, angular part only where ``rotating [N]``."""
+    weight = torch.ones_like(pred)
+    weight[:, 3:] = rotating[:, None].to(pred.dtype)
+    return ((pred - target) ** 2 * weight).sum() / weight.sum()
+
+
+class LitSimulator(L.LightningModule):
+    """Trains a :class:`LearnedSimulator` on one-step pairs.
+
+    ``optimizer``: a partial (``_partial_: true``) taking the parameters; ``scheduler``: an
+    optional partial taking the optimizer, stepped once per epoch. ``seed`` seeds the noise of
+    each step together with the step number.
+    """
+
+    def __init__(
+        self,
+        simulator: LearnedSimulator,
+        optimizer,
+        scheduler=None,
+        lambda_energy: float = 0.0,
+        noise_std: float = 0.01,
+        seed: int = 0,
+    ):
+        super().__init__()
+        if lambda_energy < 0 or noise_std < 0:
+            raise ValueError("lambda_energy and noise_std must be >= 0")
+        self.save_hyperparameters(ignore=["simulator", "optimizer", "scheduler"])
+        self.simulator = simulator
+        self.optimizer_factory = optimizer
+        self.scheduler_factory = scheduler
+        self.lambda_energy = float(lambda_energy)
+        self.noise_std = float(noise_std)
+        self.seed = int(seed)
+        self.pairs_seen = 0
+        self.nodes_seen = 0
+
+    def losses(self, state) -> dict[str, torch.Tensor]:
+        """``{"loss", "loss_mse", "loss_energy"}`` of a batch (no noise added here)."""
+        pred, _ = self.simulator.normalized_prediction(state)
+        target = self.simulator.normalized_target(state)
+        mse = masked_mse(pred, target, self.simulator.rotating(state))
+        vel_next, _ = self.simulator.to_physical(state, pred)
+        energy = energy_increase(state, vel_next).mean()
+        return {"loss": mse + self.lambda_energy * energy, "loss_mse": mse, "loss_energy": energy}
+
+    def _log_all(self, prefix: str, losses: dict, batch_size: int) -> None:
+        """Epoch means under the exact names ``{prefix}/loss`` etc. (weighted by scene count)."""
+        for name, value in losses.items():
+            self.log(
+                f"{prefix}/{name}",
+                value,
+                batch_size=batch_size,
+                on_step=False,
+                on_epoch=True,
+                prog_bar=name == "loss",
+            )
+
+    def _noise_generator(self) -> torch.Generator:
+        """Seeded by (seed, global step): a resumed run draws the same noise as a straight one."""
+        generator = torch.Generator(device=self.device)
+        return generator.manual_seed(self.seed * 1_000_003 + self.global_step)
+
+    def training_step(self, batch, batch_idx: int) -> torch.Tensor:
+        if self.noise_std > 0:
+            batch = add_noise(batch, self.simulator, self.noise_std, self._noise_generator())
+        losses = self.losses(batch)
+        loss = losses["loss"]
+        if not torch.isfinite(loss):
+            raise NonFiniteLossError(
+                f"non-finite training loss ({loss.item()}) at epoch {self.current_epoch}, "
+                f"step {self.global_step}: the model exploded, training stopped"
+            )
+        self.pairs_seen += batch.num_graphs
+        self.nodes_seen += batch.num_nodes
+        self._log_all("train", losses, batch.num_graphs)
+        self.log("train/loss_step", loss, batch_size=batch.num_graphs, on_step=True, on_epoch=False)
+        return loss
+
+    def validation_step(self, batch, batch_idx: int) -> None:
+        self._log_all("val", self.losses(batch), batch.num_graphs)
+
+    def configure_optimizers(self):
+        optimizer = self.optimizer_factory(self.parameters())
+        if self.scheduler_factory is None:
+            return optimizer
+        scheduler = self.scheduler_factory(optimizer)
+        return {
+            "optimizer": optimizer,
+            "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"},
+        }

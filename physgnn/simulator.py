@@ -1,0 +1,206 @@
+"""The learned simulator: scene state → graph → network → next velocities (physical units).
+
+:class:`LearnedSimulator` joins the physics side (:mod:`physgnn.graph`) and the network
+(:mod:`physgnn.nn.epd`) and owns every normalisation, so the rest of physgnn (Lightning module,
+rollout, evaluation) speaks physical units only.
+
+**Target choice.** The network predicts the normalised *change* of the velocities,
+``((v_{t+1} − v_t) − μ_Δv) / σ_Δv`` and ``((ω_{t+1} − ω_t) − μ_Δω) / σ_Δω`` (``delta_vel`` /
+``delta_angvel`` statistics of the training split), as GNS does with accelerations. For a given
+input state ``v_t`` is known, so this is an affine map of the report's target ``v_{t+1}``: the
+same function is learned, but the regression target has unit scale whatever the speed, and
+"nothing changes" is the output ``−μ/σ`` rather than a copy of the input. With input noise the
+target ``v_{t+1}`` stays the clean one while ``v_t`` is the noisy input, so the network also
+learns to undo the noise.
+"""
+
+from __future__ import annotations
+
+import time
+
+import torch
+from torch import nn
+
+from physgnn.graph import GraphBuilder
+from physgnn.nn.epd import EncodeProcessDecode
+from physgnn.scene import EFFECT_NAMES
+
+ROTATION = EFFECT_NAMES.index("rotation")
+VECTOR_STATS = ("vel", "angvel", "delta_vel", "delta_angvel")
+SCALAR_STATS = ("radius", "mass")
+
+
+class StatsError(ValueError):
+    """``stats.json`` lacks a field the simulator needs (one-line message)."""
+
+
+def _stat(stats: dict, key: str, part: str, size: int | None) -> torch.Tensor:
+    try:
+        value = torch.as_tensor(stats[key][part], dtype=torch.float32)
+    except (KeyError, TypeError) as err:
+        raise StatsError(
+            f"normalisation stats lack '{key}.{part}' (regenerate stats.json)"
+        ) from err
+    if size is not None and value.shape != (size,):
+        raise StatsError(f"stats '{key}.{part}' has shape {tuple(value.shape)}, expected ({size},)")
+    return value
+
+
+class LearnedSimulator(nn.Module):
+    """Graph network simulator with the normalisation of its training set kept in buffers.
+
+    Constructor arguments are the ``model`` config keys (``conf/model/*.yaml``); ``stats`` is
+    the dataset's ``stats.json`` dict (runtime object). ``length_scale`` divides every length
+    of the edge features (``None``: the mean sphere diameter of the training set); velocities
+    in edge features are divided by the velocity std. Node input per sphere:
+    ``[(v − μ_v)/σ_v for the H+1 latest v, (ω − μ_ω)/σ_ω likewise, radius, mass (standardised)]``
+    = ``6·(H+1) + 2`` numbers; absolute position and orientation are masked.
+    """
+
+    def __init__(
+        self,
+        stats: dict,
+        H: int = 2,
+        M: int = 5,
+        hidden: int = 128,
+        connectivity: str = "vi",
+        epsilon: float = 0.01,
+        factor: float = 1.0,
+        third_law: bool = True,
+        use_surfaces: bool = True,
+        num_materials: int = 0,
+        material_dim: int = 0,
+        neighbor_backend: str = "auto",
+        length_scale: float | None = None,
+    ):
+        super().__init__()
+        if H < 0 or M < 1:
+            raise ValueError(f"need H >= 0 and M >= 1 (got H={H}, M={M})")
+        self.H, self.M = int(H), int(M)
+        for key in VECTOR_STATS:
+            self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", 3))
+            self.register_buffer(f"{key}_std", _stat(stats, key, "std", 3))
+        for key in SCALAR_STATS:
+            self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", None).reshape(()))
+            self.register_buffer(f"{key}_std", _stat(stats, key, "std", None).reshape(()))
+        scale = 2.0 * float(self.radius_mean) if length_scale is None else float(length_scale)
+        if not scale > 0:
+            raise ValueError(f"length_scale must be > 0 (got {scale})")
+        self.register_buffer("length_scale", torch.tensor(scale))
+        self.register_buffer("effects_trained", torch.zeros(len(EFFECT_NAMES), dtype=torch.bool))
+        self.use_surfaces = bool(use_surfaces)
+        self.num_materials = int(num_materials)
+        self.graph_builder = GraphBuilder(
+            connectivity=connectivity, epsilon=epsilon, factor=factor, backend=neighbor_backend
+        )
+        self.network = EncodeProcessDecode(
+            node_in=self.node_in,
+            pp_in=4,
+            ps_in=10,
+            hidden=hidden,
+            M=M,
+            out_dim=6,
+            third_law=third_law,
+            use_surfaces=use_surfaces,
+            num_materials=num_materials,
+            material_dim=material_dim,
+        )
+        self.timings = {"graph": 0.0, "network": 0.0}
+
+    @property
+    def node_in(self) -> int:
+        return 6 * (self.H + 1) + 2
+
+    @staticmethod
+    def stats_from_state_dict(state_dict: dict, prefix: str = "") -> dict:
+        """The ``stats`` dict stored in a checkpoint's buffers (to rebuild the simulator)."""
+        stats = {}
+        for key in VECTOR_STATS + SCALAR_STATS:
+            stats[key] = {
+                part: state_dict[f"{prefix}{key}_{part}"].tolist() for part in ("mean", "std")
+            }
+        return stats
+
+    def reset_timings(self) -> None:
+        self.timings = {"graph": 0.0, "network": 0.0}
+
+    # ----- features ---------------------------------------------------------------------------
+    def node_features(self, state) -> torch.Tensor:
+        """``[N, 6·(H+1) + 2]``; a state with a longer history uses its H+1 latest velocities."""
+        vel = state.vel[:, : self.H + 1]
+        angvel = state.angvel[:, : self.H + 1]
+        if vel.shape[1] != self.H + 1:
+            raise ValueError(
+                f"state has {vel.shape[1]} velocities of history, model needs {self.H + 1}"
+            )
+        vel = (vel - self.vel_mean) / self.vel_std
+        angvel = (angvel - self.angvel_mean) / self.angvel_std
+        radius = (state.radius - self.radius_mean) / self.radius_std
+        mass = (state.mass - self.mass_mean) / self.mass_std
+        return torch.cat([vel.flatten(1), angvel.flatten(1), radius[:, None], mass[:, None]], 1)
+
+    def edge_features(self, graph) -> tuple[torch.Tensor, torch.Tensor]:
+        """pp ``[E, 4]`` (lengths / length_scale); ps ``[F, 10]`` (velocity / σ_v, normal
+        unchanged, lengths / length_scale)."""
+        pp_attr = graph.pp_attr / self.length_scale
+        ps = graph.ps_attr
+        ps_attr = torch.cat(
+            [ps[:, :3] / self.vel_std, ps[:, 3:6], ps[:, 6:] / self.length_scale], 1
+        )
+        return pp_attr, ps_attr
+
+    def rotating(self, state) -> torch.Tensor:
+        """``[N]`` bool: spheres whose scene has the rotation effect on."""
+        rot = state.effects[:, ROTATION]
+        batch = getattr(state, "batch", None)
+        if batch is None:
+            return rot.expand(state.pos.shape[0])
+        return rot[batch]
+
+    # ----- prediction -------------------------------------------------------------------------
+    def _clock(self, device: torch.device) -> float:
+        if device.type == "cuda" and not self.training:
+            torch.cuda.synchronize(device)
+        return time.perf_counter()
+
+    def normalized_prediction(self, state):
+        """Network output ``[N, 6]`` (normalised Δv, Δω) and the graph it was computed on."""
+        t0 = self._clock(state.pos.device)
+        graph = self.graph_builder(state)
+        t1 = self._clock(state.pos.device)
+        pp_attr, ps_attr = self.edge_features(graph)
+        material = state.material if self.num_materials > 0 else None
+        pred = self.network(
+            self.node_features(state), graph.pp_index, pp_attr, graph.ps_index, ps_attr, material
+        )
+        t2 = self._clock(state.pos.device)
+        self.timings["graph"] += t1 - t0
+        self.timings["network"] += t2 - t1
+        return pred, graph
+
+    def normalized_target(self, state) -> torch.Tensor:
+        """``[N, 6]``: the normalised change from the state's (possibly noisy) ``v_t, ω_t`` to
+        its targets ``v_{t+1}, ω_{t+1}``."""
+        if getattr(state, "target_vel", None) is None:
+            raise ValueError(
+                "state has no target_vel / target_angvel (last frame of a trajectory?)"
+            )
+        dvel = (state.target_vel - state.vel[:, 0] - self.delta_vel_mean) / self.delta_vel_std
+        dang = state.target_angvel - state.angvel[:, 0]
+        dang = (dang - self.delta_angvel_mean) / self.delta_angvel_std
+        return torch.cat([dvel, dang], 1)
+
+    def to_physical(self, state, pred: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Normalised output ``[N, 6]`` → ``(v_{t+1} [N, 3], ω_{t+1} [N, 3])``; spheres of a
+        scene without rotation keep ``ω_t``."""
+        vel_next = state.vel[:, 0] + pred[:, :3] * self.delta_vel_std + self.delta_vel_mean
+        angvel_next = (
+            state.angvel[:, 0] + pred[:, 3:] * self.delta_angvel_std + self.delta_angvel_mean
+        )
+        angvel_next = torch.where(self.rotating(state)[:, None], angvel_next, state.angvel[:, 0])
+        return vel_next, angvel_next
+
+    def forward(self, state) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(vel_next [N, 3], angvel_next [N, 3])`` in physical units (m/s, rad/s, world frame)."""
+        pred, _ = self.normalized_prediction(state)
+        return self.to_physical(state, pred)

@@ -1,0 +1,366 @@
+"""Sleeping spheres: resting spheres are frozen and left out of the network, as Bullet
+deactivates resting bodies.
+
+:class:`SleepingSimulator` wraps a simulator (same call: ``state -> (v_next, ω_next)``) for one
+rollout. Before each step it
+
+1. counts, for every awake sphere, the consecutive frames whose speed
+   ``max(|v_t|, r·|ω_t|)`` stayed below ``threshold`` (at the first call, the velocity
+   history of the state counts: spheres resting through a rollout's ``H + 1`` seed frames
+   start with ``H + 1`` still frames, so with ``k ≤ H + 1`` they sleep before the network
+   can set them in motion);
+2. puts to sleep the spheres still for ``k`` frames or more that touch nothing awake and that
+   no moving sphere can reach before the next frame. Touching (``gap ≤ touch · min(r_i,
+   r_j)``) is followed through chains, like Bullet's islands: a still sphere touching a moving
+   one keeps every still sphere of its chain awake;
+3. wakes the sleeping spheres within reach of an awake sphere (the pair rule of the
+   simulator's graph builder, the sleeper's velocity being 0), with every sleeping sphere
+   that touches a woken one, recursively (the whole island wakes);
+4. runs the simulator on the awake spheres only (a smaller graph) and returns ``v = ω = 0``
+   for the sleeping ones. :meth:`SleepingSimulator.hold` then restores their position and
+   orientation exactly after the integration step.
+
+While no sphere sleeps the wrapped simulator sees the very same state object, so a rollout
+is bit-identical to one without sleeping. Sleeping spheres cost nothing in the network; the
+search for spheres to wake costs O(awake · neighbours): a k-d tree over the sleepers (on CPU),
+built again only when spheres fall asleep.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import torch
+
+from physgnn.neighbors import radius_pairs
+
+# Per-sphere fields of a SceneState (first dimension N); the rest are per plane or per scene.
+NODE_KEYS = (
+    "pos", "quat", "vel", "angvel", "radius", "mass", "material", "batch",
+    "target_vel", "target_angvel",
+)  # fmt: skip
+SCENE_KEYS = ("planes", "plane_kind", "plane_batch", "dt", "effects", "ptr")
+
+
+class SleepingSimulator:
+    """``simulator`` with resting spheres frozen; one instance per rollout (it keeps state).
+
+    ``threshold`` (m/s): speed below which a frame counts as still; ``k``: still frames
+    before a sphere may sleep; ``touch``: contact tolerance as a fraction of the smaller
+    radius. Other attributes (``H``, ``timings``, …) are the wrapped simulator's.
+    ``asleep [N]`` (bool) and ``still [N]`` (frames) describe the spheres after the last call;
+    ``sleep_frames`` counts sphere-frames spent asleep, ``wakes`` the spheres woken.
+    """
+
+    def __init__(self, simulator, threshold: float = 0.05, k: int = 3, touch: float = 0.1):
+        if not (math.isfinite(float(threshold)) and float(threshold) >= 0):
+            raise ValueError(f"sleeping threshold must be finite and >= 0 (got {threshold})")
+        if int(k) != k or int(k) < 1:
+            raise ValueError(f"sleeping k must be an integer >= 1 (got {k})")
+        if not (math.isfinite(float(touch)) and float(touch) >= 0):
+            raise ValueError(f"sleeping touch must be finite and >= 0 (got {touch})")
+        self.simulator = simulator
+        self.threshold, self.k, self.touch = float(threshold), int(k), float(touch)
+        self.asleep: torch.Tensor | None = None
+        self.still: torch.Tensor | None = None
+        self.sleep_frames = 0
+        self.wakes = 0
+        self._index: _RestIndex | None = None
+
+    def __getattr__(self, name):
+        # Only called for attributes not found on the wrapper: delegate to the simulator.
+        if name == "simulator":
+            raise AttributeError(name)
+        return getattr(self.simulator, name)
+
+    # ----- the step -----------------------------------------------------------------------
+    def __call__(self, state) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(vel_next [N, 3], ω_next [N, 3])``; zero for sleeping spheres."""
+        n = state.pos.shape[0]
+        if self.asleep is None or self.asleep.shape[0] != n:
+            self.asleep = torch.zeros(n, dtype=torch.bool, device=state.pos.device)
+            self.still = self._still_history(state)
+            self._index = None
+        else:
+            self._count(state)
+        self._fall_asleep(state)
+        woken = self._wake(state)
+        self.sleep_frames += int(self.asleep.sum())
+        if not bool(self.asleep.any()):
+            return self.simulator(state)
+        awake = ~self.asleep
+        vel = state.pos.new_zeros(n, 3)
+        angvel = state.pos.new_zeros(n, 3)
+        if bool(awake.any()):
+            sub = subset_state(state, awake)
+            fresh = woken[awake]  # just woken: their history is the rest they were frozen in
+            sub.vel = torch.where(fresh[:, None, None], torch.zeros_like(sub.vel), sub.vel)
+            sub.angvel = torch.where(fresh[:, None, None], torch.zeros_like(sub.angvel), sub.angvel)
+            vel[awake], angvel[awake] = self.simulator(sub)
+        return vel, angvel
+
+    def hold(
+        self, pos: torch.Tensor, quat: torch.Tensor, pos_next: torch.Tensor, quat_next: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """After integration: sleeping spheres keep ``pos [N, 3]`` and ``quat [N, 4]`` exactly."""
+        if self.asleep is None or not bool(self.asleep.any()):
+            return pos_next, quat_next
+        a = self.asleep[:, None]
+        return torch.where(a, pos, pos_next), torch.where(a, quat, quat_next)
+
+    def select(self, keep: torch.Tensor) -> None:
+        """Keep the sleep state of the spheres ``keep [N]`` (bool) only, in order: call it
+        when the rollout drops spheres (finished or diverged scenes) from its batch."""
+        if self.asleep is not None:
+            keep = keep.to(self.asleep.device)
+            self.asleep, self.still = self.asleep[keep], self.still[keep]
+            self._index = None
+
+    def rotating(self, state) -> torch.Tensor:
+        """``[N]`` bool: the wrapped simulator's rotating spheres that are awake."""
+        rot = self.simulator.rotating(state)
+        return rot if self.asleep is None else rot & ~self.asleep
+
+    # ----- sleep state ----------------------------------------------------------------------
+    def _still_history(self, state) -> torch.Tensor:
+        """``[N]``: how many of the latest velocities of the history (``v_t, v_{t−1}, …``)
+        are in a row below the threshold: a sphere resting through a rollout's seed frames
+        starts with ``H + 1`` still frames."""
+        speed = torch.maximum(
+            state.vel.norm(dim=-1), state.angvel.norm(dim=-1) * state.radius[:, None]
+        )
+        return torch.cumprod((speed < self.threshold).long(), dim=1).sum(1)
+
+    def _count(self, state) -> None:
+        speed = state.vel[:, 0].norm(dim=-1)
+        spin = state.angvel[:, 0].norm(dim=-1) * state.radius
+        still = (torch.maximum(speed, spin) < self.threshold) & ~self.asleep
+        self.still = torch.where(still, self.still + 1, torch.where(self.asleep, self.still, 0))
+
+    def _fall_asleep(self, state) -> None:
+        """Spheres still for ``k`` frames sleep unless a moving sphere reaches them, directly
+        (the wake rule, which would wake them at once) or through a chain of touching ones."""
+        ready = ~self.asleep & (self.still >= self.k)
+        if not bool(ready.any()):
+            return
+        moving = torch.nonzero(~self.asleep & ~ready).flatten()
+        candidates = torch.nonzero(ready).flatten()
+        near = self._within_reach(state, moving, candidates)
+        seeds = torch.cat([moving, near])
+        left = candidates[~torch.isin(candidates, near)]
+        kept = _flood(state, seeds, left, self._touching, self._touch_extra(state))
+        sleep = ready.clone()
+        sleep[near] = False
+        sleep[kept] = False
+        if bool(sleep.any()):
+            self.asleep |= sleep
+            self._index = None  # new sleepers: rebuild the index of spheres at rest
+
+    def _wake(self, state) -> torch.Tensor:
+        """Wake the sleepers within reach of an awake sphere and every sleeper touching them,
+        recursively (the whole island); returns the woken ``[N]`` bool."""
+        woken = torch.zeros_like(self.asleep)
+        if not bool(self.asleep.any()) or bool(self.asleep.all()):
+            return woken
+        if self._index is None:
+            sleepers = torch.nonzero(self.asleep).flatten()
+            self._index = _RestIndex(state, sleepers, self._touching, self._touch_extra(state))
+        movers = torch.nonzero(~self.asleep).flatten()
+        reach = _ReachRule(state, self.simulator, ~self.asleep)
+        search = state.radius[movers].double() + reach.allow[movers] + reach.max_extra
+        q, j = self._index.near(state, movers, search)
+        hit = self.asleep[j] & reach(state, q, j)
+        if not bool(hit.any()):
+            return woken
+        woken[j[hit]] = True
+        i, j = self._index.pairs
+        woken = _spread(woken, self.asleep, i, j)
+        self.asleep &= ~woken
+        self.still[woken] = 0
+        self.wakes += int(woken.sum())
+        return woken
+
+    def _within_reach(self, state, movers: torch.Tensor, others: torch.Tensor) -> torch.Tensor:
+        """The ``others`` (at rest) that one of ``movers`` may touch before the next frame,
+        by the simulator's graph rule; ``[R]`` sphere indices."""
+        if movers.numel() == 0 or others.numel() == 0:
+            return others[:0]
+        moving = torch.zeros_like(self.asleep)
+        moving[movers] = True
+        reach = _ReachRule(state, self.simulator, moving)
+        hit = _pairs_within(state, movers, others, reach.query_extra(movers), reach.max_extra)
+        hit = hit[:, reach(state, movers[hit[0]], others[hit[1]])]
+        return torch.unique(others[hit[1]])
+
+    def _touch_extra(self, state) -> float:
+        """Bound on the centre distance of touching spheres, ``(2 + touch) · r_max``."""
+        return (2.0 + self.touch) * float(state.radius.max()) * (1 + 1e-6)
+
+    def _touching(self, state, i: torch.Tensor, j: torch.Tensor) -> torch.Tensor:
+        """``[P]`` bool: ``gap_ij ≤ touch · min(r_i, r_j)``."""
+        gap, r = _gap(state, i, j)
+        return gap <= self.touch * torch.minimum(r[i], r[j])
+
+
+# ----- helpers -------------------------------------------------------------------------------
+class _ReachRule:
+    """The graph builder's pp rule ``gap ≤ a_i + a_j + ε`` between a moving sphere ``i`` and
+    one at rest ``j`` (its speed taken as 0). Without a graph builder (baselines): ``gap ≤ 0``.
+    """
+
+    def __init__(self, state, simulator, awake: torch.Tensor):
+        """``awake [N]`` bool: the moving spheres."""
+        builder = getattr(simulator, "graph_builder", None)
+        n = state.pos.shape[0]
+        self.allow = torch.zeros(n, dtype=torch.float64, device=state.pos.device)
+        self.eps = 0.0 if builder is None else builder.epsilon
+        if builder is not None and builder.connectivity != "epsilon":
+            batch = _batch(state)
+            speed = state.vel[:, 0].to(torch.float64).norm(dim=-1)
+            speed = torch.where(awake, speed, 0.0)
+            if builder.connectivity == "vmax":
+                vmax = speed.new_zeros(state.dt.shape[0]).scatter_reduce(0, batch, speed, "amax")
+                speed = vmax[batch]
+            self.allow = builder.factor * speed * state.dt.to(torch.float64)[batch]
+        radius = state.radius.to(torch.float64)
+        self.max_extra = float((radius + self.allow).max()) + self.eps
+
+    def query_extra(self, idx: torch.Tensor) -> torch.Tensor:
+        return self.allow[idx]
+
+    def __call__(self, state, i: torch.Tensor, j: torch.Tensor) -> torch.Tensor:
+        gap, _ = _gap(state, i, j)
+        batch = _batch(state)
+        return (batch[i] == batch[j]) & (gap <= self.allow[i] + self.allow[j] + self.eps)
+
+
+def _batch(state) -> torch.Tensor:
+    batch = getattr(state, "batch", None)
+    if batch is None:
+        return torch.zeros(state.pos.shape[0], dtype=torch.long, device=state.pos.device)
+    return batch.long()
+
+
+def _gap(state, i: torch.Tensor, j: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Float64 ``gap_ij = |p_i − p_j| − r_i − r_j`` ``[P]`` and the radii ``[N]``."""
+    p = state.pos.to(torch.float64)
+    r = state.radius.to(torch.float64)
+    return (p[i] - p[j]).norm(dim=-1) - r[i] - r[j], r
+
+
+def _points(state, idx: torch.Tensor, span: float) -> np.ndarray:
+    """``[len(idx), 4]`` float64: positions, and the scene id times ``span`` as a 4th axis
+    (scenes far apart, so a k-d tree seldom proposes pairs across scenes)."""
+    p = state.pos[idx].detach().to("cpu", torch.float64).numpy()
+    b = _batch(state)[idx].cpu().numpy().astype(np.float64)
+    return np.concatenate([p, (b * span)[:, None]], axis=1)
+
+
+def _ball_pairs(tree, points: np.ndarray, search: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows into ``points`` and tree items with ``|p − x| ≤ search_row`` (float64)."""
+    hits = tree.query_ball_point(points, search * (1 + 1e-9) + 1e-12)
+    counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=len(hits))
+    rows = np.repeat(np.arange(len(hits)), counts)
+    cols = np.concatenate([np.asarray(h, dtype=np.int64) for h in hits]) if counts.sum() else []
+    return rows, np.asarray(cols, dtype=np.int64)
+
+
+class _RestIndex:
+    """A k-d tree over spheres at rest and the touching pairs among them. Sleepers do not
+    move, so it stays valid until a sphere falls asleep (woken members are filtered out by
+    the caller through the current ``asleep`` mask)."""
+
+    def __init__(self, state, members: torch.Tensor, touching, touch_reach: float):
+        from scipy.spatial import cKDTree
+
+        pos = state.pos.detach().to("cpu", torch.float64)
+        self.span = 2.0 * float((pos.max(0).values - pos.min(0).values).max()) + 1e3
+        self.members = members
+        self.r_max = float(state.radius[members].max())
+        self.tree = cKDTree(_points(state, members, self.span))
+        local = radius_pairs(state.pos[members], touch_reach, _batch(state)[members])
+        i, j = members[local[0]], members[local[1]]
+        keep = touching(state, i, j)
+        self.pairs = (i[keep], j[keep])
+
+    def near(self, state, query: torch.Tensor, search: torch.Tensor):
+        """Candidate pairs ``(query sphere [P], member [P])`` with centres at most ``search
+        [Q]`` apart (a superset: the caller applies the exact rule)."""
+        rows, cols = _ball_pairs(self.tree, _points(state, query, self.span),
+                                 search.detach().cpu().numpy())  # fmt: skip
+        device = query.device
+        return query[torch.as_tensor(rows, device=device)], self.members[
+            torch.as_tensor(cols, device=device)
+        ]
+
+
+def _pairs_within(
+    state, query: torch.Tensor, data: torch.Tensor, extra: torch.Tensor, data_extra: float
+) -> torch.Tensor:
+    """Candidate pairs ``[2, P]`` (positions into ``query`` and ``data``) with
+    ``|p_q − p_d| ≤ r_q + extra_q + data_extra`` (a superset the caller filters)."""
+    from scipy.spatial import cKDTree
+
+    if query.numel() == 0 or data.numel() == 0:
+        return torch.empty(2, 0, dtype=torch.long, device=state.pos.device)
+    search = (state.radius[query].double() + extra.double() + data_extra).cpu().numpy()
+    span = 2.0 * float(search.max()) + 1e3
+    pos = state.pos.detach().to("cpu", torch.float64)
+    span += 2.0 * float((pos.max(0).values - pos.min(0).values).max())
+    tree = cKDTree(_points(state, data, span))
+    rows, cols = _ball_pairs(tree, _points(state, query, span), search)
+    return torch.as_tensor(np.stack([rows, cols]), device=state.pos.device).reshape(2, -1)
+
+
+def _spread(reached: torch.Tensor, allowed: torch.Tensor, i: torch.Tensor, j: torch.Tensor):
+    """Grow ``reached [N]`` (bool) along the undirected pairs ``(i, j)`` into ``allowed [N]``
+    spheres until it stops; returns the grown mask."""
+    src, dst = torch.cat([i, j]), torch.cat([j, i])
+    into = allowed[dst]
+    src, dst = src[into], dst[into]
+    reached = reached.clone()
+    while True:
+        new = torch.zeros_like(reached)
+        new[dst[reached[src]]] = True
+        new &= ~reached
+        if not bool(new.any()):
+            return reached
+        reached |= new
+
+
+def _flood(state, seeds: torch.Tensor, targets: torch.Tensor, linked, reach: float) -> torch.Tensor:
+    """The ``targets`` reachable from ``seeds`` through chains of ``linked`` pairs (centres
+    at most ``reach`` apart), ``[R]`` sphere indices."""
+    n = state.pos.shape[0]
+    nodes = torch.cat([seeds, targets])
+    local = radius_pairs(state.pos[nodes], reach, _batch(state)[nodes])
+    i, j = nodes[local[0]], nodes[local[1]]
+    keep = linked(state, i, j)
+    is_target = torch.zeros(n, dtype=torch.bool, device=state.pos.device)
+    is_target[targets] = True
+    start = torch.zeros_like(is_target)
+    start[seeds] = True
+    reached = _spread(start, is_target, i[keep], j[keep])
+    return torch.nonzero(reached & is_target).flatten()
+
+
+def subset_state(state, mask: torch.Tensor):
+    """A shallow copy of ``state`` (one scene or a Batch) with only the spheres of ``mask [N]``.
+
+    Planes, ``dt`` and ``effects`` are kept whole (every scene stays, even if it lost all its
+    spheres); ``batch`` keeps the scene ids and ``ptr`` is recomputed.
+    """
+    n = state.pos.shape[0]
+    sub = copy.copy(state)
+    for key in state.keys():
+        value = state[key]
+        if not torch.is_tensor(value) or key in SCENE_KEYS:
+            continue
+        if key in NODE_KEYS or (value.dim() > 0 and value.shape[0] == n):
+            sub[key] = value[mask]
+    if getattr(state, "ptr", None) is not None:
+        counts = torch.bincount(_batch(state)[mask], minlength=state.dt.shape[0])
+        sub.ptr = torch.cat([counts.new_zeros(1), torch.cumsum(counts, 0)])
+    return sub

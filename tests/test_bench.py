@@ -1,0 +1,297 @@
+"""make bench (quick mode), its FLOP counts, targets table and the Pareto view."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from torch.utils.flop_counter import FlopCounterMode
+
+from physgnn import bench_parts, pareto
+from physgnn.bench import BenchError, bench, frame_states, make_simulator, time_learned
+from physgnn.bench_report import targets
+from physgnn.dataset import compute_stats
+from physgnn.engine import simulate
+from physgnn.nn.epd import EncodeProcessDecode
+
+CONF = str((Path(__file__).parents[1] / "conf").resolve())
+
+
+def _cfg(*overrides):
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        return compose("bench", overrides=list(overrides))
+
+
+# ---------------------------------------------------------------------- the whole bench, tiny
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    result = bench(_cfg("quick=true", "threads=1", f"out_dir={out}"))
+    return out, result
+
+
+def test_bench_json_has_exactly_the_issue_keys(quick):
+    out, result = quick
+    data = json.loads((out / "bench.json").read_text())
+    assert data == json.loads(json.dumps(result))
+    assert set(data) == {"machine", "learned", "pybullet", "training"}
+    assert set(data["machine"]) == {"cpu", "threads", "matmul_gflops"}
+    assert set(data["training"]) == {"pairs_per_s", "nodes_per_s"}
+    learned_keys = {
+        "config",
+        "n_spheres",
+        "fps",
+        "graph_ms",
+        "network_ms",
+        "integrate_ms",
+        "gflop_per_step",
+        "share_of_matmul",
+    }
+    assert data["learned"] and all(set(r) == learned_keys for r in data["learned"])
+    pyb_keys = {"n_spheres", "substeps", "fps", "mse_vs_reference"}
+    assert data["pybullet"] and all(set(r) == pyb_keys for r in data["pybullet"])
+
+
+def test_bench_values_are_sane(quick):
+    out, result = quick
+    assert result["machine"]["threads"] == 1 and result["machine"]["matmul_gflops"] > 0
+    # quick: baseline on both sizes, M1 on 10 spheres only
+    assert [(r["config"], r["n_spheres"]) for r in result["learned"]] == [
+        ("baseline", 10),
+        ("baseline", 30),
+        ("M1", 10),
+    ]
+    for r in result["learned"]:
+        parts = r["graph_ms"] + r["network_ms"] + r["integrate_ms"]
+        assert r["fps"] > 0 and min(r["graph_ms"], r["network_ms"], r["integrate_ms"]) > 0
+        assert parts <= 1000 / r["fps"] * 1.5  # medians of parts ~ median of totals
+        assert r["gflop_per_step"] > 0 and 0 < r["share_of_matmul"] <= 1
+    # sizes at 10 substeps, and the accuracy sweep (10 spheres: 1 and 2 substeps)
+    keys = [(r["n_spheres"], r["substeps"]) for r in result["pybullet"]]
+    assert keys == [(10, 1), (10, 2), (10, 10), (30, 10)]
+    for r in result["pybullet"]:
+        assert r["fps"] > 0
+        swept = r["substeps"] in (1, 2)
+        assert (r["mse_vs_reference"] is not None) == swept
+        if swept:
+            assert r["mse_vs_reference"] >= 0
+    assert result["training"]["pairs_per_s"] > 0
+    assert result["training"]["nodes_per_s"] > result["training"]["pairs_per_s"]
+    md = (out / "bench.md").read_text()
+    for title in (
+        "## Machine",
+        "## Targets",
+        "## Learned simulator",
+        "## pybullet frame rate",
+        "substeps versus accuracy",
+        "## Training throughput",
+        "Cost follows activity",
+    ):
+        assert title in md
+
+
+def test_bench_activity_rows(quick):
+    out, _ = quick
+    rows = {
+        r["case"].split(" (")[0]: r
+        for r in json.loads((out / "bench_extra.json").read_text())["activity"]
+    }
+    assert rows["contacts off"]["pp_edges"] == 0 < rows["contacts on"]["pp_edges"]
+    assert rows["no walls"]["ps_edges"] <= rows["no walls"]["nodes"]  # ground edges only
+    assert (
+        rows["no walls"]["ps_edges"] < rows["walls"]["ps_edges"]
+        or rows["walls"]["ps_edges"] == rows["walls"]["nodes"]
+    )
+    extra = json.loads((out / "bench_extra.json").read_text())
+    [roll] = extra["rollout"]
+    assert roll["n_spheres"] == 30 and roll["fps"] > 0 and roll["frames"] >= 1
+    one, two = extra["batched"]
+    assert (one["scenes"], two["scenes"]) == (1, 2)
+    assert math.isclose(two["gflop_per_step"], 2 * one["gflop_per_step"])  # same scene twice
+    assert math.isclose(two["ms_per_scene"], two["batch_ms"] / 2)
+    sleeping = [r for k, r in rows.items() if "sleeping on" in k][0]
+    awake = [r for k, r in rows.items() if "sleeping off" in k][0]
+    assert sleeping["nodes"] < awake["nodes"] == 22
+
+
+def test_bench_rejects_bad_threads(tmp_path):
+    with pytest.raises(BenchError, match="threads"):
+        bench(_cfg("quick=true", "threads=0", f"out_dir={tmp_path}"))
+
+
+# ---------------------------------------------------------------------------------- FLOPs
+@pytest.mark.parametrize(
+    "third_law,surfaces,concat",
+    [(True, True, "auto"), (False, False, "never"), (True, True, "always")],
+)
+def test_flops_per_step_equals_counted_matmuls(third_law, surfaces, concat):
+    torch.manual_seed(0)
+    net = EncodeProcessDecode(
+        node_in=20, hidden=16, M=2, third_law=third_law, use_surfaces=surfaces, concat_trick=concat
+    )
+    n, pairs, f = 7, 5, 6
+    src = torch.arange(pairs) % n
+    dst = (src + 1 + torch.arange(pairs) % (n - 1)) % n
+    pp = torch.cat([torch.stack([src, dst]), torch.stack([dst, src])], 1)
+    ps = torch.stack([torch.zeros(f, dtype=torch.long), torch.arange(f) % n])
+    with FlopCounterMode(display=False) as counter:
+        net(torch.randn(n, 20), pp, torch.randn(2 * pairs, 4), ps, torch.randn(f, 10))
+    assert counter.get_total_flops() == net.flops_per_step(n, 2 * pairs, f)
+
+
+def test_time_learned_counts_the_flops_of_the_graphs_it_ran(tmp_path):
+    cfg = _cfg("quick=true")
+    rng = np.random.default_rng(0)
+    scene = bench_parts.bench_scene(cfg.scene, 12, rng, 8.0, 4.0, 5)
+    assert scene.n_spheres == 12
+    traj = simulate(scene, {"substeps": 2})
+    sim = make_simulator(cfg.model, {"hidden": 16, "M": 2}, compute_stats([traj]))
+    states = frame_states(traj, sim.H)
+    t = time_learned(sim, states, 2)
+    expected = 0
+    for s in states[:2]:
+        g = sim.graph_builder(s)
+        expected += sim.network.flops_per_step(12, g.pp_index.shape[1], g.ps_index.shape[1])
+    assert t["network_flop"] == expected
+    assert math.isclose(t["gflop_per_step"], expected / 2 / 1e9)
+
+
+# -------------------------------------------------------------------------------- targets
+def _learned(n, fps, graph, network, share):
+    total = 1000 / fps
+    return {
+        "config": "baseline",
+        "n_spheres": n,
+        "fps": fps,
+        "total_ms": total,
+        "graph_ms": graph * total,
+        "network_ms": network,
+        "share_of_matmul": share,
+    }
+
+
+def test_targets_table_met_and_not_met():
+    extra = {
+        "learned": [
+            _learned(154, 300.0, 0.2, 1.0, 0.7),
+            _learned(1000, 50.0, 0.3, 1.0, 0.5),
+            _learned(10000, 4.0, 0.1, 1.0, 0.5),
+        ]
+    }
+    result = {
+        "pybullet": [
+            {"n_spheres": 1000, "substeps": 10, "fps": 40.0},
+            {"n_spheres": 10000, "substeps": 10, "fps": 5.0},
+        ]
+    }
+    fps, share, graph, linear, pybullet = targets(result, extra)
+    assert fps[1:] == ["300.0 FPS", "met"]
+    assert share[2] == "met (at 154)"
+    assert graph[2] == "not met"  # 30 % at 1000 spheres
+    assert linear[1:] == ["1.25", "met"]  # (250 ms / 10 000) / (20 ms / 1000)
+    assert pybullet[2] == "not met"  # 4 < 5 FPS at 10 000
+
+
+# --------------------------------------------------------------------------------- Pareto
+def test_pareto_frontier_hand_computed():
+    costs = [1.0, 2.0, 2.0, 3.0, 0.5, 4.0, 1.0, math.nan]
+    errors = [5.0, 3.0, 4.0, 3.0, 9.0, 1.0, 5.0, 0.0]
+    # 4 (0.5, 9) < 0 (1, 5) < 1 (2, 3) < 5 (4, 1); 6 duplicates 0; 2 and 3 dominated by 1
+    assert pareto.pareto_frontier(costs, errors) == [4, 0, 1, 5]
+    assert pareto.pareto_frontier([], []) == []
+    with pytest.raises(ValueError):
+        pareto.pareto_frontier([1.0], [])
+
+
+def _row(run, exp, overrides, split, chamfer, fps, diverged=None):
+    row = {
+        k: None
+        for k in (
+            "mse",
+            "mse20",
+            "energy_gain",
+            "depth_sphere",
+            "depth_ground",
+            "depth_static",
+            "pct_sphere",
+            "pct_ground",
+            "pct_static",
+            "rotation_error",
+            "n_spheres",
+            "n_frames",
+            "seed",
+        )
+    }
+    row.update(
+        run=run,
+        experiment=exp,
+        overrides=overrides,
+        split=split,
+        trajectory="t",
+        chamfer=chamfer,
+        fps=fps,
+        diverged_at=diverged,
+    )
+    return row
+
+
+def test_learned_and_pybullet_points():
+    rows = [
+        _row("a", "ablation_M", "model.M=1 seed=0", "test", 2.0, 100.0),
+        _row("b", "ablation_M", "model.M=1 seed=1", "test", 4.0, 300.0),
+        _row("c", "ablation_M", "model.M=9 seed=0", "test", 1.0, 10.0, diverged=5),
+        _row("g", "ground_truth", "", "test", 0.0, None),
+    ]
+    pts = pareto.learned_points(rows, "test", "chamfer")
+    assert [(p.label, p.error, p.valid) for p in pts] == [
+        ("ablation_M: model.M=1", 3.0, True),
+        ("ablation_M: model.M=9", 1.0, False),
+    ]
+    assert math.isclose(pts[0].ms_per_frame, 1000 / 200.0)
+    bench = {"pybullet": [{"n_spheres": 154, "substeps": 5, "fps": 50.0, "mse_vs_reference": 0.1}]}
+    extra = {
+        "pybullet_accuracy": [
+            {"n_spheres": 154, "substeps": 5, "chamfer": 0.2},
+            {"n_spheres": 154, "substeps": 400, "chamfer": None},
+        ]
+    }
+    [p] = pareto.pybullet_points(bench, extra, "chamfer")
+    assert (p.ms_per_frame, p.error, p.kind) == (20.0, 0.2, "pybullet")
+
+
+def test_pareto_figures_written(tmp_path):
+    (tmp_path / "bench").mkdir()
+    bench = {
+        "pybullet": [
+            {"n_spheres": 154, "substeps": s, "fps": 100.0 / s, "mse_vs_reference": 1.0 / s}
+            for s in (1, 10)
+        ]
+    }
+    extra = {
+        "pybullet_accuracy": [
+            {
+                "n_spheres": 154,
+                "substeps": s,
+                "chamfer": 1.0 / s,
+                "energy_gain": 0.1,
+                "depth_sphere": 0.01,
+                "depth_ground": 0.0,
+            }
+            for s in (1, 10)
+        ]
+    }
+    (tmp_path / "bench" / "bench.json").write_text(json.dumps(bench))
+    (tmp_path / "bench" / "bench_extra.json").write_text(json.dumps(extra))
+    rows = [
+        _row("a", "baseline", "", "test", 2.0, 100.0),
+        _row("a", "baseline", "", "ood", 3.0, 90.0),
+    ]
+    metrics = ("chamfer", "energy_gain")
+    paths = pareto.pareto_figures(rows, tmp_path / "bench", tmp_path / "fig", metrics=metrics)
+    assert [p.name for p in paths] == ["pareto_chamfer.png", "pareto_energy_gain.png"]
+    assert all(p.stat().st_size > 1000 for p in paths)

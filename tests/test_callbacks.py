@@ -1,0 +1,92 @@
+"""RolloutCallback: what it logs, when, and with which values (static simulator as oracle)."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+from simdata import trajectory
+
+from physgnn.callbacks import RolloutCallback
+
+
+class Still(torch.nn.Module):
+    """Predicts v = ω = 0: the rollout holds frame H for ever."""
+
+    H = 1
+
+    def forward(self, state):
+        return torch.zeros_like(state.pos), torch.zeros_like(state.pos)
+
+
+class FakeModule:
+    def __init__(self):
+        self.simulator = Still()
+        self.logged = {}
+
+    def log(self, name, value, **kwargs):
+        self.logged[name] = value
+
+
+def held_mse(traj, h=1) -> float:
+    """Position MSE of a rollout that holds frame h: frames ≤ h exact, then p_h."""
+    pos = traj.pos.astype(np.float64)
+    pred = pos.copy()
+    pred[h:] = pos[h]
+    return float(((pred - pos) ** 2).sum(-1).mean())
+
+
+def callback_with(val, ood_trajs, **kwargs):
+    cb = RolloutCallback(**kwargs)
+    cb._cache = {"val": val, "ood": ood_trajs}  # what _trajectories would have read and cut
+    return cb
+
+
+def test_logs_every_key_with_the_oracle_mse():
+    val = [trajectory(3, 10, seed=1), trajectory(2, 10, seed=2)]
+    ood = [trajectory(4, 10, seed=3)]
+    module = FakeModule()
+    values = callback_with(val, ood).log_rollouts(module, data_dir=None)
+    assert set(module.logged) == {
+        "val/rollout_mse",
+        "val/chamfer",
+        "ood/mse",
+        "ood/chamfer",
+        "ood/energy_gain",
+        "ood/depth_sphere",
+        "ood/pct_sphere",
+        "ood/diverged",
+        "rollout/fps",
+    }
+    assert module.logged == values
+    assert values["val/rollout_mse"] == pytest.approx(np.mean([held_mse(t) for t in val]))
+    assert values["ood/mse"] == pytest.approx(held_mse(ood[0]))
+    assert values["ood/diverged"] == 0.0 and values["rollout/fps"] > 0
+
+
+def test_ood_off_logs_validation_only():
+    module = FakeModule()
+    callback_with([trajectory(2, 8)], [trajectory(2, 8)], ood=False).log_rollouts(module, None)
+    assert set(module.logged) == {"val/rollout_mse", "val/chamfer", "rollout/fps"}
+
+
+def test_runs_every_n_epochs_and_skips_sanity_check():
+    cb = callback_with([trajectory(2, 8)], [], every_n_epochs=2)
+    module = FakeModule()
+    trainer = SimpleNamespace(
+        sanity_checking=False, current_epoch=0, datamodule=SimpleNamespace(data_dir="unused")
+    )
+    cb.on_validation_epoch_end(trainer, module)
+    assert module.logged == {}
+    trainer.current_epoch = 1
+    trainer.sanity_checking = True
+    cb.on_validation_epoch_end(trainer, module)
+    assert module.logged == {}
+    trainer.sanity_checking = False
+    cb.on_validation_epoch_end(trainer, module)
+    assert "val/rollout_mse" in module.logged
+
+
+def test_bad_arguments_are_refused():
+    with pytest.raises(ValueError, match="every_n_epochs"):
+        RolloutCallback(every_n_epochs=0)

@@ -1,0 +1,316 @@
+"""physgnn.eval: run discovery, the CLI's errors, and the whole eval on fake run folders."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import imageio.v2 as imageio
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+from simdata import trajectory
+
+import physgnn.train
+from physgnn import eval as ev
+from physgnn import report
+from physgnn.baselines import GravityOnlySimulator
+from physgnn.data_report import split_summary
+from physgnn.dataset import read_split, write_split
+from physgnn.report import read_csv
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def make_run(folder: Path, experiment="baseline", overrides=(), seed=0, status="finished"):
+    folder.mkdir(parents=True)
+    (folder / ".hydra").mkdir()
+    (folder / ".hydra" / "overrides.yaml").write_text("\n".join(f"- {o}" for o in overrides))
+    info = {
+        "status": status,
+        "experiment": experiment,
+        "overrides": list(overrides),
+        "seed": seed,
+        "train_time_s": 1.0,
+    }
+    (folder / "run.json").write_text(json.dumps(info))
+    return folder
+
+
+def fake_outputs(out: Path) -> Path:
+    make_run(out / "runs" / "baseline" / "2026-01-01_00-00-00")
+    make_run(out / "runs" / "baseline" / "2026-01-01_00-00-01", status="running")
+    make_run(
+        out / "multirun" / "ablation_M" / "t0" / "model.M=3,seed=1",
+        "ablation_M",
+        ["+experiment=ablation_M", "model.M=3", "seed=1"],
+        seed=1,
+    )
+    make_run(
+        out / "multirun" / "ablation_M" / "t0" / "model.M=5,seed=1",
+        "ablation_M",
+        ["model.M=5", "seed=1"],
+        seed=1,
+        status="diverged",
+    )
+    return out
+
+
+@pytest.fixture
+def outputs(tmp_path):
+    return fake_outputs(tmp_path / "outputs")
+
+
+def test_find_runs_keeps_finished_runs_only(outputs):
+    names = [ev.run_name(p, outputs) for p in ev.find_runs(None, outputs)]
+    assert names == ["multirun/ablation_M/t0/model.M=3,seed=1", "runs/baseline/2026-01-01_00-00-00"]
+
+
+def test_find_runs_of_a_multirun_folder_and_of_one_run(outputs):
+    multirun = outputs / "multirun" / "ablation_M" / "t0"
+    assert ev.find_runs(str(multirun), outputs) == [multirun / "model.M=3,seed=1"]
+    one = outputs / "runs" / "baseline" / "2026-01-01_00-00-00"
+    assert ev.find_runs(str(one), outputs) == [one]
+
+
+@pytest.mark.parametrize(
+    "target, message",
+    [
+        ("does/not/exist", "run folder does/not/exist does not exist"),
+        ("runs/baseline/2026-01-01_00-00-01", "has not finished"),
+        ("runs/nothing", "no finished run"),
+    ],
+)
+def test_find_runs_errors_are_one_line(outputs, target, message):
+    (outputs / "runs" / "nothing").mkdir()
+    path = target if target.startswith("does") else str(outputs / target)
+    with pytest.raises(ev.EvalError, match=message) as err:
+        ev.find_runs(path, outputs)
+    assert "\n" not in str(err.value)
+
+
+def test_run_info_joins_overrides_and_reads_seed(outputs):
+    run = outputs / "multirun" / "ablation_M" / "t0" / "model.M=3,seed=1"
+    info = ev.run_info(run, outputs)
+    assert (info.experiment, info.overrides, info.seed) == (
+        "ablation_M",
+        "+experiment=ablation_M model.M=3 seed=1",
+        1,
+    )
+
+
+def test_dataset_of_reads_the_datamodule_dir():
+    cfg = OmegaConf.create(
+        {"data": {"dir": "outputs/data/tiny"}, "datamodule": {"data_dir": "${data.dir}"}}
+    )
+    assert ev.dataset_of(cfg) == Path("outputs/data/tiny")
+    with pytest.raises(ev.EvalError, match="names no dataset"):
+        ev.dataset_of(OmegaConf.create({"model": {}}))
+
+
+def eval_cfg(*overrides):
+    with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+        # the stability section rolls out 2000-frame hard scenes: tests/test_stability.py
+        return compose("eval", ["stability=false", *overrides])
+
+
+def test_main_on_a_missing_run_folder_prints_one_line_and_exits_2(tmp_path, capsys):
+    cfg = eval_cfg("runs=/no/such/run", f"paths.outputs={tmp_path}")
+    with pytest.raises(SystemExit) as exit_:
+        ev.main.__wrapped__(cfg)  # the Hydra task itself, without the process around it
+    assert exit_.value.code == 2
+    assert capsys.readouterr().err.strip() == "error: run folder /no/such/run does not exist"
+
+
+@pytest.mark.slow
+def test_cli_on_a_missing_run_folder_prints_one_line_and_exits_2(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, "-m", "physgnn.eval", "runs=/no/such/run", f"paths.outputs={tmp_path}"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == "error: run folder /no/such/run does not exist"
+
+
+# ------------------------------------------------------------------ the whole eval, fake runs
+
+
+class Exploding(torch.nn.Module):
+    """A 'learned' simulator that blows up: speeds grow tenfold each step."""
+
+    H = 1
+
+    def forward(self, state):
+        return 10.0 * state.vel[:, 0] + 1.0, torch.zeros_like(state.pos)
+
+
+class Falling(GravityOnlySimulator):
+    H = history = 1
+
+
+def write_dataset(folder: Path) -> Path:
+    test = [trajectory(3, 12, seed=s) for s in (1, 2)]
+    ood = [trajectory(4, 12, seed=s) for s in (3, 4)]
+    for traj, name in zip(ood, ("ood_cubes", report.SLEEP_SCENE), strict=True):
+        traj.attrs["group"] = name
+    for split, trajs in (("test", test), ("ood", ood)):
+        write_split(folder / f"{split}.h5", trajs, {"split": split, "preset": "hand"})
+    return folder
+
+
+@pytest.fixture(scope="module")
+def evaluated(tmp_path_factory):
+    """metrics.csv and report.md of two fake runs: a sound one and one that diverges."""
+    outputs = fake_outputs(tmp_path_factory.mktemp("eval") / "outputs")
+    data = write_dataset(outputs / "data" / "hand")
+    sims = {"baseline": Falling(), "ablation_M": Exploding()}
+
+    def fake_load_run(run_dir):
+        experiment = json.loads((Path(run_dir) / "run.json").read_text())["experiment"]
+        cfg = OmegaConf.create({"datamodule": {"data_dir": str(data)}})
+        return sims[experiment], cfg, {}
+
+    cfg = eval_cfg(f"paths.outputs={outputs}", "video_frames=5")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(physgnn.train, "load_run", fake_load_run)
+        path = ev.evaluate(cfg)
+    return outputs, read_csv(outputs / "report" / "metrics.csv"), path.read_text()
+
+
+def test_eval_writes_one_row_per_run_split_and_trajectory(evaluated):
+    outputs, rows, _ = evaluated
+    runs = [r["run"] for r in rows]
+    # 3 references and 2 runs x (2 test + 2 ood) + OOD (c) again with sleeping on
+    assert len(rows) == 5 * 4 + 1
+    assert runs.count("ground_truth") == runs.count("static") == runs.count("gravity_only") == 4
+    assert runs.count("runs/baseline/2026-01-01_00-00-00+sleeping") == 1
+    assert {r["trajectory"] for r in rows if r["split"] == "ood"} == {
+        "ood_cubes",
+        report.SLEEP_SCENE,
+    }
+
+
+def test_ground_truth_and_static_rows_match_hand_computed_values(evaluated):
+    outputs, rows, _ = evaluated
+    data = read_split(outputs / "data" / "hand" / "test.h5")
+    for traj in data:
+        gt = next(r for r in rows if r["run"] == "ground_truth" and r["trajectory"] == traj.name)
+        assert gt["mse"] == 0.0 and gt["chamfer"] == 0.0 and gt["diverged_at"] is None
+        static = next(r for r in rows if r["run"] == "static" and r["trajectory"] == traj.name)
+        pos = traj.pos.astype(np.float64)
+        held = ((pos - pos[0]) ** 2).sum(-1).mean()  # static holds frame 0 (H = 0)
+        assert static["mse"] == pytest.approx(held, rel=1e-5)
+        assert static["n_frames"] == 12 and static["fps"] > 0
+
+
+def test_diverged_run_is_flagged_with_finite_metrics(evaluated):
+    _, rows, text = evaluated
+    bad = [r for r in rows if r["experiment"] == "ablation_M"]
+    assert all(r["diverged_at"] is not None and 2 <= r["diverged_at"] < 12 for r in bad)
+    assert all(r["n_frames"] == r["diverged_at"] and np.isfinite(r["mse"]) for r in bad)
+    first = min(r["diverged_at"] for r in bad)
+    assert f"diverged at step {first}" in text
+
+
+def test_report_links_figures_and_one_video_per_ood_scene(evaluated):
+    outputs, _, text = evaluated
+    report_dir = outputs / "report"
+    for scene in ("ood_cubes", report.SLEEP_SCENE):
+        gif = report_dir / "videos" / f"{scene}.gif"
+        assert len(imageio.mimread(gif)) == 5
+        assert f"(videos/{scene}.gif)" in text
+    assert (report_dir / "figures" / "energy_ood.png").stat().st_size > 1000
+    assert "![energy](figures/energy_ood.png)" in text
+    assert "with sleeping off and on" in text and "| on |" in text
+    # the multirun run that never finished is listed, not evaluated
+    assert "`multirun/ablation_M/t0/model.M=5,seed=1`: status diverged" in text
+
+
+def test_ground_truth_rows_equal_the_data_report(evaluated):
+    outputs, rows, _ = evaluated
+    for split in ("test", "ood"):
+        trajs = read_split(outputs / "data" / "hand" / f"{split}.h5")
+        expected = split_summary(trajs)
+        gt = [r for r in rows if r["run"] == "ground_truth" and r["split"] == split]
+        for key, value in expected.items():
+            mean, std, n = report.stat(gt, key)
+            assert n == len(trajs)
+            assert mean == pytest.approx(value["mean"], rel=1e-9, abs=1e-12), key
+            assert std == pytest.approx(value["std"], rel=1e-6, abs=1e-12), key
+
+
+# ------------------------------------------------------------------ a real tiny run
+
+TINY_TRAIN = [
+    "data=tiny",
+    "model.M=1",
+    "model.hidden=16",
+    "trainer.max_epochs=1",
+    "trainer.max_time=null",
+    "trainer.enable_progress_bar=false",
+    "trainer.enable_model_summary=false",
+    "datamodule.batch_size=4",
+    "datamodule.pairs_per_epoch=8",
+    "datamodule.val_pairs=8",
+    "+callbacks.rollout._target_=physgnn.callbacks.RolloutCallback",
+    "+callbacks.rollout.every_n_epochs=1",
+    "+callbacks.rollout.n_val_trajectories=1",
+    "+callbacks.rollout.max_frames=8",
+]
+
+
+@pytest.mark.slow
+def test_tiny_run_logs_rollouts_then_make_eval_reports_it(tiny_dataset, tmp_path):
+    outputs = tmp_path / "outputs"
+    run_dir = outputs / "runs" / "baseline" / "t0"
+    with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose("train", [*TINY_TRAIN, f"run_dir={run_dir}", f"data.dir={tiny_dataset}"])
+    info = physgnn.train.train(cfg)
+    (run_dir / ".hydra").mkdir()
+    (run_dir / ".hydra" / "config.yaml").write_text(OmegaConf.to_yaml(cfg))
+    # the callback logged through pl_module.log: the CSV logger has its columns
+    header = (run_dir / "csv" / "version_0" / "metrics.csv").read_text().splitlines()[0]
+    for key in (
+        "val/rollout_mse",
+        "val/chamfer",
+        "ood/energy_gain",
+        "ood/pct_sphere",
+        "rollout/fps",
+    ):
+        assert key in header.split(",")
+    assert info["status"] == "finished"
+
+    path = ev.evaluate(eval_cfg(f"paths.outputs={outputs}", "video_frames=3"))
+    rows = read_csv(outputs / "report" / "metrics.csv")
+    learned = [r for r in rows if r["run"] == "runs/baseline/t0"]
+    assert [r["split"] for r in learned] == ["test"] + ["ood"] * 4
+    assert all(r["n_frames"] == 20 or r["diverged_at"] is not None for r in learned)
+    text = path.read_text()
+    assert "| baseline: default |" in text and "### `baseline`" in text
+    assert len(list((outputs / "report" / "videos").glob("*.gif"))) == 4
+
+
+def test_eval_of_a_dataset_alone_reports_the_references(tmp_path):
+    data = write_dataset(tmp_path / "data")
+    out = tmp_path / "empty"
+    with pytest.raises(ev.EvalError, match="no finished run under"):
+        ev.evaluate(eval_cfg(f"paths.outputs={out}"))
+    text = ev.evaluate(eval_cfg(f"paths.outputs={out}", f"dataset={data}")).read_text()
+    assert "`ground_truth`: 2 test and 2 OOD trajectories." in text
+    assert "No trained runs were evaluated." in text and "No videos." in text
+    rows = read_csv(out / "report" / "metrics.csv")
+    assert sorted({r["run"] for r in rows}) == ["gravity_only", "ground_truth", "static"]
+
+
+def test_a_run_whose_dataset_is_gone_is_one_clear_error(tmp_path, monkeypatch):
+    out = tmp_path / "outputs"
+    make_run(out / "runs" / "baseline" / "t0")
+    cfg = OmegaConf.create({"datamodule": {"data_dir": str(tmp_path / "gone")}})
+    monkeypatch.setattr(physgnn.train, "load_run", lambda run_dir: (Falling(), cfg, {}))
+    with pytest.raises(ev.EvalError, match=r"dataset folder .*gone does not exist"):
+        ev.evaluate(eval_cfg(f"paths.outputs={out}"))

@@ -1,0 +1,154 @@
+"""Every conf/experiment/*.yaml composes as a multirun and every job of it instantiates."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.types import RunMode
+from hydra.utils import instantiate
+from omegaconf import OmegaConf
+
+from physgnn.train import build
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+EXPERIMENTS = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml"))
+RUNS = {
+    "ablation_H": 15,
+    "ablation_M": 15,
+    "ablation_connectivity": 9,
+    "ablation_lambda": 12,
+    "ablation_components": 24,
+}
+
+
+def compose_train(overrides: list[str]):
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        return compose("train", overrides=overrides, return_hydra_config=True)
+
+
+def parse(value: str):
+    """A sweep value as Hydra reads it (int, float or string)."""
+    for kind in (int, float):
+        try:
+            return kind(value)
+        except ValueError:
+            pass
+    return value
+
+
+def sweep_jobs(params) -> list[list[str]]:
+    """The override lists of the jobs a basic-sweeper multirun launches."""
+    axes = [
+        [f"{key}={value}" for value in str(values).split(",")] for key, values in params.items()
+    ]
+    return [list(job) for job in itertools.product(*axes)]
+
+
+def test_every_experiment_is_listed():
+    assert EXPERIMENTS == sorted(RUNS)
+
+
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_experiment_composes_and_every_job_instantiates(name, tiny_dataset, tmp_path):
+    base = [
+        "data=tiny",
+        f"paths.outputs={Path(tiny_dataset).parents[1]}",
+        f"run_dir={tmp_path}",
+        "model.hidden=8",
+    ]
+    cfg = compose_train([f"+experiment={name}", *base])
+    assert cfg.hydra.mode == RunMode.MULTIRUN and cfg.experiment_name == name
+    params = cfg.hydra.sweeper.params
+    assert params.seed == "0,1,2"
+    jobs = sweep_jobs(params)
+    assert len(jobs) == RUNS[name]
+    datamodule, lit, trainer = build(compose_train([f"+experiment={name}", *base, *jobs[0]]))
+    assert trainer.max_epochs == 30 and datamodule.batch_size == 256
+    stats = datamodule.stats()
+    for job in jobs[::3]:  # one seed of each value: the model and module that job trains
+        key, value = job[0].split("=")
+        if key == "+variant":  # named variants: composed in the test below
+            assert (CONF / "variant" / f"{value}.yaml").exists()
+            continue
+        job_cfg = cfg.copy()
+        OmegaConf.update(job_cfg, key, parse(value))
+        lit = instantiate(job_cfg.lit, simulator=instantiate(job_cfg.model, stats=stats))
+        assert lit.simulator.H == job_cfg.model.H == job_cfg.datamodule.H
+        built = {
+            "model.H": lit.simulator.H,
+            "model.M": lit.simulator.M,
+            "model.connectivity": lit.simulator.graph_builder.connectivity,
+            "lit.lambda_energy": lit.lambda_energy,
+        }
+        assert built[key] == OmegaConf.select(job_cfg, key) == parse(value)
+
+
+def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
+    base = ["data=tiny", f"paths.outputs={Path(tiny_dataset).parents[1]}", f"run_dir={tmp_path}"]
+    baseline = compose_train([*base, "+variant=baseline"])
+    expected = {
+        "m1": {"model.M": 1},
+        "epsilon": {"model.connectivity": "epsilon"},
+        "h0": {"model.H": 0},
+        "energy": {"lit.lambda_energy": 0.01},
+        "no_noise": {"lit.noise_std": 0.0},
+        "no_third_law": {"model.third_law": False},
+        "gns": {"model.third_law": False, "model.use_surfaces": False},
+    }
+    stats = build(baseline)[0].stats()
+    for variant, changes in expected.items():
+        cfg = compose_train([*base, f"+variant={variant}"])
+        lit = instantiate(cfg.lit, simulator=instantiate(cfg.model, stats=stats))
+        assert lit.simulator.M == cfg.model.M and lit.noise_std == cfg.lit.noise_std
+        for section in ("model", "lit"):
+            for key, value in cfg[section].items():
+                want = changes.get(f"{section}.{key}", baseline[section][key])
+                assert value == want, (variant, key)
+    assert baseline.model.M == 5 and baseline.model.H == 2 and baseline.lit.lambda_energy == 0
+    assert baseline.model.connectivity == "vi" and baseline.lit.noise_std == 0.01
+
+
+def test_gns_model_config_is_the_gns_variant(tiny_dataset, tmp_path):
+    base = ["data=tiny", f"paths.outputs={Path(tiny_dataset).parents[1]}", f"run_dir={tmp_path}"]
+    assert compose_train([*base, "model=gns"]).model == compose_train([*base, "+variant=gns"]).model
+
+
+@pytest.mark.parametrize(
+    "choice",
+    [
+        "trainer=gpu",
+        "trainer=ddp",
+        "logger=wandb",
+        "logger=tensorboard",
+        "callbacks=rollout",
+        "debug=short",
+    ],
+)
+def test_other_config_choices_compose(choice, tmp_path):
+    cfg = compose_train([choice, f"run_dir={tmp_path}"])
+    if choice.startswith("logger="):  # building a logger starts no run and needs no network
+        logger = instantiate(cfg.logger)
+        assert Path(logger.save_dir) == tmp_path
+    if choice == "logger=wandb":
+        assert cfg.logger.offline is True
+    if choice == "trainer=ddp":
+        assert cfg.trainer.strategy == "ddp" and cfg.trainer.accelerator == "gpu"
+    if choice == "callbacks=rollout":
+        names = [type(instantiate(c)).__name__ for c in cfg.callbacks.values()]
+        assert names == ["ModelCheckpoint", "LearningRateMonitor", "RolloutCallback"]
+
+
+@pytest.mark.parametrize(
+    "launcher,plugin",
+    [
+        ("local", "hydra_plugins.hydra_joblib_launcher"),
+        ("slurm", "hydra_plugins.hydra_submitit_launcher"),
+    ],
+)
+def test_launcher_configs_compose_when_installed(launcher, plugin, tmp_path):
+    pytest.importorskip(plugin)
+    cfg = compose_train([f"hydra/launcher={launcher}", f"run_dir={tmp_path}"])
+    assert "Launcher" in cfg.hydra.launcher._target_

@@ -1,0 +1,167 @@
+"""LitSimulator: energy term by hand, masked MSE, noise only in training, non-finite loss."""
+
+from __future__ import annotations
+
+import functools
+
+import lightning as L
+import pytest
+import torch
+from lightning.pytorch.callbacks import Callback, ModelCheckpoint
+from simdata import STATS, batch, trajectory
+from torch.testing import assert_close
+from torch_geometric.loader import DataLoader
+
+from physgnn.lit import (
+    LitSimulator,
+    NonFiniteLossError,
+    add_noise,
+    energy_increase,
+    masked_mse,
+)
+from physgnn.scene import Effects
+from physgnn.simulator import LearnedSimulator
+from physgnn.state import SceneState
+
+ADAM = functools.partial(torch.optim.Adam, lr=1e-3)
+
+
+def make_lit(**kwargs) -> LitSimulator:
+    torch.manual_seed(0)
+    return LitSimulator(LearnedSimulator(STATS, H=1, M=1, hidden=8), ADAM, **kwargs)
+
+
+def one_sphere(z: float, vel) -> SceneState:
+    """One sphere (r 0.5 m, m 2 kg) at height z with velocity ``vel``; dt 0.1 s."""
+    v = torch.tensor([vel], dtype=torch.float32)
+    return SceneState(
+        pos=torch.tensor([[0.0, 0.0, z]]),
+        quat=torch.tensor([[1.0, 0, 0, 0]]),
+        vel=v[:, None].repeat(1, 2, 1),
+        angvel=torch.zeros(1, 2, 3),
+        radius=torch.tensor([0.5]),
+        mass=torch.tensor([2.0]),
+        dt=torch.tensor([0.1]),
+    )
+
+
+def test_energy_increase_by_hand_one_sphere():
+    state = one_sphere(2.0, [1.0, 0.0, 0.0])
+    # v̂ = (2, 0, 3): kinetic 0.5·2·(4 + 9) − 0.5·2·1 = 12 J; the sphere rises 0.1·3 = 0.3 m:
+    # potential + 2·9.81·0.3 J. Divided by the weight 2·9.81 N.
+    gain = energy_increase(state, torch.tensor([[2.0, 0.0, 3.0]]))
+    assert_close(gain, torch.tensor([(12.0 + 2 * 9.81 * 0.3) / (2 * 9.81)]))
+    # slowing down and falling loses energy: no penalty
+    assert_close(energy_increase(state, torch.tensor([[0.5, 0.0, -1.0]])), torch.zeros(1))
+
+
+def test_energy_increase_per_scene_of_a_batch():
+    state = batch([trajectory(2, seed=0), trajectory(3, seed=1)])
+    assert_close(energy_increase(state, state.target_vel), torch.zeros(2))  # free fall loses
+    faster = state.target_vel.clone()
+    faster[2:] *= 3.0
+    gain = energy_increase(state, faster)
+    assert gain[0] == 0 and gain[1] > 0
+
+
+def test_masked_mse_by_hand():
+    pred, target = torch.zeros(2, 6), torch.ones(2, 6)
+    target[1, 3:] = 5.0
+    assert_close(masked_mse(pred, target, torch.tensor([True, False])), torch.tensor(1.0))
+    assert_close(
+        masked_mse(pred, target, torch.tensor([True, True])), torch.tensor((6 + 3 + 75) / 12)
+    )
+
+
+def test_energy_term_enters_the_loss_with_lambda():
+    state = batch([trajectory(3, seed=2)])
+    plain, weighted = make_lit(lambda_energy=0.0), make_lit(lambda_energy=0.5)
+    a, b = plain.losses(state), weighted.losses(state)
+    assert_close(a["loss"], a["loss_mse"])
+    assert_close(b["loss"], b["loss_mse"] + 0.5 * b["loss_energy"])
+    assert_close(a["loss_energy"], b["loss_energy"])
+
+
+def test_noise_only_in_training_and_targets_unchanged():
+    lit = make_lit(noise_std=0.1)
+    still = trajectory(40, seed=4, effects=Effects(rotation=False))
+    state = batch([trajectory(40, seed=3), still])
+    seen = []
+    original = lit.simulator.normalized_prediction
+    lit.simulator.normalized_prediction = lambda s: seen.append(s) or original(s)
+    lit.log = lambda *args, **kwargs: None
+    lit.validation_step(state, 0)
+    lit.training_step(state, 0)
+    clean, noisy = seen
+    assert torch.equal(clean.pos, state.pos) and torch.equal(clean.vel, state.vel)
+    assert torch.equal(noisy.target_vel, state.target_vel)
+    assert torch.equal(noisy.target_angvel, state.target_angvel)
+    # σ·length_scale = 0.1 m on positions, σ·std(v) on velocities
+    assert (noisy.pos - state.pos).std().item() == pytest.approx(0.1, rel=0.2)
+    dv = (noisy.vel - state.vel)[..., 2].std().item()
+    assert dv == pytest.approx(0.1 * 4.0, rel=0.2)
+    assert_close(noisy.quat.norm(dim=-1), torch.ones(80))
+    assert not torch.equal(noisy.quat[:40], state.quat[:40])
+    assert torch.equal(noisy.quat[40:], state.quat[40:])  # rotation off: untouched
+    assert torch.equal(noisy.angvel[40:], state.angvel[40:])
+
+
+def pairs(n_traj: int = 2) -> list:
+    from physgnn.state import TrajectoryFrames
+
+    frames = [TrajectoryFrames(trajectory(3, seed=s)) for s in range(n_traj)]
+    return [f.state(t, 1) for f in frames for t in range(1, 10)]
+
+
+class Poison(Callback):
+    """Sets a weight to NaN when epoch 1 starts."""
+
+    def on_train_epoch_start(self, trainer, pl_module):
+        if trainer.current_epoch == 1:
+            with torch.no_grad():
+                next(pl_module.simulator.parameters()).fill_(float("nan"))
+
+
+def test_non_finite_loss_stops_with_one_line_and_keeps_checkpoint(tmp_path):
+    lit = make_lit()
+    ckpt = ModelCheckpoint(dirpath=tmp_path, save_last=True)
+    trainer = L.Trainer(
+        max_epochs=3,
+        callbacks=[ckpt, Poison()],
+        logger=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+    )
+    data = DataLoader(pairs(), batch_size=6)
+    with pytest.raises(NonFiniteLossError) as info:
+        trainer.fit(lit, data)
+    message = str(info.value)
+    assert "\n" not in message and "non-finite training loss (nan) at epoch 1" in message
+    saved = torch.load(tmp_path / "last.ckpt", weights_only=True)
+    assert saved["epoch"] == 0
+    assert all(
+        torch.isfinite(v).all() for v in saved["state_dict"].values() if v.is_floating_point()
+    )
+
+
+def test_scheduler_is_stepped_per_epoch():
+    sched = functools.partial(torch.optim.lr_scheduler.ExponentialLR, gamma=0.5)
+    lit = make_lit(scheduler=sched)
+    conf = lit.configure_optimizers()
+    assert conf["lr_scheduler"]["interval"] == "epoch"
+    assert isinstance(conf["optimizer"], torch.optim.Adam)
+
+
+def test_negative_hyperparameters_rejected():
+    with pytest.raises(ValueError, match="must be >= 0"):
+        make_lit(noise_std=-1.0)
+
+
+def test_noise_is_reproducible_from_a_seeded_generator():
+    lit = make_lit()
+    state = batch([trajectory(5, seed=8)])
+    draw = [
+        add_noise(state, lit.simulator, 0.1, torch.Generator().manual_seed(s)) for s in (1, 1, 2)
+    ]
+    assert torch.equal(draw[0].pos, draw[1].pos) and torch.equal(draw[0].vel, draw[1].vel)
+    assert not torch.equal(draw[0].pos, draw[2].pos)

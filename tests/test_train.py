@@ -1,0 +1,174 @@
+"""train(cfg) on the tiny preset: fast_dev_run, resume, determinism, load_run, CLI errors."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from physgnn import train as train_module
+from physgnn.train import load_run, train
+
+CONF = str(Path(__file__).resolve().parents[1] / "conf")
+SHORT = [
+    "model.M=1",
+    "model.hidden=16",
+    "trainer.max_epochs=1",
+    "trainer.max_time=null",
+    "trainer.enable_progress_bar=false",
+    "trainer.enable_model_summary=false",
+    "datamodule.batch_size=4",
+    "datamodule.pairs_per_epoch=8",
+    "datamodule.val_pairs=8",
+]
+
+
+def outputs_of(tiny_dataset) -> Path:
+    return Path(tiny_dataset).parents[1]  # <outputs>/data/tiny
+
+
+def config(tiny_dataset, run_dir, *overrides):
+    base = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={run_dir}"]
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        return compose("train", overrides=base + list(overrides))
+
+
+def weights(path) -> dict:
+    return torch.load(path, map_location="cpu", weights_only=True)["state_dict"]
+
+
+def test_fast_dev_run(tiny_dataset, tmp_path):
+    info = train(config(tiny_dataset, tmp_path, "debug=fast", "model.hidden=16"))
+    assert info["status"] == "finished" and info["global_step"] == 1
+    assert info["train_loss"] > 0 and info["val_loss"] > 0
+    assert info["pairs_per_s"] > 0 and info["nodes_per_s"] >= info["pairs_per_s"]
+    saved = json.loads((tmp_path / "run.json").read_text())
+    assert saved["status"] == "finished" and saved["seed"] == 0
+
+
+@pytest.fixture(scope="module")
+def runs(tiny_dataset, tmp_path_factory) -> dict:
+    """Five short trainings (noise on): a, b same seed; c another seed; a resumed to 2
+    epochs; a straight 2-epoch run with a's seed."""
+    root = tmp_path_factory.mktemp("runs")
+    out = {}
+    for name, extra in {
+        "a": [],
+        "b": [],
+        "c": ["seed=4"],
+        "straight": ["trainer.max_epochs=2"],
+    }.items():
+        cfg = config(tiny_dataset, root / name, *SHORT, "seed=3", *extra)
+        out[name] = train(cfg) | {"cfg": cfg}
+    last = out["a"]["checkpoints"]["last"]
+    resumed = ["seed=3", "trainer.max_epochs=2", f"ckpt_path={last}"]
+    out["resumed"] = train(config(tiny_dataset, root / "resumed", *SHORT, *resumed))
+    return out
+
+
+def test_same_seed_same_weights(runs):
+    wa, wb = weights(runs["a"]["checkpoints"]["last"]), weights(runs["b"]["checkpoints"]["last"])
+    wc = weights(runs["c"]["checkpoints"]["last"])
+    assert wa.keys() == wb.keys()
+    assert all(torch.equal(wa[k], wb[k]) for k in wa)
+    assert not all(torch.equal(wa[k], wc[k]) for k in wa)
+    assert runs["a"]["train_loss"] == runs["b"]["train_loss"] != runs["c"]["train_loss"]
+
+
+def test_resume_equals_straight_training(runs):
+    assert runs["a"]["epochs"] == 1 and runs["a"]["global_step"] == 2
+    resumed, straight = runs["resumed"], runs["straight"]
+    assert resumed["epochs"] == 2 and resumed["global_step"] == 4
+    assert resumed["pairs_seen"] == 8  # only the second epoch ran
+    wr, ws = weights(resumed["checkpoints"]["last"]), weights(straight["checkpoints"]["last"])
+    assert all(torch.equal(wr[k], ws[k]) for k in ws)
+    assert resumed["val_loss"] == straight["val_loss"]
+
+
+def test_load_run_rebuilds_the_simulator(runs):
+    run_dir = Path(runs["a"]["run_dir"])
+    (run_dir / ".hydra").mkdir()
+    (run_dir / ".hydra" / "config.yaml").write_text(OmegaConf.to_yaml(runs["a"]["cfg"]))
+    simulator, run_cfg, loaded = load_run(run_dir)
+    assert loaded["checkpoint"] == runs["a"]["checkpoints"]["best"]
+    assert loaded["status"] == "finished" and loaded["seed"] == 3
+    assert run_cfg.model.M == 1 and not simulator.training
+    saved = weights(loaded["checkpoint"])
+    for key, value in simulator.state_dict().items():
+        assert torch.equal(value, saved[f"simulator.{key}"])
+    assert bool(simulator.effects_trained.all())
+
+
+def test_load_run_without_checkpoint_is_clear(tmp_path):
+    (tmp_path / ".hydra").mkdir()
+    (tmp_path / ".hydra" / "config.yaml").write_text("model: {}\n")
+    with pytest.raises(FileNotFoundError, match="no checkpoint in"):
+        load_run(tmp_path)
+    with pytest.raises(FileNotFoundError, match="not a training run"):
+        load_run(tmp_path / "nothing")
+
+
+def run_main(monkeypatch, capsys, *args) -> tuple[int, str]:
+    monkeypatch.setattr(sys, "argv", ["physgnn.train", *args])
+    with pytest.raises(SystemExit) as info:
+        train_module.main()
+    return info.value.code, capsys.readouterr().err.strip().splitlines()[-1]
+
+
+def test_missing_dataset_is_one_line(monkeypatch, capsys, tmp_path):
+    code, line = run_main(monkeypatch, capsys, "data=tiny", f"paths.outputs={tmp_path}")
+    assert code == 2
+    assert line.startswith("error: dataset 'tiny' not found") and "make data PRESET=tiny" in line
+
+
+def test_bad_config_value_is_one_line(monkeypatch, capsys, tiny_dataset, tmp_path):
+    args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"hydra.run.dir={tmp_path}"]
+    code, line = run_main(monkeypatch, capsys, *args, "model.connectivity=nearest")
+    assert code == 2 and line.startswith("error: ") and "unknown connectivity 'nearest'" in line
+
+
+def test_exploding_model_stops_with_one_line(monkeypatch, capsys, tiny_dataset, tmp_path):
+    args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"hydra.run.dir={tmp_path}"]
+    code, line = run_main(monkeypatch, capsys, *args, *SHORT, "lit.noise_std=1e30")
+    assert code == 1 and line.startswith("error: non-finite training loss")
+    assert json.loads((tmp_path / "run.json").read_text())["status"] == "diverged"
+
+
+@pytest.mark.slow
+def test_real_multirun_two_jobs(tiny_dataset, tmp_path):
+    outputs = tmp_path / "outputs"  # the fixture's folder is read-only
+    shutil.copytree(tiny_dataset, outputs / "data" / "tiny")
+    cmd = [
+        sys.executable,
+        "-m",
+        "physgnn.train",
+        "-m",
+        "model.M=1,2",
+        "data=tiny",
+        f"paths.outputs={outputs}",
+        "experiment_name=mr",
+        *SHORT[1:],
+    ]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    runs = sorted((outputs / "multirun" / "mr").glob("*/*/run.json"))
+    assert [json.loads(p.read_text())["overrides"][0] for p in runs] == ["model.M=1", "model.M=2"]
+    assert all(json.loads(p.read_text())["status"] == "finished" for p in runs)
+    names = [p.parent.name for p in runs]  # job number + overrides, without paths
+    assert names[0].startswith("0_") and "model.M=1" in names[0] and "paths" not in names[0]
+    assert names[1].startswith("1_") and "model.M=2" in names[1]
+
+
+def test_last_checkpoint_holds_the_final_weights_after_a_mid_epoch_stop(tiny_dataset, tmp_path):
+    info = train(
+        config(tiny_dataset, tmp_path, *SHORT, "trainer.max_epochs=3", "+trainer.max_steps=3")
+    )
+    assert info["global_step"] == 3 and info["status"] == "finished"
+    assert torch.load(info["checkpoints"]["last"], weights_only=True)["global_step"] == 3
