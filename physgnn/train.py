@@ -28,11 +28,34 @@ from physgnn.lit import NonFiniteLossError
 from physgnn.scene import SceneError
 from physgnn.simulator import LearnedSimulator, StatsError
 
-USER_ERRORS = (DatasetError, SceneError, StatsError, HydraException, OmegaConfBaseException)
+NUMERIC_TRAINER_KEYS = ("max_epochs", "max_steps", "gradient_clip_val", "log_every_n_steps")
+
+
+class ConfigError(ValueError):
+    """A config value of the wrong kind (one-line message)."""
+
+
+USER_ERRORS = (
+    DatasetError,
+    SceneError,
+    StatsError,
+    ConfigError,
+    HydraException,
+    OmegaConfBaseException,
+)
+
+
+def check_trainer_config(trainer_cfg: DictConfig) -> None:
+    """Catch a non-numeric value before Lightning fails on it deep inside ``fit``."""
+    for key in NUMERIC_TRAINER_KEYS:
+        value = trainer_cfg.get(key)
+        if value is not None and not isinstance(value, int | float):
+            raise ConfigError(f"trainer.{key} must be a number, got {value!r}")
 
 
 def build_trainer(cfg: DictConfig) -> L.Trainer:
     """The Lightning trainer of ``cfg.trainer`` with ``cfg.callbacks`` and ``cfg.logger``."""
+    check_trainer_config(cfg.trainer)
     callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
     logger = instantiate(cfg.logger) if cfg.get("logger") else False
     return instantiate(

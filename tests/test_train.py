@@ -134,6 +134,12 @@ def test_bad_config_value_is_one_line(monkeypatch, capsys, tiny_dataset, tmp_pat
     assert code == 2 and line.startswith("error: ") and "unknown connectivity 'nearest'" in line
 
 
+def test_non_numeric_trainer_value_is_one_line(monkeypatch, capsys, tiny_dataset, tmp_path):
+    args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"hydra.run.dir={tmp_path}"]
+    code, line = run_main(monkeypatch, capsys, *args, "trainer.max_epochs=abc")
+    assert code == 2 and line == "error: trainer.max_epochs must be a number, got 'abc'"
+
+
 def test_exploding_model_stops_with_one_line(monkeypatch, capsys, tiny_dataset, tmp_path):
     args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"hydra.run.dir={tmp_path}"]
     code, line = run_main(monkeypatch, capsys, *args, *SHORT, "lit.noise_std=1e30")
