@@ -48,10 +48,10 @@ sweep: ## Run a whole ablation sweep (EXPERIMENT=ablation_H|ablation_M|ablation_
 eval: ## Evaluate every finished run under outputs/ and write outputs/report/ (ARGS: runs=PATH ...)
 	$(PY) -m physgnn.eval $(ARGS)
 
-# PASSIVE: OpenMP threads sleep instead of spinning at barriers; on a busy machine spinning made
-# 2-thread steps up to 6x slower (measured). OMP_WAIT_POLICY=ACTIVE make bench to compare.
+# On a busy machine (load > cores) run `OMP_WAIT_POLICY=PASSIVE make bench`: spinning OpenMP
+# threads made 2-thread steps up to 6x slower there; on an idle machine PASSIVE is 2x slower.
 bench: ## Accuracy versus time: outputs/bench/bench.{json,md} (ARGS: e.g. quick=true threads=1)
-	OMP_WAIT_POLICY=$${OMP_WAIT_POLICY:-PASSIVE} $(PY) -m physgnn.bench $(ARGS)
+	$(PY) -m physgnn.bench $(ARGS)
 
 sleep-study: ## Sleeping spheres off vs on, OOD (c) and a resting pile (RUN=a run folder)
 	$(PY) -m physgnn.sleep_study run=$(RUN) $(ARGS)

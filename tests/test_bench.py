@@ -195,6 +195,10 @@ def test_targets_table_met_and_not_met():
     assert graph[2] == "not met"  # 30 % at 1000 spheres
     assert linear[1:] == ["1.25", "met"]  # (250 ms / 10 000) / (20 ms / 1000)
     assert pybullet[2] == "not met"  # 4 < 5 FPS at 10 000
+    # the graph share is judged from 154 spheres up: 50 % at 10 spheres does not count
+    extra["learned"][1] = _learned(1000, 50.0, 0.2, 1.0, 0.5)
+    extra["learned"].append(_learned(10, 500.0, 0.5, 1.0, 0.1))
+    assert targets(result, extra)[2][2] == "met"
 
 
 # --------------------------------------------------------------------------------- Pareto
