@@ -66,7 +66,7 @@ def test_experiment_composes_and_every_job_instantiates(name, tiny_dataset, tmp_
     jobs = sweep_jobs(params)
     assert len(jobs) == RUNS[name]
     datamodule, lit, trainer = build(compose_train([f"+experiment={name}", *base, *jobs[0]]))
-    assert trainer.max_epochs == 30 and datamodule.batch_size == 256
+    assert trainer.max_epochs == 90 and datamodule.batch_size == 256
     stats = datamodule.stats()
     for job in jobs[::3]:  # one seed of each value: the model and module that job trains
         key, value = job[0].split("=")
