@@ -139,11 +139,33 @@ def spawn_without_overlap(
     return pos
 
 
+def clustered_positions(
+    rng, radius: np.ndarray, half: float, h_max: float, max_gap: float
+) -> np.ndarray | None:
+    """Centres ``[N, 3]`` on a random subset of a cubic lattice whose spheres are
+    U[0.01, max_gap] m apart (surface to surface for the largest radius): a block of close,
+    non-touching spheres anywhere in the spawn volume. None when the block does not fit."""
+    n, r_max = len(radius), float(radius.max())
+    k = int(np.ceil(n ** (1 / 3) - 1e-9))
+    step = 2 * r_max + rng.uniform(0.01, max_gap)
+    span = (k - 1) * step
+    if span > 2 * (half - r_max) or r_max + span > h_max:
+        return None
+    cells = np.stack(np.meshgrid(*[np.arange(k)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    cells = cells[rng.permutation(len(cells))[:n]]
+    low = np.array([-half + r_max, -half + r_max, r_max])
+    high = np.array([half - r_max - span, half - r_max - span, h_max - span])
+    return rng.uniform(low, high) + step * cells
+
+
 def random_box(c: dict, rng: np.random.Generator) -> Scene:
     """N ~ U{n_min..n_max} spheres of radius U[radius_min, radius_max] at heights in
     (r, h_max] over a square arena of side U[side_min, side_max] with 4 walls. Initial
     horizontal velocities are uniform in a disc of radius ``max_speed0`` and angular
-    velocities uniform in a ball of radius ``max_angvel0`` (more rolling and wall hits)."""
+    velocities uniform in a ball of radius ``max_angvel0`` (more rolling and wall hits).
+    With probability ``cluster_fraction`` (default 0) the spheres start as one block of close
+    spheres (:func:`clustered_positions`) instead of scattered: many neighbours falling and
+    landing together."""
     if c["n_min"] < 1 or c["n_max"] < c["n_min"]:
         raise SceneError(
             f"random_box: need 1 <= n_min <= n_max (got {c['n_min']}, {c['n_max']}): "
@@ -158,13 +180,18 @@ def random_box(c: dict, rng: np.random.Generator) -> Scene:
     side = float(rng.uniform(c["side_min"], c["side_max"]))
     radius = rng.uniform(c["radius_min"], c["radius_max"], size=n)
     half = side / 2
-    pos = spawn_without_overlap(
-        rng,
-        radius,
-        np.array([-half, -half, 0.0]),
-        np.array([half, half, c["h_max"]]),
-        int(c["spawn_tries"]),
-    )
+    pos = None
+    # The extra draw only when clusters are asked for: scenes without them stay as they were.
+    if c.get("cluster_fraction", 0.0) > 0 and rng.uniform() < c["cluster_fraction"]:
+        pos = clustered_positions(rng, radius, half, c["h_max"], c.get("cluster_max_gap", 0.5))
+    if pos is None:
+        pos = spawn_without_overlap(
+            rng,
+            radius,
+            np.array([-half, -half, 0.0]),
+            np.array([half, half, c["h_max"]]),
+            int(c["spawn_tries"]),
+        )
     ang = rng.uniform(0, 2 * np.pi, size=n)
     speed = c["max_speed0"] * np.sqrt(rng.uniform(size=n))
     vel = np.stack([speed * np.cos(ang), speed * np.sin(ang), np.zeros(n)], axis=1)

@@ -108,7 +108,7 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
                 want = changes.get(f"{section}.{key}", baseline[section][key])
                 assert value == want, (variant, key)
     assert baseline.model.M == 5 and baseline.model.H == 2 and baseline.lit.lambda_energy == 0
-    assert baseline.model.connectivity == "vi" and baseline.lit.noise_std == 0.01
+    assert baseline.model.connectivity == "vi" and baseline.lit.noise_std == 0.03
 
 
 def test_gns_model_config_is_the_gns_variant(tiny_dataset, tmp_path):

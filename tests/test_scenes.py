@@ -54,6 +54,32 @@ def test_random_box_spawns_without_overlap_inside_the_arena():
         assert list(s.plane_kind) == [GROUND, WALL, WALL, WALL, WALL]
 
 
+def test_random_box_clusters_are_close_but_never_overlap():
+    cfg = scene_cfg(
+        "random_box",
+        n_min=20,
+        n_max=20,
+        side_min=12.0,
+        side_max=12.0,
+        h_max=12.0,
+        cluster_fraction=1.0,
+        cluster_max_gap=0.2,
+    )
+    for seed in range(10):
+        s = build_scene(cfg, np.random.default_rng(seed))
+        gaps = pair_gaps(s.pos, s.radius)
+        # lattice step = 2 r_max + U[0.01, 0.2]: nearest gaps are small, none negative
+        assert gaps.min() > 0 and np.sort(gaps)[:20].max() < 1.2
+        assert np.all(np.abs(s.pos[:, :2]) + s.radius[:, None] <= 6.0 + 1e-5)
+        assert np.all(s.pos[:, 2] >= s.radius - 1e-6) and np.all(s.pos[:, 2] <= 12.0 + 1e-6)
+
+
+def test_random_box_without_clusters_draws_as_before():
+    plain = build_scene(scene_cfg("random_box"), np.random.default_rng(3))
+    off = build_scene(scene_cfg("random_box", cluster_fraction=0.0), np.random.default_rng(3))
+    assert np.array_equal(plain.pos, off.pos)
+
+
 def test_walls_face_inwards():
     s = build_scene(scene_cfg("random_box"), np.random.default_rng(1))
     centres, normals = s.planes[1:, :3], s.planes[1:, 3:6]
