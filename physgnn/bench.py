@@ -35,6 +35,7 @@ from physgnn.bench_report import write_markdown
 from physgnn.dataset import DatasetError, compute_stats
 from physgnn.engine import simulate
 from physgnn.integrator import euler_step
+from physgnn.metrics import PENETRATION_KEYS
 from physgnn.scene import SceneError
 from physgnn.simulator import StatsError
 from physgnn.state import TrajectoryFrames
@@ -313,16 +314,7 @@ def accuracy_sweep(cfg: DictConfig, start) -> list[dict]:
 
 
 def _physics(m: dict) -> dict:
-    keys = (
-        "energy_gain",
-        "depth_sphere",
-        "depth_ground",
-        "depth_static",
-        "pct_sphere",
-        "pct_ground",
-        "pct_static",
-    )
-    return {k: m[k] for k in keys}
+    return {k: m[k] for k in ("energy_gain", *PENETRATION_KEYS)}
 
 
 def pybullet_rows(cfg: DictConfig, runs: dict, sweep: list[dict]) -> list[dict]:

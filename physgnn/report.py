@@ -14,44 +14,23 @@ from collections import defaultdict
 from pathlib import Path
 
 from physgnn import plots
+from physgnn.metrics import PENETRATION_KEYS
 
-COLUMNS = [
-    "run",
-    "experiment",
-    "overrides",
-    "seed",
-    "split",
-    "trajectory",
-    "n_spheres",
-    "n_frames",
-    "mse",
-    "mse20",
-    "chamfer",
-    "energy_gain",
-    "depth_sphere",
-    "depth_ground",
-    "depth_static",
-    "pct_sphere",
-    "pct_ground",
-    "pct_static",
-    "rotation_error",
-    "drift_before_hit",
-    "diverged_at",
-    "fps",
-]
+# metrics.csv: identification columns, the metrics, then the divergence step and the speed.
 METRICS = [
     "mse",
     "mse20",
     "chamfer",
     "energy_gain",
-    "depth_sphere",
-    "depth_ground",
-    "depth_static",
-    "pct_sphere",
-    "pct_ground",
-    "pct_static",
+    *PENETRATION_KEYS,
     "rotation_error",
     "drift_before_hit",
+    "fps",
+]
+COLUMNS = [
+    *("run", "experiment", "overrides", "seed", "split", "trajectory", "n_spheres", "n_frames"),
+    *METRICS[:-1],
+    "diverged_at",
     "fps",
 ]
 INTS = ["n_spheres", "n_frames", "diverged_at", "seed"]
