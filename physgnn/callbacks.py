@@ -62,18 +62,7 @@ class RolloutCallback(L.Callback):
             rows, fps = [], []
             for traj in trajectories:
                 pred: Prediction = rollout_prediction(simulator, traj)
-                rows.append(
-                    metrics.trajectory_metrics(
-                        dict(
-                            pos=pred.pos,
-                            vel=pred.vel,
-                            quat=pred.quat,
-                            start=pred.start,
-                            diverged_at=pred.diverged_at,
-                        ),
-                        traj,
-                    )
-                )
+                rows.append(metrics.trajectory_metrics(pred.as_metrics_input(), traj))
                 if pred.fps is not None:
                     fps.append(float(pred.fps))
         finally:

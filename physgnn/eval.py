@@ -159,6 +159,16 @@ class Prediction:
     diverged_at: int | None
     fps: float | None
 
+    def as_metrics_input(self) -> dict:
+        """The ``pred`` argument of :func:`physgnn.metrics.trajectory_metrics`."""
+        return dict(
+            pos=self.pos,
+            vel=self.vel,
+            quat=self.quat,
+            start=self.start,
+            diverged_at=self.diverged_at,
+        )
+
 
 def truth_prediction(traj: Trajectory) -> Prediction:
     d = metrics.trajectory_dict(traj)
@@ -177,18 +187,7 @@ def rollout_prediction(simulator, traj: Trajectory, **kwargs) -> Prediction:
 
 def metrics_row(info: RunInfo, split: str, traj: Trajectory, pred: Prediction, tol: float) -> dict:
     """One metrics.csv row (columns of ``report.COLUMNS``)."""
-    m = metrics.trajectory_metrics(
-        dict(
-            pos=pred.pos,
-            vel=pred.vel,
-            quat=pred.quat,
-            start=pred.start,
-            diverged_at=pred.diverged_at,
-        ),
-        traj,
-        tol=tol,
-        horizon=20,
-    )
+    m = metrics.trajectory_metrics(pred.as_metrics_input(), traj, tol=tol, horizon=20)
     row = {k: m.get(k) for k in report.COLUMNS}
     row.update(
         run=info.name,

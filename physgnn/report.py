@@ -8,12 +8,12 @@ rollout's metrics are on its finite prefix and its group is marked "diverged at 
 
 from __future__ import annotations
 
-import csv
 import math
 from collections import defaultdict
 from pathlib import Path
 
 from physgnn import plots
+from physgnn.csvio import read_rows, write_rows
 from physgnn.metrics import PENETRATION_KEYS
 
 # metrics.csv: identification columns, the metrics, then the divergence step and the speed.
@@ -80,28 +80,12 @@ REPORT_FIGURES = {
 
 def write_csv(path: str | Path, rows: list[dict]) -> Path:
     """Write rows (dicts keyed by ``COLUMNS``; None → empty cell) atomically."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".csv.tmp")
-    with open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=COLUMNS)
-        w.writeheader()
-        for row in rows:
-            w.writerow({k: "" if row.get(k) is None else row[k] for k in COLUMNS})
-    tmp.replace(path)
-    return path
+    return write_rows(path, rows, COLUMNS)
 
 
 def read_csv(path: str | Path) -> list[dict]:
     """Rows of a metrics.csv with numbers parsed (empty cell → None)."""
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    for row in rows:
-        for k in METRICS:
-            row[k] = float(row[k]) if row.get(k) not in (None, "") else None
-        for k in INTS:
-            row[k] = int(float(row[k])) if row.get(k) not in (None, "") else None
-    return rows
+    return read_rows(path, METRICS, INTS)
 
 
 # ---------------------------------------------------------------- grouping

@@ -23,7 +23,6 @@ Metrics of a diverged rollout are computed on its finite prefix.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import math
@@ -35,6 +34,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn import metrics
+from physgnn.csvio import read_rows, write_rows
 from physgnn.scene import GROUND, Trajectory
 
 HARD_FILE = "hard.h5"
@@ -217,27 +217,11 @@ def hard_split(
 
 def write_csv(path, rows: list[dict]) -> Path:
     """``stability.csv`` (columns :data:`COLUMNS`; None → empty cell), written atomically."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=COLUMNS)
-        w.writeheader()
-        for row in rows:
-            w.writerow({k: "" if row.get(k) is None else row[k] for k in COLUMNS})
-    tmp.replace(path)
-    return path
+    return write_rows(path, rows, COLUMNS)
 
 
 def read_csv(path) -> list[dict]:
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    for row in rows:
-        for k in _FLOATS:
-            row[k] = float(row[k]) if row[k] != "" else None
-        for k in _INTS:
-            row[k] = int(float(row[k])) if row[k] != "" else None
-    return rows
+    return read_rows(path, _FLOATS, _INTS)
 
 
 def _fmt(x) -> str:
