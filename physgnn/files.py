@@ -1,24 +1,61 @@
-"""Tables as CSV: atomic writes, typed reads (metrics.csv, stability.csv)."""
+"""Files written atomically (a ``<name>.tmp`` beside the target, then renamed over it), so an
+interrupted run never leaves a half file under the real name; CSV tables with typed reads."""
 
 from __future__ import annotations
 
 import csv
-from collections.abc import Iterable
+import json
+import math
+import os
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
+
+
+@contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield ``<path>.tmp`` to write; on success it replaces ``path`` (folders are made),
+    on an error it is removed and ``path`` is left as it was."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+    return Path(path)
+
+
+def _finite(x):
+    """``x`` with every non-finite float replaced by None (JSON has no NaN or inf)."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_finite(v) for v in x]
+    return x
+
+
+def write_json(path: str | Path, data) -> Path:
+    """``data`` as indented JSON (non-finite floats as null), written atomically."""
+    return write_text(path, json.dumps(_finite(data), indent=2) + "\n")
 
 
 def write_rows(path: str | Path, rows: list[dict], columns: list[str]) -> Path:
     """Write ``rows`` (dicts keyed by ``columns``; None → empty cell) to ``path`` atomically."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as f:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=columns)
         w.writeheader()
         for row in rows:
             w.writerow({k: "" if row.get(k) is None else row[k] for k in columns})
-    tmp.replace(path)
-    return path
+    return Path(path)
 
 
 def read_rows(path: str | Path, floats: Iterable[str], ints: Iterable[str]) -> list[dict]:

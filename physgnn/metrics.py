@@ -10,7 +10,7 @@ one :class:`MetricError` line instead of returning a silent NaN. Conventions (SP
   normalised depth exceeds ``tol`` (default 0: any overlap counts, as in the report).
   The ground (kind 0) is a half-space: depth ``r − (p − c)·n``. Other planes (walls, static)
   are two-sided bounded rectangles: depth ``r − |p − closest point of the rectangle|``.
-- energy: kinetic + potential ``m·g·(z − r)`` (:mod:`physgnn.energy`) from the velocities
+- energy: kinetic + potential ``m·g·(z − r)`` (:mod:`physgnn.physics.energy`) from the velocities
   given (ground truth: the engine's by default; rollouts: their own); the normalised gain is
   ``Σ max(0, E_{k+1} − E_k) / E_0``; when ``E_0`` is zero (``≤ 1e-6·Σ m·g·r``, float noise of a
   resting scene) or negative, the sum is divided by ``Σ m·g·r`` instead.
@@ -23,10 +23,11 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from physgnn import quaternion as Q
-from physgnn.energy import G, sphere_energy
-from physgnn.features import finite_difference_velocities
-from physgnn.scene import GROUND, Trajectory
+from physgnn.errors import PhysgnnError
+from physgnn.physics import quaternion as Q
+from physgnn.physics.energy import G, sphere_energy
+from physgnn.physics.kinematics import finite_difference_velocities
+from physgnn.physics.scene import GROUND, Trajectory
 
 # Above this many pair distances (T·N·M) the per-frame cKDTree path is used.
 _BRUTE_FORCE_MAX = 2_000_000
@@ -42,7 +43,7 @@ PENETRATION_KEYS = (
 )
 
 
-class MetricError(ValueError):
+class MetricError(PhysgnnError, ValueError):
     """A metric cannot be computed from its input (one line naming the problem)."""
 
 

@@ -1,7 +1,7 @@
 """Autoregressive rollout of a simulator over many scenes at once, with divergence detection.
 
 A *simulator* is any callable ``simulator(state) -> (vel_next [N, 3], angvel_next [N, 3])``
-taking a batched :class:`physgnn.state.SceneState` and returning ``v_{t+1}``, ``ω_{t+1}`` in
+taking a batched :class:`physgnn.data.state.SceneState` and returning ``v_{t+1}``, ``ω_{t+1}`` in
 physical units (the learned simulator and the baselines share this call). Each trajectory
 starts from its first ``H + 1`` ground-truth frames (the state at frame ``H``), then every
 step integrates the prediction with semi-implicit Euler and shifts the velocity histories
@@ -24,16 +24,17 @@ import numpy as np
 import torch
 from torch_geometric.data import Batch
 
-from physgnn import quaternion as Q
-from physgnn.integrator import euler_step
-from physgnn.scene import EFFECT_NAMES, Trajectory
-from physgnn.state import SceneState, TrajectoryFrames
+from physgnn.data.state import SceneState, TrajectoryFrames
+from physgnn.errors import PhysgnnError
+from physgnn.physics import quaternion as Q
+from physgnn.physics.integrator import euler_step
+from physgnn.physics.scene import EFFECT_NAMES, Trajectory
 
 ROTATION = EFFECT_NAMES.index("rotation")
 _FLOAT_KEYS = ("pos", "quat", "vel", "angvel", "radius", "mass", "planes", "dt")
 
 
-class RolloutError(ValueError):
+class RolloutError(PhysgnnError, ValueError):
     """A rollout cannot start (one line naming the problem)."""
 
 
@@ -87,7 +88,7 @@ def rollout(
     it). A scene runs away when a sphere is faster than ``max_speed`` m/s or, if
     ``speed_factor`` is set, than ``speed_factor × max(largest true speed, min_speed)``, or a
     coordinate exceeds ``max_pos`` m. ``batch_size`` scenes share one graph (None: all).
-    ``sleeping``: resting spheres are frozen (:class:`physgnn.sleeping.SleepingSimulator`,
+    ``sleeping``: resting spheres are frozen (:class:`physgnn.models.sleeping.SleepingSimulator`,
     built with the ``sleep`` kwargs ``threshold``, ``k``, ``touch``; one per batch).
     """
     h = _history(simulator, history)
@@ -149,7 +150,7 @@ def _warn_unseen_effects(simulator, trajectories: list[Trajectory]) -> None:
 
 
 def _sleeping(simulator, sleep: dict | None):
-    from physgnn.sleeping import SleepingSimulator
+    from physgnn.models.sleeping import SleepingSimulator
 
     return SleepingSimulator(simulator, **(sleep or {}))
 

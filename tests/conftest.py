@@ -21,7 +21,7 @@ def compose_generate(overrides: list[str]):
 def tiny_dataset(tmp_path_factory) -> Path:
     """The ``tiny`` preset generated once per session; returns its folder (train.h5, val.h5,
     test.h5, ood.h5, stats.json). Read-only: copy it before changing anything."""
-    from physgnn.generate import generate
+    from physgnn.groundtruth.generate import generate
 
     outputs = tmp_path_factory.mktemp("outputs")
     cfg = compose_generate(["data=tiny", f"paths.outputs={outputs}", "workers=1", "progress=false"])

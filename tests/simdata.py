@@ -6,9 +6,9 @@ import numpy as np
 import torch
 from torch_geometric.data import Batch
 
-from physgnn import quaternion as Q
-from physgnn.scene import Effects, Material, Trajectory, ground_plane, make_plane
-from physgnn.state import TrajectoryFrames
+from physgnn.data.state import TrajectoryFrames
+from physgnn.physics import quaternion as Q
+from physgnn.physics.scene import Effects, Material, Trajectory, ground_plane, make_plane
 
 STATS = {
     "vel": {"mean": [0.1, -0.2, -3.0], "std": [1.0, 2.0, 4.0]},

@@ -1,13 +1,13 @@
-"""Trivial baselines (physgnn.baselines) through the rollout engine."""
+"""Trivial baselines (physgnn.models.baselines) through the rollout engine."""
 
 import numpy as np
 import torch
 from torch_geometric.data import Batch
 
-from physgnn.baselines import GravityOnlySimulator, StaticSimulator
+from physgnn.data.state import TrajectoryFrames
+from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
+from physgnn.physics.scene import Effects, Trajectory, ground_plane
 from physgnn.rollout import rollout
-from physgnn.scene import Effects, Trajectory, ground_plane
-from physgnn.state import TrajectoryFrames
 
 DT, G = 0.1, 9.81
 

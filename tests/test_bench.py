@@ -12,12 +12,13 @@ import torch
 from hydra import compose, initialize_config_dir
 from torch.utils.flop_counter import FlopCounterMode
 
-from physgnn import bench_parts, pareto
-from physgnn.bench import BenchError, bench, frame_states, make_simulator, time_learned
-from physgnn.bench_report import targets
-from physgnn.dataset import compute_stats
-from physgnn.engine import simulate
+from physgnn.benchmark import parts as bench_parts
+from physgnn.benchmark.markdown import targets
+from physgnn.benchmark.run import BenchError, bench, frame_states, make_simulator, time_learned
+from physgnn.data.dataset import compute_stats
+from physgnn.groundtruth.engine import simulate
 from physgnn.nn.epd import EncodeProcessDecode
+from physgnn.report import pareto
 
 CONF = str((Path(__file__).parents[1] / "conf").resolve())
 

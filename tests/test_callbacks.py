@@ -7,7 +7,7 @@ import pytest
 import torch
 from simdata import trajectory
 
-from physgnn.callbacks import RolloutCallback
+from physgnn.training.callbacks import RolloutCallback
 
 
 class Still(torch.nn.Module):

@@ -8,11 +8,11 @@ import torch
 from torch.testing import assert_close
 from torch_geometric.data import Batch
 
-from physgnn import quaternion as Q
-from physgnn.energy import scene_energy, scene_weight, sphere_energy
-from physgnn.integrator import euler_step
-from physgnn.scene import Effects, Scene, SceneError, Trajectory, ground_plane, make_plane
-from physgnn.state import TrajectoryFrames
+from physgnn.data.state import TrajectoryFrames
+from physgnn.physics import quaternion as Q
+from physgnn.physics.energy import scene_energy, scene_weight, sphere_energy
+from physgnn.physics.integrator import euler_step
+from physgnn.physics.scene import Effects, Scene, SceneError, Trajectory, ground_plane, make_plane
 
 
 def test_euler_step_position_is_semi_implicit():

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
-from physgnn.data_report import KEYS, DataReportError, data_report
-from physgnn.dataset import DatasetError, write_split
-from physgnn.scene import Effects, Trajectory, ground_plane
+from physgnn.data.dataset import DatasetError, write_split
+from physgnn.evaluation.data_report import KEYS, DataReportError, data_report
+from physgnn.physics.scene import Effects, Trajectory, ground_plane
 
 CONF = str(Path(__file__).resolve().parents[1] / "conf")
 G = 9.81

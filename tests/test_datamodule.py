@@ -7,9 +7,9 @@ import torch
 from simdata import trajectory
 from torch.testing import assert_close
 
-from physgnn.datamodule import PairDataset, StatePairDataModule
-from physgnn.dataset import DatasetError, compute_stats, write_split, write_stats
-from physgnn.scene import EFFECT_NAMES, Effects
+from physgnn.data.dataset import DatasetError, compute_stats, write_split, write_stats
+from physgnn.physics.scene import EFFECT_NAMES, Effects
+from physgnn.training.datamodule import PairDataset, StatePairDataModule
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +90,7 @@ def test_stats_are_read(data_dir):
 
 
 def test_sampler_is_seeded_by_epoch():
-    from physgnn.datamodule import EpochSampler
+    from physgnn.training.datamodule import EpochSampler
 
     sampler = EpochSampler(50, 20, seed=7)
     first, second = list(sampler), list(sampler)

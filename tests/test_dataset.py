@@ -1,4 +1,4 @@
-"""HDF5 schema, atomic writes, checked reads and statistics (physgnn.dataset)."""
+"""HDF5 schema, atomic writes, checked reads and statistics (physgnn.data.dataset)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from physgnn import __version__
-from physgnn.dataset import (
+from physgnn.data.dataset import (
     CHUNK_FRAMES,
     SCHEMA_VERSION,
     DatasetError,
@@ -19,7 +19,7 @@ from physgnn.dataset import (
     write_split,
     write_stats,
 )
-from physgnn.scene import Effects, Material, Trajectory, ground_plane
+from physgnn.physics.scene import Effects, Material, Trajectory, ground_plane
 
 
 def linear_traj(t=5, n=2, v=(1.0, -2.0, 0.5), dt=0.1, name="lin") -> Trajectory:

@@ -12,11 +12,11 @@ import torch
 from omegaconf import OmegaConf
 from simdata import STATS, batch, trajectory
 
-from physgnn.lit import LitSimulator
+from physgnn.models.learned import LearnedSimulator
+from physgnn.physics.scene import EFFECT_NAMES, GROUND, Effects
 from physgnn.rollout import rollout
-from physgnn.scene import EFFECT_NAMES, GROUND, Effects
-from physgnn.simulator import LearnedSimulator
-from physgnn.train import load_run
+from physgnn.training.lit import LitSimulator
+from physgnn.training.runs import load_run
 
 MODEL = dict(H=1, M=2, hidden=16, epsilon=0.05)
 
@@ -110,7 +110,7 @@ def test_effects_trained_round_trip_through_a_lightning_checkpoint(tmp_path):
     trainer.strategy.connect(lit)
     (tmp_path / "checkpoints").mkdir()
     trainer.save_checkpoint(tmp_path / "checkpoints" / "last.ckpt")
-    model = dict(_target_="physgnn.simulator.LearnedSimulator", **MODEL)
+    model = dict(_target_="physgnn.models.learned.LearnedSimulator", **MODEL)
     (tmp_path / ".hydra").mkdir()
     OmegaConf.save(OmegaConf.create({"model": model}), tmp_path / ".hydra" / "config.yaml")
     loaded, _, info = load_run(tmp_path)

@@ -1,4 +1,4 @@
-"""pybullet ground truth against analytic physics (physgnn.engine)."""
+"""pybullet ground truth against analytic physics (physgnn.groundtruth.engine)."""
 
 from __future__ import annotations
 
@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from physgnn import quaternion as Q
-from physgnn.engine import EngineSettings, simulate
-from physgnn.features import finite_difference_velocities
-from physgnn.scene import Effects, Scene, SceneError, ground_plane
+from physgnn.groundtruth.engine import EngineSettings, simulate
+from physgnn.physics import quaternion as Q
+from physgnn.physics.kinematics import finite_difference_velocities
+from physgnn.physics.scene import Effects, Scene, SceneError, ground_plane
 
 G = 9.81
 DT = 0.1

@@ -13,13 +13,15 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 from simdata import trajectory
 
-import physgnn.train
-from physgnn import eval as ev
-from physgnn import report
-from physgnn.baselines import GravityOnlySimulator
-from physgnn.data_report import split_summary
-from physgnn.dataset import read_split, write_split
-from physgnn.report import read_csv
+import physgnn.training.runs
+import physgnn.training.train
+from physgnn import eval as eval_command
+from physgnn.data.dataset import read_split, write_split
+from physgnn.evaluation import evaluate as ev
+from physgnn.evaluation.data_report import split_summary
+from physgnn.models.baselines import GravityOnlySimulator
+from physgnn.report import document as report
+from physgnn.report.document import read_csv
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -119,7 +121,7 @@ def eval_cfg(*overrides):
 def test_main_on_a_missing_run_folder_prints_one_line_and_exits_2(tmp_path, capsys):
     cfg = eval_cfg("runs=/no/such/run", f"paths.outputs={tmp_path}")
     with pytest.raises(SystemExit) as exit_:
-        ev.main.__wrapped__(cfg)  # the Hydra task itself, without the process around it
+        eval_command.main.__wrapped__(cfg)  # the Hydra task itself, without the process around it
     assert exit_.value.code == 2
     assert capsys.readouterr().err.strip() == "error: run folder /no/such/run does not exist"
 
@@ -177,7 +179,7 @@ def evaluated(tmp_path_factory):
 
     cfg = eval_cfg(f"paths.outputs={outputs}", "video_frames=5")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(physgnn.train, "load_run", fake_load_run)
+        mp.setattr(physgnn.training.runs, "load_run", fake_load_run)
         path = ev.evaluate(cfg)
     return outputs, read_csv(outputs / "report" / "metrics.csv"), path.read_text()
 
@@ -257,7 +259,7 @@ TINY_TRAIN = [
     "datamodule.batch_size=4",
     "datamodule.pairs_per_epoch=8",
     "datamodule.val_pairs=8",
-    "+callbacks.rollout._target_=physgnn.callbacks.RolloutCallback",
+    "+callbacks.rollout._target_=physgnn.training.callbacks.RolloutCallback",
     "+callbacks.rollout.every_n_epochs=1",
     "+callbacks.rollout.n_val_trajectories=1",
     "+callbacks.rollout.max_frames=8",
@@ -270,7 +272,7 @@ def test_tiny_run_logs_rollouts_then_make_eval_reports_it(tiny_dataset, tmp_path
     run_dir = outputs / "runs" / "baseline" / "t0"
     with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
         cfg = compose("train", [*TINY_TRAIN, f"run_dir={run_dir}", f"data.dir={tiny_dataset}"])
-    info = physgnn.train.train(cfg)
+    info = physgnn.training.train.train(cfg)
     (run_dir / ".hydra").mkdir()
     (run_dir / ".hydra" / "config.yaml").write_text(OmegaConf.to_yaml(cfg))
     # the callback logged through pl_module.log: the CSV logger has its columns
@@ -311,6 +313,6 @@ def test_a_run_whose_dataset_is_gone_is_one_clear_error(tmp_path, monkeypatch):
     out = tmp_path / "outputs"
     make_run(out / "runs" / "baseline" / "t0")
     cfg = OmegaConf.create({"datamodule": {"data_dir": str(tmp_path / "gone")}})
-    monkeypatch.setattr(physgnn.train, "load_run", lambda run_dir: (Falling(), cfg, {}))
+    monkeypatch.setattr(physgnn.training.runs, "load_run", lambda run_dir: (Falling(), cfg, {}))
     with pytest.raises(ev.EvalError, match=r"dataset folder .*gone does not exist"):
         ev.evaluate(eval_cfg(f"paths.outputs={out}"))

@@ -19,8 +19,8 @@ import math
 import pytest
 import torch
 
-from physgnn import quaternion as Q
-from physgnn.features import finite_difference_velocities, history
+from physgnn.physics import quaternion as Q
+from physgnn.physics.kinematics import finite_difference_velocities, history
 
 U32 = 2.0**-24
 

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from conftest import compose_generate
 
-import physgnn.generate as gen
-from physgnn.dataset import SCHEMA_VERSION, compute_stats, read_split, read_stats
-from physgnn.scene import SceneError
+import physgnn.groundtruth.generate as gen
+from physgnn.data.dataset import SCHEMA_VERSION, compute_stats, read_split, read_stats
+from physgnn.physics.scene import SceneError
 
 SPLIT_SIZES = {"train": 2, "val": 1, "test": 1}
 OOD = ["ood_cubes", "ood_cubes_ramps", "ood_resting_hit", "ood_spaced_drop"]

@@ -9,10 +9,10 @@ import pytest
 import torch
 from torch_geometric.data import Batch
 
-import physgnn.graph as graph_module
-from physgnn.graph import Graph, GraphBuilder, build_graph
-from physgnn.scene import GROUND, STATIC, WALL, ground_plane, make_plane
-from physgnn.state import SceneState
+import physgnn.graph.builder as graph_module
+from physgnn.data.state import SceneState
+from physgnn.graph.builder import Graph, GraphBuilder, build_graph
+from physgnn.physics.scene import GROUND, STATIC, WALL, ground_plane, make_plane
 
 
 def make_state(pos, vel=None, radius=0.5, planes=(), kinds=(), dt=0.125, effects=None):

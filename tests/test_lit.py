@@ -12,16 +12,16 @@ from simdata import STATS, batch, trajectory
 from torch.testing import assert_close
 from torch_geometric.loader import DataLoader
 
-from physgnn.lit import (
+from physgnn.data.state import SceneState
+from physgnn.models.learned import LearnedSimulator
+from physgnn.physics.scene import Effects
+from physgnn.training.lit import (
     LitSimulator,
     NonFiniteLossError,
     add_noise,
     energy_increase,
     masked_mse,
 )
-from physgnn.scene import Effects
-from physgnn.simulator import LearnedSimulator
-from physgnn.state import SceneState
 
 ADAM = functools.partial(torch.optim.Adam, lr=1e-3)
 
@@ -107,7 +107,7 @@ def test_noise_only_in_training_and_targets_unchanged():
 
 
 def pairs(n_traj: int = 2) -> list:
-    from physgnn.state import TrajectoryFrames
+    from physgnn.data.state import TrajectoryFrames
 
     frames = [TrajectoryFrames(trajectory(3, seed=s)) for s in range(n_traj)]
     return [f.state(t, 1) for f in frames for t in range(1, 10)]

@@ -7,7 +7,15 @@ import pytest
 from torch.testing import assert_close
 
 from physgnn import metrics as M
-from physgnn.scene import GROUND, STATIC, WALL, Effects, Trajectory, ground_plane, make_plane
+from physgnn.physics.scene import (
+    GROUND,
+    STATIC,
+    WALL,
+    Effects,
+    Trajectory,
+    ground_plane,
+    make_plane,
+)
 
 GROUND_ONLY = (ground_plane()[None], np.array([GROUND]))
 

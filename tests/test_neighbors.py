@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from physgnn.neighbors import has_torch_cluster, radius_pairs
+from physgnn.graph.neighbors import has_torch_cluster, radius_pairs
 
 BACKENDS = ["torch", "kdtree", "auto"] + (["cluster"] if has_torch_cluster() else [])
 needs_cluster = pytest.mark.skipif(not has_torch_cluster(), reason="torch_cluster not installed")

@@ -8,7 +8,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from physgnn import quaternion as Q
+from physgnn.physics import quaternion as Q
 
 F64 = torch.float64
 unit = st.floats(-1.0, 1.0, allow_nan=False)

@@ -5,8 +5,8 @@ import math
 
 import pytest
 
-from physgnn import report
-from physgnn.report import COLUMNS, config_label, read_csv, stat, sweep_axis, write_csv
+from physgnn.report import document as report
+from physgnn.report.document import COLUMNS, config_label, read_csv, stat, sweep_axis, write_csv
 
 SCENES = ("ood_cubes", "ood_cubes_ramps", "ood_resting_hit", "ood_spaced_drop")
 

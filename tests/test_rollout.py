@@ -8,9 +8,9 @@ import torch
 from torch import nn
 
 from physgnn import metrics as M
+from physgnn.data.state import TrajectoryFrames
+from physgnn.physics.scene import Effects, Trajectory, ground_plane
 from physgnn.rollout import RolloutError, rollout
-from physgnn.scene import Effects, Trajectory, ground_plane
-from physgnn.state import TrajectoryFrames
 
 DT = 0.1
 

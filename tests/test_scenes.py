@@ -1,4 +1,4 @@
-"""Scene families (physgnn.scenes) built from the conf/scene configs."""
+"""Scene families (physgnn.groundtruth.families) built from the conf/scene configs."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from omegaconf import OmegaConf
 
-from physgnn.engine import simulate
-from physgnn.scene import GROUND, STATIC, WALL, SceneError
-from physgnn.scenes import BUILDERS, build_scene
+from physgnn.groundtruth.engine import simulate
+from physgnn.groundtruth.families import BUILDERS, build_scene
+from physgnn.physics.scene import GROUND, STATIC, WALL, SceneError
 
 SCENE_DIR = Path(__file__).resolve().parents[1] / "conf" / "scene"
 

@@ -7,8 +7,8 @@ import torch
 from simdata import STATS, batch, trajectory
 from torch.testing import assert_close
 
-from physgnn.scene import Effects
-from physgnn.simulator import LearnedSimulator, StatsError
+from physgnn.models.learned import LearnedSimulator, StatsError
+from physgnn.physics.scene import Effects
 
 
 def make(**kwargs) -> LearnedSimulator:

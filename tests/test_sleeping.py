@@ -1,15 +1,15 @@
-"""Sleeping spheres (physgnn.sleeping): falling asleep, islands, waking, exactness."""
+"""Sleeping spheres (physgnn.models.sleeping): falling asleep, islands, waking, exactness."""
 
 import numpy as np
 import pytest
 import torch
 from torch_geometric.data import Batch
 
-from physgnn import quaternion as Q
-from physgnn.graph import GraphBuilder
-from physgnn.scene import Effects, Material, Trajectory, ground_plane
-from physgnn.sleeping import SleepingSimulator, subset_state
-from physgnn.state import SceneState, TrajectoryFrames
+from physgnn.data.state import SceneState, TrajectoryFrames
+from physgnn.graph.builder import GraphBuilder
+from physgnn.models.sleeping import SleepingSimulator, subset_state
+from physgnn.physics import quaternion as Q
+from physgnn.physics.scene import Effects, Material, Trajectory, ground_plane
 
 
 class Billiard:
@@ -274,8 +274,8 @@ def test_rollout_with_sleeping_holds_sleepers_exactly_and_wakes_them_when_hit():
 def test_rollout_where_nobody_sleeps_is_bit_identical_to_no_sleeping():
     from simdata import STATS, trajectory
 
+    from physgnn.models.learned import LearnedSimulator
     from physgnn.rollout import rollout
-    from physgnn.simulator import LearnedSimulator
 
     torch.manual_seed(0)
     sim = LearnedSimulator(STATS, H=1, M=2, hidden=16).eval()
@@ -312,7 +312,7 @@ def test_drift_before_hit_stops_counting_when_the_truth_moves():
 
 
 def test_frozen_share_counts_unchanged_sphere_steps():
-    from physgnn.sleep_study import frozen_share
+    from physgnn.evaluation.sleep_study import frozen_share
 
     pos = np.zeros((5, 2, 3))
     pos[:, 1, 0] = np.arange(5)  # sphere 1 moves, sphere 0 never does
@@ -353,7 +353,7 @@ def test_configs_are_off_by_default_and_agree_with_the_class_defaults(name, key)
 def test_sleep_study_compare_rows_and_missing_run_error():
     from omegaconf import OmegaConf
 
-    from physgnn.sleep_study import COLUMNS, compare, study
+    from physgnn.evaluation.sleep_study import COLUMNS, compare, study
 
     traj = _line_trajectory(20)
 
@@ -376,8 +376,8 @@ def test_learned_rollout_with_a_whole_scene_asleep_in_the_batch():
     from simdata import STATS, trajectory
     from torch.testing import assert_close
 
+    from physgnn.models.learned import LearnedSimulator
     from physgnn.rollout import rollout
-    from physgnn.simulator import LearnedSimulator
 
     torch.manual_seed(0)
     sim = LearnedSimulator(STATS, H=1, M=2, hidden=16).eval()

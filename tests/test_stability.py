@@ -15,15 +15,16 @@ from omegaconf import OmegaConf
 from simdata import STATS, trajectory
 from torch import nn
 
-import physgnn.stability as S
-from physgnn import train as train_module
-from physgnn.baselines import GravityOnlySimulator, StaticSimulator
-from physgnn.engine import simulate
+import physgnn.evaluation.stability as S
+from physgnn import train as train_command
+from physgnn.groundtruth.engine import simulate
+from physgnn.groundtruth.families import build_scene, pile_positions
 from physgnn.metrics import MetricError
+from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
+from physgnn.models.learned import LearnedSimulator
+from physgnn.physics.scene import WALL, Material, Trajectory, ground_plane, make_plane
 from physgnn.rollout import rollout
-from physgnn.scene import WALL, Material, Trajectory, ground_plane, make_plane
-from physgnn.scenes import build_scene, pile_positions
-from physgnn.simulator import LearnedSimulator
+from physgnn.training.train import build
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE_DIR = ROOT / "conf" / "scene"
@@ -189,7 +190,7 @@ def test_hard_split_is_built_once_then_read_from_the_cache(tmp_path, monkeypatch
     def no_engine(*args, **kwargs):
         raise AssertionError("simulated again")
 
-    monkeypatch.setattr("physgnn.engine.simulate", no_engine)
+    monkeypatch.setattr("physgnn.groundtruth.engine.simulate", no_engine)
     again = S.hard_split(tmp_path, tiny_hard())
     for a, b in zip(first, again, strict=True):
         np.testing.assert_array_equal(a.pos, b.pos)
@@ -252,7 +253,7 @@ def sgd_step(tiny_dataset, run_dir, clip) -> float:
         "~logger", "callbacks=none", f"trainer.gradient_clip_val={clip}",
     )  # fmt: skip
     torch.manual_seed(0)
-    datamodule, lit, trainer = train_module.build(cfg)
+    datamodule, lit, trainer = build(cfg)
     assert trainer.gradient_clip_val == (None if clip == "null" else float(clip))
     before = [p.detach().clone() for p in lit.parameters()]
     trainer.fit(lit, datamodule=datamodule)
@@ -289,14 +290,14 @@ def run_cli(monkeypatch, capsys, main, *args) -> tuple[int, list[str]]:
     ],
 )
 def test_config_typos_name_the_problem_without_traceback(monkeypatch, capsys, override, problem):
-    code, err = run_cli(monkeypatch, capsys, train_module.main, override)
+    code, err = run_cli(monkeypatch, capsys, train_command.main, override)
     assert code != 0 and problem in err[0]  # Hydra's own message, first line
     assert not any("Traceback" in line for line in err)
 
 
 def test_unknown_model_key_appended_is_one_error_line(monkeypatch, capsys, tiny_dataset, tmp_path):
     args = ["data=tiny", f"paths.outputs={Path(tiny_dataset).parents[1]}", f"run_dir={tmp_path}"]
-    code, err = run_cli(monkeypatch, capsys, train_module.main, *args, "+model.MM=3")
+    code, err = run_cli(monkeypatch, capsys, train_command.main, *args, "+model.MM=3")
     assert (
         code == 2
         and err[-1].startswith("error: ")
@@ -329,9 +330,9 @@ def fake_eval(tmp_path, monkeypatch, *overrides, entry=None):
     (``entry``: call this with the config instead, and return what it returns)."""
     import json
 
-    import physgnn.train
-    from physgnn import eval as ev
-    from physgnn.dataset import write_split
+    import physgnn.training.runs
+    from physgnn.data.dataset import write_split
+    from physgnn.evaluation import evaluate as ev
 
     outputs = tmp_path / "outputs"
     data = outputs / "data" / "hand"
@@ -350,7 +351,7 @@ def fake_eval(tmp_path, monkeypatch, *overrides, entry=None):
         cfg = OmegaConf.create({"datamodule": {"data_dir": str(data)}})
         return sims[Path(run_dir).parent.name], cfg, {}
 
-    monkeypatch.setattr(physgnn.train, "load_run", fake_load_run)
+    monkeypatch.setattr(physgnn.training.runs, "load_run", fake_load_run)
     with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
         cfg = compose(
             "eval",
@@ -388,11 +389,14 @@ def test_eval_without_stability_says_so(tmp_path, monkeypatch):
 
 
 def test_bad_hard_scene_config_is_one_error_line(tmp_path, monkeypatch, capsys):
-    from physgnn import eval as ev
+    from physgnn import eval as eval_command
 
     with pytest.raises(SystemExit) as info:
         fake_eval(
-            tmp_path, monkeypatch, "hard.scenes.resting_pile.layers=9", entry=ev.main.__wrapped__
+            tmp_path,
+            monkeypatch,
+            "hard.scenes.resting_pile.layers=9",
+            entry=eval_command.main.__wrapped__,
         )
     err = capsys.readouterr().err.strip().splitlines()
     assert info.value.code == 2 and len(err) == 1

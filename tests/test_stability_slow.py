@@ -14,10 +14,11 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-import physgnn.stability as S
-from physgnn.engine import simulate
-from physgnn.scenes import build_scene
-from physgnn.train import load_run, train
+import physgnn.evaluation.stability as S
+from physgnn.groundtruth.engine import simulate
+from physgnn.groundtruth.families import build_scene
+from physgnn.training.runs import load_run
+from physgnn.training.train import train
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.slow

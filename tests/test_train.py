@@ -13,8 +13,9 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from physgnn import train as train_module
-from physgnn.train import load_run, train
+from physgnn import train as train_command
+from physgnn.training.runs import load_run
+from physgnn.training.train import train
 
 CONF = str(Path(__file__).resolve().parents[1] / "conf")
 SHORT = [
@@ -118,7 +119,7 @@ def test_load_run_without_checkpoint_is_clear(tmp_path):
 def run_main(monkeypatch, capsys, *args) -> tuple[int, str]:
     monkeypatch.setattr(sys, "argv", ["physgnn.train", *args])
     with pytest.raises(SystemExit) as info:
-        train_module.main()
+        train_command.main()
     return info.value.code, capsys.readouterr().err.strip().splitlines()[-1]
 
 

@@ -4,8 +4,9 @@ import imageio.v2 as imageio
 import numpy as np
 import pytest
 
-from physgnn import plots, video
-from physgnn.scene import GROUND, STATIC, WALL, ground_plane, make_plane
+from physgnn.physics.scene import GROUND, STATIC, WALL, ground_plane, make_plane
+from physgnn.report import figures as plots
+from physgnn.report import video
 
 
 def falling(n_frames=30, n=3):

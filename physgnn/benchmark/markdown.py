@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import os
 
-from physgnn.report import fmt, md_table
+from physgnn.report.document import fmt, md_table
 
 BASELINE = "baseline"
 TARGET_FPS, TARGET_SHARE, TARGET_GRAPH, TARGET_LINEAR = 250.0, 0.60, 0.25, 1.5

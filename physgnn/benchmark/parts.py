@@ -16,10 +16,10 @@ from omegaconf import DictConfig, OmegaConf
 from torch.utils.data import RandomSampler
 from torch_geometric.loader import DataLoader
 
-from physgnn.datamodule import PairDataset
-from physgnn.engine import simulate
-from physgnn.scene import GROUND, Effects, Scene
-from physgnn.scenes import arena_planes, build_scene, materials_array
+from physgnn.groundtruth.engine import simulate
+from physgnn.groundtruth.families import arena_planes, build_scene, materials_array
+from physgnn.physics.scene import GROUND, Effects, Scene
+from physgnn.training.datamodule import PairDataset
 
 
 # ------------------------------------------------------------------------------------ machine
@@ -260,8 +260,8 @@ def resting_scene(scene_cfg: DictConfig, resting: int, moving: int, rng, n_frame
 def activity_rows(cfg: DictConfig, runs: dict, stats: dict, rng) -> list[dict]:
     """Baseline ms per frame for the cases of issue 7 item 3 (one row per case), all timed
     together (:func:`physgnn.bench.time_cases`)."""
-    from physgnn.bench import frame_states, make_simulator, time_cases
-    from physgnn.sleeping import SleepingSimulator
+    from physgnn.benchmark.run import frame_states, make_simulator, time_cases
+    from physgnn.models.sleeping import SleepingSimulator
 
     a = cfg.activity
     sim = make_simulator(cfg.model, {}, stats)
@@ -315,7 +315,7 @@ def bench_run(cfg: DictConfig, n: int, rng):
 def rollout_rows(cfg: DictConfig, runs: dict, stats: dict) -> list[dict]:
     """The baseline through :func:`physgnn.rollout.rollout` (the path ``make eval`` times) on
     the bench scenes of ``rollout_sizes``: FPS and ms per frame of each part."""
-    from physgnn.bench import make_simulator
+    from physgnn.benchmark.run import make_simulator
     from physgnn.rollout import rollout
 
     sim = make_simulator(cfg.model, {}, stats)

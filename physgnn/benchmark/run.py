@@ -17,42 +17,27 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
 import time
 from pathlib import Path
 
-import hydra
 import numpy as np
 import torch
-from hydra.errors import HydraException
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
-from omegaconf.errors import OmegaConfBaseException
 from torch_geometric.data import Batch
 
-from physgnn import bench_parts as parts
-from physgnn.bench_report import write_markdown
-from physgnn.dataset import DatasetError, compute_stats
-from physgnn.engine import simulate
-from physgnn.integrator import euler_step
+from physgnn.benchmark import parts
+from physgnn.benchmark.markdown import write_markdown
+from physgnn.data.dataset import compute_stats
+from physgnn.data.state import TrajectoryFrames
+from physgnn.errors import ConfigError
+from physgnn.groundtruth.engine import simulate
 from physgnn.metrics import PENETRATION_KEYS
-from physgnn.scene import SceneError
-from physgnn.simulator import StatsError
-from physgnn.state import TrajectoryFrames
+from physgnn.physics.integrator import euler_step
 
 
-class BenchError(ValueError):
+class BenchError(ConfigError):
     """A bench setting that cannot be run (one-line message)."""
-
-
-USER_ERRORS = (
-    BenchError,
-    DatasetError,
-    SceneError,
-    StatsError,
-    HydraException,
-    OmegaConfBaseException,
-)
 
 
 # ------------------------------------------------------------------------------ learned steps
@@ -457,20 +442,3 @@ def _write_json(path: Path, data: dict) -> None:
     tmp = path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(clean(data), indent=2) + "\n")
     tmp.replace(path)
-
-
-def _one_line(err: Exception) -> str:
-    return "; ".join(line.strip() for line in str(err).splitlines() if line.strip())
-
-
-@hydra.main(version_base="1.3", config_path="../conf", config_name="bench")
-def main(cfg: DictConfig) -> None:
-    try:
-        bench(cfg)
-    except USER_ERRORS as err:
-        print(f"error: {_one_line(err)}", file=sys.stderr)
-        sys.exit(2)
-
-
-if __name__ == "__main__":
-    main()

@@ -17,8 +17,9 @@ import numpy as np
 import torch
 
 from physgnn import __version__
-from physgnn.features import finite_difference_velocities
-from physgnn.scene import PLANE_DIM, Effects, SceneError, Trajectory
+from physgnn.errors import PhysgnnError
+from physgnn.physics.kinematics import finite_difference_velocities
+from physgnn.physics.scene import PLANE_DIM, Effects, SceneError, Trajectory
 
 SCHEMA_VERSION = 1
 FRAME_FIELDS = ("pos", "quat", "vel", "angvel")
@@ -28,7 +29,7 @@ STD_FLOOR = 1e-6
 CHUNK_FRAMES = 64
 
 
-class DatasetError(RuntimeError):
+class DatasetError(PhysgnnError, RuntimeError):
     """A dataset file is missing, corrupt or does not match the schema (one-line message)."""
 
 

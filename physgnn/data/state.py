@@ -4,7 +4,7 @@ One :class:`SceneState` is one scene; ``Batch.from_data_list`` (or the PyG DataL
 many into one disconnected graph: node tensors are concatenated, ``batch`` says the scene of
 each sphere, ``plane_batch`` the scene of each plane, and ``num_graphs`` the scene count.
 Graph edges are *not* stored here: they depend on the (noisy, predicted) state and are
-rebuilt from it at every step by :mod:`physgnn.graph`.
+rebuilt from it at every step by :mod:`physgnn.graph.builder`.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ import numpy as np
 import torch
 from torch_geometric.data import Data
 
-from physgnn.features import finite_difference_velocities, history
-from physgnn.scene import EFFECT_NAMES, Effects, Trajectory
+from physgnn.physics.kinematics import finite_difference_velocities, history
+from physgnn.physics.scene import EFFECT_NAMES, Effects, Trajectory
 
 
 class SceneState(Data):

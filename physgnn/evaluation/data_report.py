@@ -13,14 +13,14 @@ table beside the report's Blender figures and writes ``<dataset>/report.json``:
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
-import hydra
 import numpy as np
 from omegaconf import DictConfig
 from rich.console import Console
 from rich.table import Table
+
+from physgnn.errors import PhysgnnError
 
 # torch, h5py and scipy are imported when needed: a bad command line fails fast.
 KEYS = (
@@ -53,7 +53,7 @@ REPORT = {
 }
 
 
-class DataReportError(ValueError):
+class DataReportError(PhysgnnError, ValueError):
     """The dataset cannot be reported (one line naming the problem)."""
 
 
@@ -97,7 +97,7 @@ def data_report(cfg: DictConfig) -> dict:
     folder = Path(cfg.dataset)
     if not folder.is_dir():
         raise DataReportError(f"dataset folder {folder} not found: run `make data` first")
-    from physgnn.dataset import read_split
+    from physgnn.data.dataset import read_split
 
     summary, finite = {}, {}
     for split in cfg.splits:
@@ -119,29 +119,3 @@ def data_report(cfg: DictConfig) -> dict:
     out.write_text(json.dumps(summary, indent=2) + "\n")
     print(f"wrote {out}")
     return summary
-
-
-@hydra.main(version_base="1.3", config_path="../conf", config_name="data_report")
-def main(cfg: DictConfig) -> None:
-    """Entry point: errors of the user's making are one ``error: ...`` line, exit 2."""
-    try:
-        data_report(cfg)
-    except Exception as e:
-        if not _user_error(e):
-            raise
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-
-
-def _user_error(e: Exception) -> bool:
-    """A bad dataset or command line (not a bug)."""
-    if isinstance(e, DataReportError):
-        return True
-    from physgnn.dataset import DatasetError
-    from physgnn.metrics import MetricError
-
-    return isinstance(e, (DatasetError, MetricError))
-
-
-if __name__ == "__main__":
-    main()

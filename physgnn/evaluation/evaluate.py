@@ -6,7 +6,7 @@ itself), ``static`` and ``gravity_only`` on each dataset the runs were trained o
 and OOD trajectory is rolled out from its first H+1 frames; a diverged rollout's metrics are
 on its finite prefix and carry ``diverged_at``. With ``stability=true`` (default) every learned
 run is also rolled out on the hard scenes of ``hard`` and measured with
-:mod:`physgnn.stability` (``stability.csv`` and the report's stability section).
+:mod:`physgnn.evaluation.stability` (``stability.csv`` and the report's stability section).
 """
 
 from __future__ import annotations
@@ -17,21 +17,26 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import hydra
 import numpy as np
 import yaml
 from omegaconf import DictConfig, OmegaConf
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from physgnn import metrics, plots, report, stability, video
-from physgnn.dataset import DatasetError, read_split
-from physgnn.rollout import RolloutError, rollout
-from physgnn.scene import SceneError, Trajectory
+from physgnn import metrics
+from physgnn.data.dataset import DatasetError, read_split
+from physgnn.errors import PhysgnnError
+from physgnn.evaluation import stability
+from physgnn.physics.scene import Trajectory
+from physgnn.report import document as report
+from physgnn.report import figures as plots
+from physgnn.report import video
+from physgnn.rollout import rollout
+from physgnn.training import runs as training_runs
 
 SPLITS = ("test", "ood")
 
 
-class EvalError(RuntimeError):
+class EvalError(PhysgnnError, RuntimeError):
     """Evaluation cannot start (one line naming the problem)."""
 
 
@@ -213,7 +218,7 @@ def energy_of(traj: Trajectory, pred: Prediction) -> np.ndarray:
 
 def references(dataset: Path, several: bool) -> list[RunInfo]:
     """ground_truth, static and gravity_only on one dataset (suffixed when there are several)."""
-    from physgnn.baselines import GravityOnlySimulator, StaticSimulator
+    from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
 
     suffix = f"[{dataset.name}]" if several else ""
     sims = {
@@ -239,13 +244,11 @@ def load_runs(cfg: DictConfig, outputs: Path) -> tuple[list[RunInfo], list[str]]
     run_dirs = find_runs(cfg.runs, outputs)
     skipped = [f"`{run_name(p, outputs)}`: status {run_status(p)}"
                for p in all_runs(cfg.runs, outputs) if p not in run_dirs]  # fmt: skip
-    if run_dirs:
-        from physgnn.train import load_run
     infos = []
     for run_dir in run_dirs:
         info = run_info(run_dir, outputs)
         try:
-            info.simulator, run_cfg, _ = load_run(run_dir)
+            info.simulator, run_cfg, _ = training_runs.load_run(run_dir)
             info.simulator.eval()
             info.dataset = Path(cfg.dataset) if cfg.dataset else dataset_of(run_cfg)
         except Exception as e:
@@ -430,7 +433,7 @@ def _dt(data: dict, scene: str) -> float:
 
 def rollout_settings(cfg: DictConfig) -> dict:
     """``rollout`` keyword arguments from ``cfg.rollout``: ``sleeping`` (bool) and ``sleep``
-    (the :class:`physgnn.sleeping.SleepingSimulator` settings)."""
+    (the :class:`physgnn.models.sleeping.SleepingSimulator` settings)."""
     r = cfg.get("rollout") or {}
     sleep = OmegaConf.to_container(r["sleep"]) if r.get("sleep") is not None else {}
     return {"sleeping": bool(r.get("sleeping", False)), "sleep": sleep}
@@ -478,18 +481,3 @@ def _progress() -> Progress:
     return Progress(
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()
     )
-
-
-@hydra.main(version_base="1.3", config_path="../conf", config_name="eval")
-def main(cfg: DictConfig) -> None:
-    """Entry point: errors of the user's making are one ``error: ...`` line, exit 2."""
-    try:
-        path = evaluate(cfg)
-    except (EvalError, metrics.MetricError, DatasetError, RolloutError, SceneError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    print(f"report written to {path}")
-
-
-if __name__ == "__main__":
-    main()

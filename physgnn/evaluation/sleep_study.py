@@ -12,18 +12,17 @@ ms per frame. Writes ``<out>/sleep_study.json`` and prints a markdown table.
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
-import hydra
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn import metrics
-from physgnn.engine import simulate
-from physgnn.scene import Trajectory
-from physgnn.scenes import build_scene
+from physgnn.errors import ConfigError
+from physgnn.groundtruth.engine import simulate
+from physgnn.groundtruth.families import build_scene
+from physgnn.physics.scene import Trajectory
 
 COLUMNS = ("scene", "sleeping", "rest_drift", "rest_drift_mean", "mse", "mse20", "chamfer",
            "frozen_pct", "ms_per_frame", "diverged_at")  # fmt: skip
@@ -75,12 +74,12 @@ def markdown(rows: list[dict]) -> str:
 
 def study(cfg: DictConfig) -> list[dict]:
     """Load ``cfg.run``, compare sleeping off/on on OOD (c) and the pile; write the JSON."""
-    from physgnn.dataset import read_split
-    from physgnn.eval import dataset_of, truncate
-    from physgnn.train import load_run
+    from physgnn.data.dataset import read_split
+    from physgnn.evaluation.evaluate import dataset_of, truncate
+    from physgnn.training.runs import load_run
 
     if not cfg.run:
-        raise ValueError("pass run=PATH (a finished training run folder)")
+        raise ConfigError("pass run=PATH (a finished training run folder)")
     torch.set_num_threads(int(cfg.threads))
     simulator, run_cfg, _ = load_run(cfg.run)
     dataset = Path(cfg.dataset) if cfg.dataset else dataset_of(run_cfg)
@@ -95,17 +94,3 @@ def study(cfg: DictConfig) -> list[dict]:
     meta = {"run": str(cfg.run), "dataset": str(dataset), "sleep": sleep}
     (out / "sleep_study.json").write_text(json.dumps({**meta, "rows": rows}, indent=2) + "\n")
     return rows
-
-
-@hydra.main(version_base="1.3", config_path="../conf", config_name="sleep_study")
-def main(cfg: DictConfig) -> None:
-    try:
-        rows = study(cfg)
-    except (ValueError, FileNotFoundError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    print(markdown(rows))
-
-
-if __name__ == "__main__":
-    main()

@@ -2,7 +2,7 @@
 
 Hard scenes (``conf/scene/{resting_pile,drop_1000,tight_pack}.yaml``; SPEC "Hard cases") are
 simulated once with the engine and cached as a split file ``<hard.dir>/hard.h5``
-(:func:`physgnn.dataset.write_split`; rebuilt when the scene or engine config changes). Every
+(:func:`physgnn.data.dataset.write_split`; rebuilt when the scene or engine config changes). Every
 learned run is rolled out on them (:func:`physgnn.rollout.rollout`) and, through the eval, on
 its dataset's OOD scenes. One row per (run, scene), columns :data:`COLUMNS`:
 
@@ -34,8 +34,8 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn import metrics
-from physgnn.csvio import read_rows, write_rows
-from physgnn.scene import GROUND, Trajectory
+from physgnn.files import read_rows, write_rows
+from physgnn.physics.scene import GROUND, Trajectory
 
 HARD_FILE = "hard.h5"
 COLUMNS = [
@@ -164,7 +164,7 @@ def _plain(cfg) -> dict:
 
 def cache_key(scenes: Mapping, engine: Mapping | None, seed: int) -> str:
     """Canonical JSON of what the hard split is built from (stored as a file attribute)."""
-    from physgnn.engine import EngineSettings
+    from physgnn.groundtruth.engine import EngineSettings
 
     settings = EngineSettings.from_cfg(_plain(engine) if engine else None)
     plain = {name: _plain(c) for name, c in scenes.items()}
@@ -193,9 +193,9 @@ def hard_split(
     ``scenes`` (name → scene config), ``engine`` settings and ``seed``; else simulated now
     (scene ``k`` with ``numpy.random.default_rng([seed, k])``) and written atomically.
     Groups are named after the scenes (the keys of ``scenes``), in the order given."""
-    from physgnn.dataset import read_split, write_split
-    from physgnn.engine import simulate
-    from physgnn.scenes import build_scene
+    from physgnn.data.dataset import read_split, write_split
+    from physgnn.groundtruth.engine import simulate
+    from physgnn.groundtruth.families import build_scene
 
     path = Path(hard_dir) / HARD_FILE
     key = cache_key(scenes, engine, seed)

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import torch
 
-from physgnn.neighbors import BACKENDS, radius_pairs
-from physgnn.scene import EFFECT_NAMES, GROUND
+from physgnn.graph.neighbors import BACKENDS, radius_pairs
+from physgnn.physics.scene import EFFECT_NAMES, GROUND
 
 CONNECTIVITIES = ("epsilon", "vmax", "vi")
 _GRAVITY = EFFECT_NAMES.index("gravity")
@@ -60,7 +60,7 @@ class GraphBuilder:
     """Builds a :class:`Graph` from a ``SceneState`` (one scene or a PyG ``Batch`` of them).
 
     ``epsilon`` is a length in metres; ``factor`` scales the velocity terms; ``backend`` is
-    the :func:`physgnn.neighbors.radius_pairs` backend.
+    the :func:`physgnn.graph.neighbors.radius_pairs` backend.
     """
 
     def __init__(

@@ -1,5 +1,5 @@
-"""pybullet ground truth: simulate a :class:`~physgnn.scene.Scene` into a
-:class:`~physgnn.scene.Trajectory`.
+"""pybullet ground truth: simulate a :class:`~physgnn.physics.scene.Scene` into a
+:class:`~physgnn.physics.scene.Trajectory`.
 
 One DIRECT client per call (always disconnected). Spheres are maximal-coordinate rigid bodies
 (``GEOM_SPHERE``); the ground is a ``GEOM_PLANE`` (a half-space: nothing tunnels through it);
@@ -25,8 +25,8 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-from physgnn import quaternion as Q
-from physgnn.scene import GROUND, Scene, SceneError, Trajectory
+from physgnn.physics import quaternion as Q
+from physgnn.physics.scene import GROUND, Scene, SceneError, Trajectory
 
 
 def _import_pybullet_quietly():

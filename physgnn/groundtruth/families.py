@@ -1,8 +1,8 @@
 """Scene families built from a config (Hydra group ``scene/``) and a numpy ``Generator``.
 
 ``build_scene(cfg, rng)`` dispatches on ``cfg.name``. Every config has ``dt``, ``n_frames``,
-``effects`` (dict of :data:`physgnn.scene.EFFECT_NAMES`), ``materials`` (list of dicts of
-:class:`physgnn.scene.Material` fields) and ``density`` (kg/m³, mass = density·4/3·π·r³).
+``effects`` (dict of :data:`physgnn.physics.scene.EFFECT_NAMES`), ``materials`` (list of dicts of
+:class:`physgnn.physics.scene.Material` fields) and ``density`` (kg/m³, mass = density·4/3·π·r³).
 Arenas are squares of side ``side`` centred at the origin, closed by 4 walls of height
 ``wall_height`` (planes of kind wall, normals inward); the ground is always plane row 0.
 """
@@ -14,7 +14,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.scene import (
+from physgnn.physics.scene import (
     GROUND,
     STATIC,
     WALL,

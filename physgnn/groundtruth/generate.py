@@ -11,19 +11,17 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import shutil
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from physgnn.dataset import DatasetError, compute_stats, write_split, write_stats
-from physgnn.engine import EngineSettings, simulate
-from physgnn.scene import SceneError, Trajectory
-from physgnn.scenes import build_scene
+from physgnn.data.dataset import compute_stats, write_split, write_stats
+from physgnn.groundtruth.engine import EngineSettings, simulate
+from physgnn.groundtruth.families import build_scene
+from physgnn.physics.scene import SceneError, Trajectory
 
 SPLITS = ("train", "val", "test", "ood")
 FILES = tuple(f"{s}.h5" for s in SPLITS) + ("stats.json",)
@@ -154,21 +152,3 @@ def generate(cfg: DictConfig) -> Path:
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return out
-
-
-@hydra.main(version_base="1.3", config_path="../conf", config_name="generate")
-def _hydra_main(cfg: DictConfig) -> None:
-    try:
-        out = generate(cfg)
-    except (SceneError, DatasetError, FileExistsError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    print(f"dataset written to {out}")
-
-
-def main() -> None:
-    _hydra_main()
-
-
-if __name__ == "__main__":
-    main()

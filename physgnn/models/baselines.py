@@ -12,7 +12,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from physgnn.scene import EFFECT_NAMES, GRAVITY
+from physgnn.physics.scene import EFFECT_NAMES, GRAVITY
 
 _GRAVITY = EFFECT_NAMES.index("gravity")
 

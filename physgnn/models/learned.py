@@ -1,6 +1,6 @@
 """The learned simulator: scene state → graph → network → next velocities (physical units).
 
-:class:`LearnedSimulator` joins the physics side (:mod:`physgnn.graph`) and the network
+:class:`LearnedSimulator` joins the physics side (:mod:`physgnn.graph.builder`) and the network
 (:mod:`physgnn.nn.epd`) and owns every normalisation, so the rest of physgnn (Lightning module,
 rollout, evaluation) speaks physical units only.
 
@@ -21,16 +21,17 @@ import time
 import torch
 from torch import nn
 
-from physgnn.graph import GraphBuilder
+from physgnn.errors import PhysgnnError
+from physgnn.graph.builder import GraphBuilder
 from physgnn.nn.epd import EncodeProcessDecode
-from physgnn.scene import EFFECT_NAMES
+from physgnn.physics.scene import EFFECT_NAMES
 
 ROTATION = EFFECT_NAMES.index("rotation")
 VECTOR_STATS = ("vel", "angvel", "delta_vel", "delta_angvel")
 SCALAR_STATS = ("radius", "mass")
 
 
-class StatsError(ValueError):
+class StatsError(PhysgnnError, ValueError):
     """``stats.json`` lacks a field the simulator needs (one-line message)."""
 
 

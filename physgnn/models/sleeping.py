@@ -34,7 +34,7 @@ import math
 import numpy as np
 import torch
 
-from physgnn.neighbors import radius_pairs
+from physgnn.graph.neighbors import radius_pairs
 
 # Per-sphere fields of a SceneState (first dimension N); the rest are per plane or per scene.
 NODE_KEYS = (

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from physgnn import quaternion as Q
+from physgnn.physics import quaternion as Q
 
 
 def euler_step(

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import torch
 
-from physgnn import quaternion as Q
+from physgnn.physics import quaternion as Q
 
 
 def finite_difference_velocities(

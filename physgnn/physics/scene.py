@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from physgnn.errors import PhysgnnError
+
 PLANE_DIM = 11
 PLANE_KINDS = ("ground", "wall", "static")
 GROUND, WALL, STATIC = 0, 1, 2
@@ -22,7 +24,7 @@ GRAVITY = (0.0, 0.0, -9.81)
 EFFECT_NAMES = ("gravity", "sphere_contact", "surface_contact", "friction", "rotation")
 
 
-class SceneError(ValueError):
+class SceneError(PhysgnnError, ValueError):
     """Invalid scene or trajectory description (message is one line naming the problem)."""
 
 

@@ -12,9 +12,9 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
-from physgnn import plots
-from physgnn.csvio import read_rows, write_rows
+from physgnn.files import read_rows, write_rows
 from physgnn.metrics import PENETRATION_KEYS
+from physgnn.report import figures as plots
 
 # metrics.csv: identification columns, the metrics, then the divergence step and the speed.
 METRICS = [
@@ -365,7 +365,7 @@ def pareto_section(
     rows: list[dict], bench_dir: str | Path | None, fig_dir: Path, root: Path
 ) -> str:
     """Accuracy against ms per frame (learned runs and pybullet), when ``make bench`` ran."""
-    from physgnn import pareto
+    from physgnn.report import pareto
 
     if bench_dir is None or not (Path(bench_dir) / "bench.json").exists():
         return "No bench results (`make bench` writes them; then run `make eval` again)."
@@ -391,7 +391,7 @@ def sleeping_section(rows: list[dict]) -> str:
 
 def stability_section(root: Path) -> str:
     """The stability table from ``root/stability.csv`` (written by the eval's ``stability``)."""
-    from physgnn import stability
+    from physgnn.evaluation import stability
 
     path = root / "stability.csv"
     if not path.exists():

@@ -1,6 +1,6 @@
 """Figures of the eval report (PNG, matplotlib Agg): sweeps, FPS, energy over time.
 
-Plot functions take already aggregated numbers (see :mod:`physgnn.report`) and know nothing
+Plot functions take already aggregated numbers (see :mod:`physgnn.report.document`) and know nothing
 of runs or files other than the PNG they write.
 """
 

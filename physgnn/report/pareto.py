@@ -19,7 +19,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from physgnn import report  # noqa: E402
+from physgnn.report import document as report  # noqa: E402
 
 PARETO_METRICS = ("chamfer", "energy_gain", "depth_sphere", "depth_ground")
 METRIC_NAMES = {

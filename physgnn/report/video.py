@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.collections import EllipseCollection, PolyCollection  # noqa: E402
 
-from physgnn.scene import GROUND  # noqa: E402
+from physgnn.physics.scene import GROUND  # noqa: E402
 
 VIEWS = ((0, 2, "side (x–z)"), (0, 1, "top (x–y)"))
 

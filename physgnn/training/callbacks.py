@@ -42,8 +42,8 @@ class RolloutCallback(L.Callback):
     def _trajectories(self, data_dir: Path, split: str) -> list:
         """Trajectories of a split, cut to ``max_frames`` (read once, then cached)."""
         if split not in self._cache:
-            from physgnn.dataset import read_split
-            from physgnn.eval import truncate
+            from physgnn.data.dataset import read_split
+            from physgnn.evaluation.evaluate import truncate
 
             path = data_dir / f"{split}.h5"
             trajs = read_split(path) if path.exists() else []
@@ -54,7 +54,7 @@ class RolloutCallback(L.Callback):
 
     def rollout_metrics(self, simulator, trajectories: list) -> tuple[list[dict], list[float]]:
         """Metrics and FPS of each trajectory's rollout (eval mode restored afterwards)."""
-        from physgnn.eval import Prediction, rollout_prediction
+        from physgnn.evaluation.evaluate import Prediction, rollout_prediction
 
         was_training = simulator.training
         simulator.eval()

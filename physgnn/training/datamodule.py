@@ -2,7 +2,7 @@
 
 A *pair* is a frame ``t`` of a training trajectory with ``t ∈ [H, T − 2]``: the state at ``t``
 with ``H + 1`` velocities of history, and the finite-difference velocities of frame ``t + 1``
-as targets (:class:`physgnn.state.TrajectoryFrames`). An epoch is ``pairs_per_epoch`` pairs
+as targets (:class:`physgnn.data.state.TrajectoryFrames`). An epoch is ``pairs_per_epoch`` pairs
 drawn uniformly with replacement by a sampler seeded by (seed, epoch); validation is a fixed
 seeded subset of the validation split. Input noise is added by the Lightning module, not
 here, so the data stream is the same with or without noise.
@@ -17,9 +17,9 @@ import torch
 from torch.utils.data import Dataset, Sampler
 from torch_geometric.loader import DataLoader
 
-from physgnn.dataset import DatasetError, read_split, read_stats
-from physgnn.scene import EFFECT_NAMES
-from physgnn.state import TrajectoryFrames
+from physgnn.data.dataset import DatasetError, read_split, read_stats
+from physgnn.data.state import TrajectoryFrames
+from physgnn.physics.scene import EFFECT_NAMES
 
 
 class PairDataset(Dataset):

@@ -5,13 +5,13 @@ Loss of a batch of state pairs:
 ``L = MSE(normalised prediction, normalised target)
 + λ · mean_scenes max(E_{t+1} − E_t, 0) / Σ m g``
 
-- MSE over the 6 normalised outputs of every sphere (:mod:`physgnn.simulator` explains the
+- MSE over the 6 normalised outputs of every sphere (:mod:`physgnn.models.learned` explains the
   target); the 3 angular outputs of spheres whose scene has rotation off are left out.
-- ``E`` = kinetic + potential energy of a scene (:mod:`physgnn.energy`, potential from the
-  ground contact height); ``E_{t+1}`` is the energy after integrating the predicted
-  ``v̂_{t+1}`` with :func:`physgnn.integrator.euler_step`. Dividing a scene's energy increase by
-  its weight ``Σ m·g`` turns joules into *metres of height gained per sphere mass*, so ``λ``
-  means the same for a scene of 1 or 300 spheres, light or heavy.
+- ``E`` = kinetic + potential energy of a scene (:mod:`physgnn.physics.energy`, potential
+  from the ground contact height); ``E_{t+1}`` is the energy after integrating the predicted
+  ``v̂_{t+1}`` with :func:`physgnn.physics.integrator.euler_step`. Dividing a scene's energy
+  increase by its weight ``Σ m·g`` turns joules into *metres of height gained per sphere
+  mass*, so ``λ`` means the same for a scene of 1 or 300 spheres, light or heavy.
 - Noise (training only): ``noise_std`` is in normalised units: positions get
   ``σ · length_scale`` metres, velocity histories ``σ · std(v)`` and ``σ · std(ω)``,
   orientations ``σ`` per component then renormalised. Spheres of scenes without rotation keep
@@ -23,14 +23,17 @@ from __future__ import annotations
 import lightning as L
 import torch
 
-from physgnn import quaternion as Q
-from physgnn.energy import scene_energy, scene_weight
-from physgnn.integrator import euler_step
-from physgnn.simulator import LearnedSimulator
+from physgnn.errors import PhysgnnError
+from physgnn.models.learned import LearnedSimulator
+from physgnn.physics import quaternion as Q
+from physgnn.physics.energy import scene_energy, scene_weight
+from physgnn.physics.integrator import euler_step
 
 
-class NonFiniteLossError(RuntimeError):
+class NonFiniteLossError(PhysgnnError, RuntimeError):
     """The training loss became NaN or infinite (the model exploded)."""
+
+    exit_code = 1
 
 
 def add_noise(state, simulator: LearnedSimulator, std: float, generator=None):

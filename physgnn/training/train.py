@@ -1,48 +1,25 @@
 """``python -m physgnn.train [overrides]``: train a learned simulator (Hydra + Lightning).
 
-``train(cfg)`` does the work and returns the final metrics; ``main`` is the Hydra wrapper that
-turns configuration and data errors into one line ``error: ...`` (exit status 2). A run writes
+``train(cfg)`` does the work and returns the final metrics. A run writes
 ``<run_dir>/checkpoints/{last,best-*}.ckpt``, its logs and ``<run_dir>/run.json``;
-``load_run(run_dir)`` rebuilds the trained simulator for evaluation.
+:func:`physgnn.training.runs.load_run` rebuilds the trained simulator for evaluation.
 """
 
 from __future__ import annotations
 
-import json
-import sys
 import time
 from pathlib import Path
 
-import hydra
 import lightning as L
-import torch
 from hydra.core.hydra_config import HydraConfig
-from hydra.errors import HydraException
 from hydra.utils import instantiate
-from omegaconf import DictConfig, OmegaConf
-from omegaconf.errors import OmegaConfBaseException
+from omegaconf import DictConfig
 
-from physgnn import CONF_DIR
-from physgnn.dataset import DatasetError
-from physgnn.lit import NonFiniteLossError
-from physgnn.scene import SceneError
-from physgnn.simulator import LearnedSimulator, StatsError
+from physgnn.errors import ConfigError
+from physgnn.training.lit import NonFiniteLossError
+from physgnn.training.runs import write_run_json
 
 NUMERIC_TRAINER_KEYS = ("max_epochs", "max_steps", "gradient_clip_val", "log_every_n_steps")
-
-
-class ConfigError(ValueError):
-    """A config value of the wrong kind (one-line message)."""
-
-
-USER_ERRORS = (
-    DatasetError,
-    SceneError,
-    StatsError,
-    ConfigError,
-    HydraException,
-    OmegaConfBaseException,
-)
 
 
 def check_trainer_config(trainer_cfg: DictConfig) -> None:
@@ -106,8 +83,9 @@ def train(cfg: DictConfig) -> dict:
         trainer.fit(lit, datamodule=datamodule, ckpt_path=cfg.get("ckpt_path"))
     except NonFiniteLossError as err:
         info.update(status="diverged", error=str(err), checkpoints=_checkpoints(trainer))
-        _write_json(run_dir / "run.json", info)
-        raise
+        write_run_json(run_dir, info)
+        kept = run_dir / "checkpoints"
+        raise NonFiniteLossError(f"{err}; last good checkpoint kept in {kept}") from err
     elapsed = time.perf_counter() - start
     _save_final(trainer)
     info.update(
@@ -126,7 +104,7 @@ def train(cfg: DictConfig) -> dict:
         val_loss_energy=_metric(trainer, "val/loss_energy"),
         checkpoints=_checkpoints(trainer),
     )
-    _write_json(run_dir / "run.json", info)
+    write_run_json(run_dir, info)
     return info
 
 
@@ -140,68 +118,3 @@ def _save_final(trainer: L.Trainer) -> None:
         last = Path(ckpt.dirpath) / "last.ckpt"
         trainer.save_checkpoint(last)
         ckpt.last_model_path = str(last)
-
-
-def _write_json(path: Path, data: dict) -> None:
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    tmp.replace(path)
-
-
-def _checkpoint_of(run_dir: Path) -> Path:
-    best = sorted((run_dir / "checkpoints").glob("best-*.ckpt"))
-    last = run_dir / "checkpoints" / "last.ckpt"
-    if best:
-        return best[-1]
-    if last.exists():
-        return last
-    raise FileNotFoundError(
-        f"no checkpoint in {run_dir / 'checkpoints'} (did the run finish an epoch?)"
-    )
-
-
-def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
-    """``(simulator, cfg, info)`` of a finished run: the simulator from ``.hydra/config.yaml``
-    and the best (else last) checkpoint, in eval mode on the CPU; ``info`` is run.json (plus
-    ``checkpoint``, the file loaded)."""
-    run_dir = Path(run_dir)
-    config = run_dir / ".hydra" / "config.yaml"
-    if not config.exists():
-        raise FileNotFoundError(f"{run_dir} is not a training run (no .hydra/config.yaml)")
-    cfg = OmegaConf.load(config)
-    cfg.run_dir = str(run_dir)
-    path = _checkpoint_of(run_dir)
-    state = torch.load(path, map_location="cpu", weights_only=True)["state_dict"]
-    state = {
-        k.removeprefix("simulator."): v for k, v in state.items() if k.startswith("simulator.")
-    }
-    simulator = instantiate(cfg.model, stats=LearnedSimulator.stats_from_state_dict(state))
-    simulator.load_state_dict(state)
-    simulator.eval()
-    info = json.loads((run_dir / "run.json").read_text()) if (run_dir / "run.json").exists() else {}
-    info["checkpoint"] = str(path)
-    return simulator, cfg, info
-
-
-def _one_line(err: Exception) -> str:
-    return "; ".join(line.strip() for line in str(err).splitlines() if line.strip())
-
-
-# An absolute path: "../conf" fails when main() is imported (console script, tests).
-@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="train")
-def main(cfg: DictConfig) -> float | None:
-    try:
-        return train(cfg)["val_loss"]
-    except USER_ERRORS as err:
-        print(f"error: {_one_line(err)}", file=sys.stderr)
-        sys.exit(2)
-    except NonFiniteLossError as err:
-        print(
-            f"error: {err}; last good checkpoint kept in {Path(cfg.run_dir) / 'checkpoints'}",
-            file=sys.stderr,
-        )
-        sys.exit(1)
-
-
-if __name__ == "__main__":
-    main()

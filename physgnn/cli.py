@@ -1,0 +1,59 @@
+"""The one wrapper of every ``python -m physgnn.<command>``: one config dir, one-line errors.
+
+:func:`command` makes a command's ``main``: Hydra composes ``conf/<name>.yaml`` from the one
+absolute config dir :data:`physgnn.CONF_DIR` (so ``main`` runs alike from ``python -m``, a
+console script or a test), ``run(cfg)`` does the work and ``done(result)`` (optional) gives
+the line to print. An error of the user's making (:class:`~physgnn.errors.PhysgnnError`, a
+Hydra or OmegaConf error raised while running, a file missing or already there) is printed
+as one line ``error: <message>`` and exits with its ``exit_code`` (2 unless it says
+otherwise); anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+from typing import NoReturn
+
+import hydra
+from hydra.errors import HydraException
+from omegaconf import DictConfig
+from omegaconf.errors import OmegaConfBaseException
+
+from physgnn import CONF_DIR
+from physgnn.errors import PhysgnnError, one_line
+
+USER_ERRORS = (
+    PhysgnnError,
+    HydraException,
+    OmegaConfBaseException,
+    FileNotFoundError,
+    FileExistsError,
+)
+
+
+def fail(err: BaseException) -> NoReturn:
+    """Print ``error: <one line>`` on stderr and exit with the error's code (default 2)."""
+    print(f"error: {one_line(err)}", file=sys.stderr)
+    sys.exit(getattr(err, "exit_code", 2))
+
+
+def command(
+    name: str, run: Callable[[DictConfig], object], done: Callable[[object], str] | None = None
+) -> Callable:
+    """``main`` of ``python -m physgnn.<name>`` (config ``conf/<name>.yaml``); it returns what
+    ``run`` returns (a Hydra sweeper optimises it). ``main.__wrapped__(cfg)`` is the body
+    without Hydra (for tests)."""
+
+    def main(cfg: DictConfig):
+        try:
+            result = run(cfg)
+        except USER_ERRORS as err:
+            fail(err)
+        if done is not None:
+            print(done(result))
+        return result
+
+    # Hydra names the job (and its log file) after the module of the task function.
+    main.__module__ = f"physgnn.{name}"
+    return hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main)

@@ -1,0 +1,13 @@
+"""``python -m physgnn.data_report dataset=PATH``: Table 1 of a dataset (``make data-report``).
+
+The work is :func:`physgnn.evaluation.data_report.data_report` (prints the table, writes
+``<dataset>/report.json``).
+"""
+
+from physgnn.cli import command
+from physgnn.evaluation.data_report import data_report
+
+main = command("data_report", data_report)
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,79 @@
+"""A training run on disk: ``<run_dir>/run.json``, ``.hydra/config.yaml`` and
+``checkpoints/{best-*,last}.ckpt``; :func:`load_run` rebuilds its trained simulator.
+
+No Lightning here: evaluation loads runs without importing the trainer.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from physgnn.files import write_json
+from physgnn.models.learned import LearnedSimulator
+
+RUN_JSON = "run.json"
+# Model targets of runs trained before the package was split into subpackages.
+MOVED_TARGETS = {"physgnn.simulator.LearnedSimulator": "physgnn.models.learned.LearnedSimulator"}
+
+
+def write_run_json(run_dir: str | Path, info: dict) -> Path:
+    """``run.json`` of a run (status, experiment, overrides, seed, figures), atomically."""
+    return write_json(Path(run_dir) / RUN_JSON, info)
+
+
+def read_run_json(run_dir: str | Path) -> dict:
+    """``run.json`` of a run; ``{}`` when there is none."""
+    path = Path(run_dir) / RUN_JSON
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def run_status(run_dir: Path) -> str:
+    """``status`` of a run's run.json (``"unreadable"`` when it cannot be read)."""
+    try:
+        return str(json.loads((Path(run_dir) / RUN_JSON).read_text()).get("status"))
+    except (OSError, ValueError):
+        return "unreadable"
+
+
+def checkpoint_of(run_dir: Path) -> Path:
+    """The best checkpoint of a run, else its last one."""
+    best = sorted((run_dir / "checkpoints").glob("best-*.ckpt"))
+    last = run_dir / "checkpoints" / "last.ckpt"
+    if best:
+        return best[-1]
+    if last.exists():
+        return last
+    raise FileNotFoundError(
+        f"no checkpoint in {run_dir / 'checkpoints'} (did the run finish an epoch?)"
+    )
+
+
+def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
+    """``(simulator, cfg, info)`` of a finished run: the simulator from ``.hydra/config.yaml``
+    and the best (else last) checkpoint, in eval mode on the CPU; ``info`` is run.json (plus
+    ``checkpoint``, the file loaded)."""
+    run_dir = Path(run_dir)
+    config = run_dir / ".hydra" / "config.yaml"
+    if not config.exists():
+        raise FileNotFoundError(f"{run_dir} is not a training run (no .hydra/config.yaml)")
+    cfg = OmegaConf.load(config)
+    cfg.run_dir = str(run_dir)
+    target = OmegaConf.select(cfg, "model._target_")
+    if target in MOVED_TARGETS:
+        cfg.model._target_ = MOVED_TARGETS[target]
+    path = checkpoint_of(run_dir)
+    state = torch.load(path, map_location="cpu", weights_only=True)["state_dict"]
+    state = {
+        k.removeprefix("simulator."): v for k, v in state.items() if k.startswith("simulator.")
+    }
+    simulator = instantiate(cfg.model, stats=LearnedSimulator.stats_from_state_dict(state))
+    simulator.load_state_dict(state)
+    simulator.eval()
+    info = read_run_json(run_dir)
+    info["checkpoint"] = str(path)
+    return simulator, cfg, info
