@@ -1,24 +1,24 @@
 """Autoregressive rollout of a simulator over many scenes at once, with divergence detection.
 
-A *simulator* is any callable ``simulator(state) -> (vel_next [N, 3], angvel_next [N, 3])``
-taking a batched :class:`physgnn.data.state.SceneState` and returning ``v_{t+1}``, ``ω_{t+1}`` in
-physical units (the learned simulator and the baselines share this call). Each trajectory
-starts from its first ``H + 1`` ground-truth frames (the state at frame ``H``), then every
-step integrates the prediction with semi-implicit Euler and shifts the velocity histories
-with the velocities the integrator implies, ``(p_{t+1} − p_t)/dt`` and
-``log(q_{t+1} ⊗ q_t⁻¹)/dt``, exactly as the training features are computed.
+A simulator is any :class:`~physgnn.models.protocol.Simulator`: ``simulator(state) ->
+(vel_next [N, 3], angvel_next [N, 3])`` on a batched :class:`~physgnn.data.state.SceneState`,
+in physical units (the learned simulator and the baselines share this call). Each trajectory
+starts from its first ``H + 1`` ground-truth frames (the state at frame ``H``); every step is
+:func:`physgnn.physics.integrator.step` (semi-implicit Euler, then the velocity histories
+shifted by the velocities the move implies, as the training features are computed).
 
 A scene stops when a frame turns non-finite or runs away (a speed above the bound, a
 coordinate beyond ``max_pos``); ``diverged_at`` is the index of that first bad frame and the
-scene's arrays keep only the frames before it. The other scenes of the batch continue.
+scene's arrays keep only the frames before it. The other scenes of the batch continue. Each
+result is a :class:`~physgnn.physics.trajectory.Trajectory`, the container the truth uses.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import time
 import warnings
-from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -26,43 +26,20 @@ from torch_geometric.data import Batch
 
 from physgnn.data.state import SceneState, TrajectoryFrames
 from physgnn.errors import PhysgnnError
-from physgnn.physics import quaternion as Q
-from physgnn.physics.integrator import euler_step
-from physgnn.physics.scene import EFFECT_NAMES, Trajectory
+from physgnn.models.profiling import StepTimer
+from physgnn.models.protocol import hooks_of
+from physgnn.models.sleeping import SleepingSimulator
+from physgnn.physics import integrator
+from physgnn.physics.scene import EFFECT_NAMES
+from physgnn.physics.trajectory import Trajectory
 
 ROTATION = EFFECT_NAMES.index("rotation")
 _FLOAT_KEYS = ("pos", "quat", "vel", "angvel", "radius", "mass", "planes", "dt")
+_RECORDED = {"pos": 3, "quat": 4, "vel": 3, "angvel": 3}
 
 
 class RolloutError(PhysgnnError, ValueError):
     """A rollout cannot start (one line naming the problem)."""
-
-
-@dataclass
-class RolloutResult:
-    """One trajectory's rollout; frame ``k`` of the arrays is frame ``k`` of the trajectory.
-
-    pos ``[T, N, 3]``, quat ``[T, N, 4]``, vel ``[T, N, 3]`` (finite differences; frames
-    ``0..start`` are the ground truth's), float32. ``T = n_frames`` is the finite prefix when
-    the rollout diverged (``diverged_at = T``, the first bad frame). ``fps`` = frames computed
-    per second of wall time of the batch the scene ran in; ``timings`` (seconds, batch
-    totals): ``graph``, ``network``, ``integration``, ``total`` and the count of ``steps``.
-    """
-
-    name: str
-    pos: np.ndarray
-    quat: np.ndarray
-    vel: np.ndarray
-    diverged_at: int | None
-    n_frames: int
-    fps: float
-    timings: dict = field(default_factory=dict)
-    start: int = 0
-
-    def as_dict(self) -> dict:
-        """The ``pred`` argument of :func:`physgnn.metrics.trajectory_metrics`."""
-        return dict(pos=self.pos, quat=self.quat, vel=self.vel, start=self.start,
-                    diverged_at=self.diverged_at)  # fmt: skip
 
 
 def rollout(
@@ -80,61 +57,66 @@ def rollout(
     dtype: torch.dtype = torch.float32,
     sleeping: bool = False,
     sleep: dict | None = None,
-) -> list[RolloutResult]:
+    timer: StepTimer | None = None,
+) -> list[Trajectory]:
     """Roll every trajectory out from its first ``history + 1`` frames, without gradients.
 
-    ``history`` defaults to the simulator's ``H`` (or ``history``) attribute. ``n_frames``:
-    frames per rollout, seed frames included (default: each trajectory's length; may exceed
-    it). A scene runs away when a sphere is faster than ``max_speed`` m/s or, if
-    ``speed_factor`` is set, than ``speed_factor × max(largest true speed, min_speed)``, or a
-    coordinate exceeds ``max_pos`` m. ``batch_size`` scenes share one graph (None: all).
-    ``sleeping``: resting spheres are frozen (:class:`physgnn.models.sleeping.SleepingSimulator`,
-    built with the ``sleep`` kwargs ``threshold``, ``k``, ``touch``; one per batch).
+    ``history`` defaults to the simulator's ``H``. ``n_frames``: frames per rollout, seed
+    frames included (default: each trajectory's length; may exceed it). A scene runs away
+    when a sphere is faster than ``max_speed`` m/s or, if ``speed_factor`` is set, than
+    ``speed_factor × max(largest true speed, min_speed)``, or a coordinate exceeds
+    ``max_pos`` m. ``batch_size`` scenes share one graph (None: all). ``sleeping``: resting
+    spheres are frozen (:class:`~physgnn.models.sleeping.SleepingSimulator`, built with the
+    ``sleep`` kwargs ``threshold``, ``k``, ``touch``; one per batch). ``timer`` (opt-in)
+    splits the steps' seconds into graph, network and integration.
     """
-    h = _history(simulator, history)
+    hooks = hooks_of(simulator)
+    h = _history(hooks.history, history)
     lengths = [n_frames or t.n_frames for t in trajectories]
     for traj, length in zip(trajectories, lengths, strict=True):
-        if traj.n_spheres == 0:
-            raise RolloutError(f"trajectory '{traj.name}' has no sphere")
-        if not np.isfinite(traj.pos[: h + 1]).all() or not np.isfinite(traj.quat[: h + 1]).all():
-            raise RolloutError(
-                f"trajectory '{traj.name}' has NaN or inf in its first {h + 1} frames"
-            )
-        if traj.n_frames < h + 1 or length < h + 1:
-            raise RolloutError(
-                f"trajectory '{traj.name}' needs at least H+1 = {h + 1} frames to start "
-                f"(has {traj.n_frames}, rollout of {length})"
-            )
-    _warn_unseen_effects(simulator, trajectories)
-    if device is None:
-        device = next((p.device for p in _parameters(simulator)), torch.device("cpu"))
-    bounds = dict(max_speed=max_speed, speed_factor=speed_factor, min_speed=min_speed)
+        _check_start(traj, length, h)
+    _warn_unseen_effects(hooks.effects_trained, trajectories)
+    settings = dict(
+        h=h,
+        bounds=dict(max_speed=max_speed, speed_factor=speed_factor, min_speed=min_speed),
+        max_pos=max_pos,
+        device=torch.device(device if device is not None else hooks.device),
+        dtype=dtype,
+        timer=timer,
+    )
     size = batch_size or max(len(trajectories), 1)
     results = []
     with torch.inference_mode():
         for i in range(0, len(trajectories), size):
-            chunk = list(range(i, min(i + size, len(trajectories))))
-            sim = _sleeping(simulator, sleep) if sleeping else simulator
-            results += _rollout_batch(
-                sim, [trajectories[j] for j in chunk], [lengths[j] for j in chunk],
-                h, bounds, max_pos, torch.device(device), dtype,
-            )  # fmt: skip
+            sim = SleepingSimulator(simulator, **(sleep or {})) if sleeping else simulator
+            chunk = slice(i, i + size)
+            results += _rollout_batch(sim, trajectories[chunk], lengths[chunk], **settings)
     return results
 
 
-def _history(simulator, history: int | None) -> int:
+def _history(own: int | None, history: int | None) -> int:
     if history is not None:
         return int(history)
-    for name in ("H", "history"):
-        if isinstance(getattr(simulator, name, None), int):
-            return int(getattr(simulator, name))
-    raise RolloutError("pass history=H: the simulator has no integer 'H' or 'history'")
+    if own is None:
+        raise RolloutError("pass history=H: the simulator has no integer 'H'")
+    return own
 
 
-def _warn_unseen_effects(simulator, trajectories: list[Trajectory]) -> None:
+def _check_start(traj: Trajectory, length: int, h: int) -> None:
+    if traj.n_spheres == 0:
+        raise RolloutError(f"trajectory '{traj.name}' has no sphere")
+    if not np.isfinite(traj.pos[: h + 1]).all() or not np.isfinite(traj.quat[: h + 1]).all():
+        raise RolloutError(f"trajectory '{traj.name}' has NaN or inf in its first {h + 1} frames")
+    if traj.n_frames < h + 1 or length < h + 1:
+        raise RolloutError(
+            f"trajectory '{traj.name}' needs at least H+1 = {h + 1} frames to start "
+            f"(has {traj.n_frames}, rollout of {length})"
+        )
+
+
+def _warn_unseen_effects(trained, trajectories: list[Trajectory]) -> None:
     """One warning line when a scene asks for an effect the model was not trained with
-    (``simulator.effects_trained [5]`` bool, order of ``EFFECT_NAMES``; none: no check)."""
-    trained = getattr(simulator, "effects_trained", None)
+    (``trained [5]`` bool, order of ``EFFECT_NAMES``; None: no check)."""
     if trained is None:
         return
     asked = {name for t in trajectories for name in EFFECT_NAMES if getattr(t.effects, name)}
@@ -149,25 +131,6 @@ def _warn_unseen_effects(simulator, trajectories: list[Trajectory]) -> None:
         )
 
 
-def _sleeping(simulator, sleep: dict | None):
-    from physgnn.models.sleeping import SleepingSimulator
-
-    return SleepingSimulator(simulator, **(sleep or {}))
-
-
-def _select(simulator, b: Batch, keep: list[int]) -> None:
-    """Tell a simulator with per-sphere state (sleeping) which spheres of batch ``b`` stay."""
-    select = getattr(simulator, "select", None)
-    if select is not None:
-        select(torch.isin(b.batch, torch.tensor(keep, dtype=torch.long, device=b.batch.device)))
-
-
-def _parameters(simulator):
-    """The simulator's parameters (also through a wrapper that delegates ``parameters``)."""
-    parameters = getattr(simulator, "parameters", None)
-    return parameters() if callable(parameters) else iter(())
-
-
 def _speed_bound(frames: TrajectoryFrames, bounds: dict) -> float:
     if bounds["speed_factor"] is None:
         return bounds["max_speed"]
@@ -180,12 +143,6 @@ def _clock(device: torch.device) -> float:
     if device.type == "cuda":
         torch.cuda.synchronize(device)
     return time.perf_counter()
-
-
-def _graph_seconds(simulator) -> float:
-    """The simulator's cumulative graph-building time (``timings['graph']``), 0 without."""
-    timings = getattr(simulator, "timings", None)
-    return float(timings.get("graph", 0.0)) if isinstance(timings, dict) else 0.0
 
 
 class _Batch:
@@ -231,29 +188,21 @@ class _Batch:
         self._build(states)
 
     def step(self, vel_next, angvel_next, max_pos: float, hold=None) -> list[bool] | None:
-        """Integrate one frame in place (positions, orientations, velocity histories).
+        """Integrate one frame in place (:func:`physgnn.physics.integrator.step`).
 
-        ``hold(pos, quat, pos_next, quat_next)`` (sleeping) may keep spheres in place.
         Returns None when every scene is fine, else a per-scene list: diverged?
         """
-        pos, quat, dt = self.pos, self.quat, self.dt
-        pos_next, quat_next = euler_step(pos, quat, vel_next, angvel_next, dt, self.rotate)
-        if hold is not None:
-            pos_next, quat_next = hold(pos, quat, pos_next, quat_next)
-        vel_new = (pos_next - pos) / dt[:, None]
-        if self.rotate is False and hold is None:
-            angvel_new = torch.zeros_like(vel_new)  # orientation untouched
-        else:
-            angvel_new = Q.angular_velocity(quat, quat_next, dt[:, None])
-        self.vel[:, 1:] = self.vel[:, :-1].clone()
-        self.vel[:, 0] = vel_new
-        self.angvel[:, 1:] = self.angvel[:, :-1].clone()
-        self.angvel[:, 0] = angvel_new
-        pos.copy_(pos_next)
-        quat.copy_(quat_next)
+        pos_next, quat_next, vel, angvel = integrator.step(
+            self.pos, self.quat, self.vel, self.angvel, vel_next, angvel_next,
+            self.dt, self.rotate, hold,
+        )  # fmt: skip
+        for own, new in ((self.pos, pos_next), (self.quat, quat_next), (self.vel, vel),
+                         (self.angvel, angvel)):  # fmt: skip
+            own.copy_(new)
         # One reduction: a NaN or inf anywhere in a row makes its sum non-finite.
-        finite = (pos_next.sum(1) + quat_next.sum(1) + angvel_new.sum(1)).isfinite()
-        bad = ~finite | (vel_new.norm(dim=1) > self.bound) | (pos_next.abs().amax(1) > max_pos)
+        finite = (pos_next.sum(1) + quat_next.sum(1) + angvel[:, 0].sum(1)).isfinite()
+        speed, far = vel[:, 0].norm(dim=1), pos_next.abs().amax(1)
+        bad = ~finite | (speed > self.bound) | (far > max_pos)
         if not bool(bad.any()):
             return None
         per_scene = torch.zeros(self.num_graphs, dtype=torch.long, device=bad.device)
@@ -268,43 +217,52 @@ def _start_state(frames: TrajectoryFrames, h: int) -> SceneState:
     return s
 
 
-def _rollout_batch(simulator, trajs, lengths, h, bounds, max_pos, device, dtype):
+class _Record:
+    """The frames of every scene of a batch, ``[T, N_total, ·]`` float32 per key."""
+
+    def __init__(self, frames: list[TrajectoryFrames], t_max: int, h: int):
+        counts = [f.pos.shape[1] for f in frames]
+        self.offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        n = int(self.offsets[-1])
+        self.arrays = {k: np.zeros((t_max, n, w), np.float32) for k, w in _RECORDED.items()}
+        for f, lo, hi in zip(frames, self.offsets[:-1], self.offsets[1:], strict=True):
+            for key, array in self.arrays.items():
+                array[: h + 1, lo:hi] = getattr(f, key)[: h + 1].numpy()
+
+    def nodes(self, active: list[int]) -> np.ndarray:
+        """Columns of the records of the active scenes' spheres."""
+        if not active:
+            return np.zeros(0, dtype=np.int64)
+        return np.concatenate([np.arange(self.offsets[i], self.offsets[i + 1]) for i in active])
+
+    def write(self, t: int, nodes: np.ndarray, state: _Batch) -> None:
+        self.arrays["pos"][t, nodes] = state.pos.float().cpu().numpy()
+        self.arrays["quat"][t, nodes] = state.quat.float().cpu().numpy()
+        self.arrays["vel"][t, nodes] = state.vel[:, 0].float().cpu().numpy()
+        self.arrays["angvel"][t, nodes] = state.angvel[:, 0].float().cpu().numpy()
+
+    def frames_of(self, i: int, end: int) -> dict:
+        lo, hi = self.offsets[i], self.offsets[i + 1]
+        return {k: a[:end, lo:hi].copy() for k, a in self.arrays.items()}
+
+
+def _rollout_batch(simulator, trajs, lengths, *, h, bounds, max_pos, device, dtype, timer):
     frames = [TrajectoryFrames(t) for t in trajs]
-    counts = [t.n_spheres for t in trajs]
-    offsets = np.concatenate([[0], np.cumsum(counts)])
-    t_max = max(lengths)
-    rec = {
-        "pos": np.zeros((t_max, offsets[-1], 3), np.float32),
-        "quat": np.zeros((t_max, offsets[-1], 4), np.float32),
-        "vel": np.zeros((t_max, offsets[-1], 3), np.float32),
-    }
-    for f, lo, hi in zip(frames, offsets[:-1], offsets[1:], strict=True):
-        for key in rec:
-            rec[key][: h + 1, lo:hi] = getattr(f, key)[: h + 1].numpy()
+    record = _Record(frames, max(lengths), h)
     speed_bound = torch.tensor([_speed_bound(f, bounds) for f in frames], dtype=torch.float64)
     state = _Batch([_start_state(f, h) for f in frames], speed_bound, device, dtype)
     diverged: list[int | None] = [None] * len(trajs)
     ends = list(lengths)
-    clock = {"graph": 0.0, "network": 0.0, "integration": 0.0}
-    hold = getattr(simulator, "hold", None)
+    hooks = hooks_of(simulator)
     steps, t = 0, h
     start_time = _clock(device)
     if min(lengths) == h + 1:  # nothing to compute for these
         state.keep([k for k, i in enumerate(state.active) if lengths[i] > h + 1])
-    nodes = _nodes(offsets, state.active)  # columns of the records of the active spheres
-    while state.batch is not None and t + 1 < t_max:
-        t0, g0 = _clock(device), _graph_seconds(simulator)
-        vel_next, angvel_next = simulator(state.batch)
-        t1, g1 = _clock(device), _graph_seconds(simulator)
-        bad = state.step(vel_next, angvel_next, max_pos, hold)
-        t2 = _clock(device)
-        clock["graph"] += g1 - g0
-        clock["network"] += (t1 - t0) - (g1 - g0)
-        clock["integration"] += t2 - t1
+    nodes = record.nodes(state.active)
+    while state.batch is not None and t + 1 < max(lengths):
+        bad = _one_step(simulator, state, max_pos, hooks.hold, timer)
         t, steps = t + 1, steps + 1
-        rec["pos"][t, nodes] = state.pos.float().cpu().numpy()
-        rec["quat"][t, nodes] = state.quat.float().cpu().numpy()
-        rec["vel"][t, nodes] = state.vel[:, 0].float().cpu().numpy()
+        record.write(t, nodes, state)
         keep = []
         for k, i in enumerate(state.active):
             if bad is not None and bad[k]:
@@ -312,29 +270,33 @@ def _rollout_batch(simulator, trajs, lengths, h, bounds, max_pos, device, dtype)
             elif t + 1 < lengths[i]:
                 keep.append(k)
         if len(keep) < len(state.active):
-            _select(simulator, state.batch, keep)
+            if hooks.select is not None:
+                index = torch.tensor(keep, dtype=torch.long, device=state.node_batch.device)
+                hooks.select(torch.isin(state.node_batch, index))
             state.keep(keep)
-            nodes = _nodes(offsets, state.active)
+            nodes = record.nodes(state.active)
     total = _clock(device) - start_time
-    timings = dict(clock, total=total, steps=steps)
+    if timer is not None:
+        timer.timings["total"] += total
     fps = steps / total if total > 0 else float("inf")
     return [
-        RolloutResult(
-            name=traj.name,
-            pos=rec["pos"][: ends[i], offsets[i] : offsets[i + 1]].copy(),
-            quat=rec["quat"][: ends[i], offsets[i] : offsets[i + 1]].copy(),
-            vel=rec["vel"][: ends[i], offsets[i] : offsets[i + 1]].copy(),
-            diverged_at=diverged[i],
-            n_frames=int(ends[i]),
-            fps=fps,
-            timings=dict(timings),
+        dataclasses.replace(
+            traj,
+            **record.frames_of(i, ends[i]),
+            attrs=dict(traj.attrs),
             start=h,
-        )
+            diverged_at=diverged[i],
+            fps=fps,
+        )  # fmt: skip
         for i, traj in enumerate(trajs)
     ]
 
 
-def _nodes(offsets: np.ndarray, active: list[int]) -> np.ndarray:
-    if not active:
-        return np.zeros(0, dtype=np.int64)
-    return np.concatenate([np.arange(offsets[i], offsets[i + 1]) for i in active])
+def _one_step(simulator, state: _Batch, max_pos: float, hold, timer: StepTimer | None):
+    """Predict and integrate one frame of the batch (timed when a timer is given)."""
+    if timer is None:
+        vel_next, angvel_next = simulator(state.batch)
+        return state.step(vel_next, angvel_next, max_pos, hold)
+    with timer.watch(simulator):
+        vel_next, angvel_next = timer.predict(simulator, state.batch)
+    return timer.integrate(state.step, vel_next, angvel_next, max_pos, hold)

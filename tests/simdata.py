@@ -8,7 +8,8 @@ from torch_geometric.data import Batch
 
 from physgnn.data.state import TrajectoryFrames
 from physgnn.physics import quaternion as Q
-from physgnn.physics.scene import Effects, Material, Trajectory, ground_plane, make_plane
+from physgnn.physics.scene import Effects, Material, ground_plane, make_plane
+from physgnn.physics.trajectory import Trajectory
 
 STATS = {
     "vel": {"mean": [0.1, -0.2, -3.0], "std": [1.0, 2.0, 4.0]},

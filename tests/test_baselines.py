@@ -6,7 +6,8 @@ from torch_geometric.data import Batch
 
 from physgnn.data.state import TrajectoryFrames
 from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
-from physgnn.physics.scene import Effects, Trajectory, ground_plane
+from physgnn.physics.scene import Effects, ground_plane
+from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
 
 DT, G = 0.1, 9.81

@@ -12,9 +12,10 @@ import torch
 from hydra import compose, initialize_config_dir
 from torch.utils.flop_counter import FlopCounterMode
 
-from physgnn.benchmark import parts as bench_parts
-from physgnn.benchmark.markdown import targets
-from physgnn.benchmark.run import BenchError, bench, frame_states, make_simulator, time_learned
+from physgnn.benchmark import scenes as bench_scenes
+from physgnn.benchmark.learned import frame_states, make_simulator, time_learned
+from physgnn.benchmark.run import BenchError, bench
+from physgnn.benchmark.targets import targets
 from physgnn.data.dataset import compute_stats
 from physgnn.groundtruth.engine import simulate
 from physgnn.nn.epd import EncodeProcessDecode
@@ -36,7 +37,7 @@ def quick(tmp_path_factory):
     return out, result
 
 
-def test_bench_json_has_exactly_the_issue_keys(quick):
+def test_bench_json_has_exactly_the_agreed_keys(quick):
     out, result = quick
     data = json.loads((out / "bench.json").read_text())
     assert data == json.loads(json.dumps(result))
@@ -148,7 +149,7 @@ def test_flops_per_step_equals_counted_matmuls(third_law, surfaces, concat):
 def test_time_learned_counts_the_flops_of_the_graphs_it_ran(tmp_path):
     cfg = _cfg("quick=true")
     rng = np.random.default_rng(0)
-    scene = bench_parts.bench_scene(cfg.scene, 12, rng, 8.0, 4.0, 5)
+    scene = bench_scenes.bench_scene(cfg.scene, 12, rng, 8.0, 4.0, 5)
     assert scene.n_spheres == 12
     traj = simulate(scene, {"substeps": 2})
     sim = make_simulator(cfg.model, {"hidden": 16, "M": 2}, compute_stats([traj]))

@@ -12,7 +12,8 @@ from physgnn.data.state import TrajectoryFrames
 from physgnn.physics import quaternion as Q
 from physgnn.physics.energy import scene_energy, scene_weight, sphere_energy
 from physgnn.physics.integrator import euler_step
-from physgnn.physics.scene import Effects, Scene, SceneError, Trajectory, ground_plane, make_plane
+from physgnn.physics.scene import Effects, Scene, SceneError, ground_plane, make_plane
+from physgnn.physics.trajectory import Trajectory
 
 
 def test_euler_step_position_is_semi_implicit():

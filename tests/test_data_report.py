@@ -11,7 +11,8 @@ from hydra import compose, initialize_config_dir
 
 from physgnn.data.dataset import DatasetError, write_split
 from physgnn.evaluation.data_report import KEYS, DataReportError, data_report
-from physgnn.physics.scene import Effects, Trajectory, ground_plane
+from physgnn.physics.scene import Effects, ground_plane
+from physgnn.physics.trajectory import Trajectory
 
 CONF = str(Path(__file__).resolve().parents[1] / "conf")
 G = 9.81

@@ -90,7 +90,7 @@ def test_stats_are_read(data_dir):
 
 
 def test_sampler_is_seeded_by_epoch():
-    from physgnn.training.datamodule import EpochSampler
+    from physgnn.data.pairs import EpochSampler
 
     sampler = EpochSampler(50, 20, seed=7)
     first, second = list(sampler), list(sampler)

@@ -19,7 +19,8 @@ from physgnn.data.dataset import (
     write_split,
     write_stats,
 )
-from physgnn.physics.scene import Effects, Material, Trajectory, ground_plane
+from physgnn.physics.scene import Effects, Material, ground_plane
+from physgnn.physics.trajectory import Trajectory
 
 
 def linear_traj(t=5, n=2, v=(1.0, -2.0, 0.5), dt=0.1, name="lin") -> Trajectory:

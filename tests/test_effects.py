@@ -1,4 +1,4 @@
-"""Effects end to end: scene effects → graph → network → rollout → checkpoint (issue 7)."""
+"""Effects end to end: scene effects → graph → network → rollout → checkpoint."""
 
 from __future__ import annotations
 
@@ -71,7 +71,6 @@ def test_contacts_off_builds_no_pp_edge_and_calls_no_pp_mlp_in_a_rollout():
     rollout(sim, [crowded()], n_frames=4)
     assert "pp_encoder" in calls and "block1.pp" in calls  # control: overlapping spheres
     calls.clear()
-    sim.reset_timings()
     off = crowded(Effects(sphere_contact=False))
     state = batch([off], t=2, H=1)
     _, graph = sim.normalized_prediction(state)

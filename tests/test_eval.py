@@ -18,10 +18,11 @@ import physgnn.training.train
 from physgnn import eval as eval_command
 from physgnn.data.dataset import read_split, write_split
 from physgnn.evaluation import evaluate as ev
+from physgnn.evaluation import runs as eval_runs
 from physgnn.evaluation.data_report import split_summary
 from physgnn.models.baselines import GravityOnlySimulator
-from physgnn.report import document as report
-from physgnn.report.document import read_csv
+from physgnn.report import table as report_table
+from physgnn.report.table import read_csv
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -66,15 +67,15 @@ def outputs(tmp_path):
 
 
 def test_find_runs_keeps_finished_runs_only(outputs):
-    names = [ev.run_name(p, outputs) for p in ev.find_runs(None, outputs)]
+    names = [eval_runs.run_name(p, outputs) for p in eval_runs.find_runs(None, outputs)]
     assert names == ["multirun/ablation_M/t0/model.M=3,seed=1", "runs/baseline/2026-01-01_00-00-00"]
 
 
 def test_find_runs_of_a_multirun_folder_and_of_one_run(outputs):
     multirun = outputs / "multirun" / "ablation_M" / "t0"
-    assert ev.find_runs(str(multirun), outputs) == [multirun / "model.M=3,seed=1"]
+    assert eval_runs.find_runs(str(multirun), outputs) == [multirun / "model.M=3,seed=1"]
     one = outputs / "runs" / "baseline" / "2026-01-01_00-00-00"
-    assert ev.find_runs(str(one), outputs) == [one]
+    assert eval_runs.find_runs(str(one), outputs) == [one]
 
 
 @pytest.mark.parametrize(
@@ -88,14 +89,14 @@ def test_find_runs_of_a_multirun_folder_and_of_one_run(outputs):
 def test_find_runs_errors_are_one_line(outputs, target, message):
     (outputs / "runs" / "nothing").mkdir()
     path = target if target.startswith("does") else str(outputs / target)
-    with pytest.raises(ev.EvalError, match=message) as err:
-        ev.find_runs(path, outputs)
+    with pytest.raises(eval_runs.EvalError, match=message) as err:
+        eval_runs.find_runs(path, outputs)
     assert "\n" not in str(err.value)
 
 
 def test_run_info_joins_overrides_and_reads_seed(outputs):
     run = outputs / "multirun" / "ablation_M" / "t0" / "model.M=3,seed=1"
-    info = ev.run_info(run, outputs)
+    info = eval_runs.run_info(run, outputs)
     assert (info.experiment, info.overrides, info.seed) == (
         "ablation_M",
         "+experiment=ablation_M model.M=3 seed=1",
@@ -107,9 +108,9 @@ def test_dataset_of_reads_the_datamodule_dir():
     cfg = OmegaConf.create(
         {"data": {"dir": "outputs/data/tiny"}, "datamodule": {"data_dir": "${data.dir}"}}
     )
-    assert ev.dataset_of(cfg) == Path("outputs/data/tiny")
-    with pytest.raises(ev.EvalError, match="names no dataset"):
-        ev.dataset_of(OmegaConf.create({"model": {}}))
+    assert eval_runs.dataset_of(cfg) == Path("outputs/data/tiny")
+    with pytest.raises(eval_runs.EvalError, match="names no dataset"):
+        eval_runs.dataset_of(OmegaConf.create({"model": {}}))
 
 
 def eval_cfg(*overrides):
@@ -158,7 +159,7 @@ class Falling(GravityOnlySimulator):
 def write_dataset(folder: Path) -> Path:
     test = [trajectory(3, 12, seed=s) for s in (1, 2)]
     ood = [trajectory(4, 12, seed=s) for s in (3, 4)]
-    for traj, name in zip(ood, ("ood_cubes", report.SLEEP_SCENE), strict=True):
+    for traj, name in zip(ood, ("ood_cubes", report_table.SLEEP_SCENE), strict=True):
         traj.attrs["group"] = name
     for split, trajs in (("test", test), ("ood", ood)):
         write_split(folder / f"{split}.h5", trajs, {"split": split, "preset": "hand"})
@@ -193,7 +194,7 @@ def test_eval_writes_one_row_per_run_split_and_trajectory(evaluated):
     assert runs.count("runs/baseline/2026-01-01_00-00-00+sleeping") == 1
     assert {r["trajectory"] for r in rows if r["split"] == "ood"} == {
         "ood_cubes",
-        report.SLEEP_SCENE,
+        report_table.SLEEP_SCENE,
     }
 
 
@@ -222,7 +223,7 @@ def test_diverged_run_is_flagged_with_finite_metrics(evaluated):
 def test_report_links_figures_and_one_video_per_ood_scene(evaluated):
     outputs, _, text = evaluated
     report_dir = outputs / "report"
-    for scene in ("ood_cubes", report.SLEEP_SCENE):
+    for scene in ("ood_cubes", report_table.SLEEP_SCENE):
         gif = report_dir / "videos" / f"{scene}.gif"
         assert len(imageio.mimread(gif)) == 5
         assert f"(videos/{scene}.gif)" in text
@@ -240,7 +241,7 @@ def test_ground_truth_rows_equal_the_data_report(evaluated):
         expected = split_summary(trajs)
         gt = [r for r in rows if r["run"] == "ground_truth" and r["split"] == split]
         for key, value in expected.items():
-            mean, std, n = report.stat(gt, key)
+            mean, std, n = report_table.stat(gt, key)
             assert n == len(trajs)
             assert mean == pytest.approx(value["mean"], rel=1e-9, abs=1e-12), key
             assert std == pytest.approx(value["std"], rel=1e-6, abs=1e-12), key
@@ -300,7 +301,7 @@ def test_tiny_run_logs_rollouts_then_make_eval_reports_it(tiny_dataset, tmp_path
 def test_eval_of_a_dataset_alone_reports_the_references(tmp_path):
     data = write_dataset(tmp_path / "data")
     out = tmp_path / "empty"
-    with pytest.raises(ev.EvalError, match="no finished run under"):
+    with pytest.raises(eval_runs.EvalError, match="no finished run under"):
         ev.evaluate(eval_cfg(f"paths.outputs={out}"))
     text = ev.evaluate(eval_cfg(f"paths.outputs={out}", f"dataset={data}")).read_text()
     assert "`ground_truth`: 2 test and 2 OOD trajectories." in text
@@ -314,5 +315,5 @@ def test_a_run_whose_dataset_is_gone_is_one_clear_error(tmp_path, monkeypatch):
     make_run(out / "runs" / "baseline" / "t0")
     cfg = OmegaConf.create({"datamodule": {"data_dir": str(tmp_path / "gone")}})
     monkeypatch.setattr(physgnn.training.runs, "load_run", lambda run_dir: (Falling(), cfg, {}))
-    with pytest.raises(ev.EvalError, match=r"dataset folder .*gone does not exist"):
+    with pytest.raises(eval_runs.EvalError, match=r"dataset folder .*gone does not exist"):
         ev.evaluate(eval_cfg(f"paths.outputs={out}"))

@@ -139,7 +139,7 @@ def test_no_surfaces_but_the_ground_does_no_plane_work(monkeypatch):
     def fail(*args, **kwargs):
         raise AssertionError("plane distances computed for a ground-only scene")
 
-    monkeypatch.setattr(graph_module, "_rectangle_distance", fail)
+    monkeypatch.setattr(graph_module, "rectangle_distance", fail)
     g = GraphBuilder()(make_state([[0, 0, 1], [3, 0, 1]]))
     assert ps_of(g) == [(0, 0), (0, 1)]
 

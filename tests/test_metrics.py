@@ -1,5 +1,6 @@
 """Metrics on hand-computed cases (physgnn.metrics)."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -7,15 +8,9 @@ import pytest
 from torch.testing import assert_close
 
 from physgnn import metrics as M
-from physgnn.physics.scene import (
-    GROUND,
-    STATIC,
-    WALL,
-    Effects,
-    Trajectory,
-    ground_plane,
-    make_plane,
-)
+from physgnn.metrics import checks
+from physgnn.physics.scene import GROUND, STATIC, WALL, Effects, ground_plane, make_plane
+from physgnn.physics.trajectory import Trajectory
 
 GROUND_ONLY = (ground_plane()[None], np.array([GROUND]))
 
@@ -45,7 +40,7 @@ def pen(pos, radius, planes=GROUND_ONLY, tol=0.0):
 @pytest.mark.parametrize("brute", [True, False])
 def test_two_spheres_overlapping_by_known_depth(monkeypatch, brute):
     if not brute:
-        monkeypatch.setattr(M, "_BRUTE_FORCE_MAX", 0)
+        monkeypatch.setattr(checks, "BRUTE_FORCE_MAX", 0)
     # r 1 and 0.5 at distance 1.2: depth 0.3, mean diameter 1.5 -> 0.2; third sphere alone.
     frame = [[0, 0, 10], [1.2, 0, 10], [50, 0, 10]]
     apart = [[0, 0, 10], [3.0, 0, 10], [50, 0, 10]]
@@ -106,7 +101,7 @@ def test_overlaps_neighbour_query_equals_brute_force(monkeypatch):
     pos = rng.uniform(0, 6, size=(3, 200, 3))
     radius = rng.uniform(0.2, 0.5, size=200)
     brute = pen(pos, radius)
-    monkeypatch.setattr(M, "_BRUTE_FORCE_MAX", 0)
+    monkeypatch.setattr(checks, "BRUTE_FORCE_MAX", 0)
     tree = pen(pos, radius)
     assert brute["pct_sphere"] > 0
     for key in M.PENETRATION_KEYS:
@@ -137,7 +132,7 @@ def test_zero_initial_energy_divides_by_sum_m_g_r_or_errors():
 
 def test_resting_sphere_has_zero_energy_and_defined_gain():
     traj = traj_of(np.full((5, 1, 3), [0, 0, 0.5]), [0.5])
-    out = M.trajectory_metrics(M.trajectory_dict(traj))
+    out = M.trajectory_metrics(traj)
     assert out["energy_gain"] == 0.0
 
 
@@ -163,7 +158,7 @@ def test_chamfer_of_shifted_and_permuted_sets(monkeypatch):
     rng = np.random.default_rng(1)
     a, b = rng.normal(size=(4, 150, 3)), rng.normal(size=(4, 120, 3))
     brute = M.chamfer(a, b)
-    monkeypatch.setattr(M, "_BRUTE_FORCE_MAX", 0)
+    monkeypatch.setattr(checks, "BRUTE_FORCE_MAX", 0)
     assert M.chamfer(a, b) == pytest.approx(brute, rel=1e-12)
 
 
@@ -223,7 +218,7 @@ def test_trajectory_metrics_of_ground_truth_alone_and_against_a_prediction():
     pos[:, 0] = np.stack([np.zeros(30), np.zeros(30), 20 - 0.5 * t], -1)
     pos[:, 1] = [5, 0, 0.5]
     traj = traj_of(pos, [0.5, 0.5], mass=[1.0, 2.0])
-    truth = M.trajectory_dict(traj)
+    truth = traj
     alone = M.trajectory_metrics(truth)
     assert alone["mse"] is None and alone["chamfer"] is None and alone["mse20"] is None
     assert alone["momentum_drift"] is None  # gravity acts
@@ -233,30 +228,29 @@ def test_trajectory_metrics_of_ground_truth_alone_and_against_a_prediction():
     e0 = 1 * 9.81 * 19.5
     assert alone["energy_gain"] == pytest.approx((12.5 - 9.81 * 0.5) / e0)
 
-    pred = dict(truth, start=2)
-    pred["pos"] = pos[:25].copy()  # truncated (diverged), frames 1.. shifted by 0.1 m
-    pred["pos"][1:, :, 1] += 0.1
-    pred["vel"] = truth["vel"][:25]
-    pred["diverged_at"] = 25
+    pred = dataclasses.replace(truth, start=2, vel=truth.vel[:25], diverged_at=25)
+    pred.pos = pos[:25].copy()  # truncated (diverged), frames 1.. shifted by 0.1 m
+    pred.pos[1:, :, 1] += 0.1
     out = M.trajectory_metrics(pred, traj)
     assert out["mse"] == pytest.approx(0.01 * 24 / 25) and out["mse20"] == pytest.approx(0.01)
     assert out["chamfer"] == pytest.approx(0.02 * 24 / 25)
     assert out["rotation_error"] == 0.0 and out["rest_drift"] == pytest.approx(0.2)
     assert out["diverged_at"] == 25 and out["n_frames"] == 25
-    pred["pos"], pred["vel"] = pos[:22], truth["vel"][:22]
+    pred.pos, pred.vel = pos[:22], truth.vel[:22]
     assert M.trajectory_metrics(pred, traj)["mse20"] is None  # frame 22 never reached
 
 
 def test_momentum_drift_only_without_external_force():
     pos = np.zeros((3, 1, 3)) + [0, 0, 5]
     traj = traj_of(pos, [0.5], effects=Effects(gravity=False, surface_contact=False))
-    assert M.trajectory_metrics(M.trajectory_dict(traj))["momentum_drift"] == 0.0
+    assert M.trajectory_metrics(traj)["momentum_drift"] == 0.0
 
 
 def test_trajectory_metrics_errors():
     traj = traj_of(np.ones((3, 1, 3)), [0.5])
-    pred = M.trajectory_dict(traj)
+    pred = traj
+    no_scene = dict(radius=None, mass=None, planes=None, plane_kind=None, effects=None)
     with pytest.raises(M.MetricError, match="scene arrays"):
-        M.trajectory_metrics({"pos": pred["pos"], "vel": pred["vel"]})
+        M.trajectory_metrics(dataclasses.replace(pred, **no_scene))
     with pytest.raises(M.MetricError, match="no 'vel'"):
-        M.trajectory_metrics({"pos": pred["pos"]}, traj)
+        M.trajectory_metrics(dataclasses.replace(pred, vel=None), traj)

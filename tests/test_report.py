@@ -6,7 +6,10 @@ import math
 import pytest
 
 from physgnn.report import document as report
-from physgnn.report.document import COLUMNS, config_label, read_csv, stat, sweep_axis, write_csv
+from physgnn.report import format as report_format
+from physgnn.report import table as report_table
+from physgnn.report.sweeps import sweep_axis
+from physgnn.report.table import COLUMNS, config_label, read_csv, stat, write_csv
 
 SCENES = ("ood_cubes", "ood_cubes_ramps", "ood_resting_hit", "ood_spaced_drop")
 
@@ -142,7 +145,7 @@ def test_report_from_fake_rows_has_every_section(tmp_path):
 
 
 def test_report_without_learned_runs_says_so(tmp_path):
-    rows = [r for r in fake_rows() if r["experiment"] in report.REFERENCES]
+    rows = [r for r in fake_rows() if r["experiment"] in report_table.REFERENCES]
     write_csv(tmp_path / "metrics.csv", rows)
     text = report.write_report(tmp_path).read_text()
     assert "No trained runs were evaluated." in text
@@ -164,7 +167,7 @@ def test_report_without_learned_runs_says_so(tmp_path):
     ],
 )
 def test_fmt(value, text):
-    assert report.fmt(value) == text
+    assert report_format.fmt(value) == text
 
 
 def test_report_links_the_pareto_figures_when_the_bench_ran(tmp_path):

@@ -9,7 +9,9 @@ from torch import nn
 
 from physgnn import metrics as M
 from physgnn.data.state import TrajectoryFrames
-from physgnn.physics.scene import Effects, Trajectory, ground_plane
+from physgnn.models.profiling import StepTimer
+from physgnn.physics.scene import Effects, ground_plane
+from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import RolloutError, rollout
 
 DT = 0.1
@@ -106,7 +108,7 @@ def test_exploding_simulator_stops_at_the_step_computed_by_hand():
     assert np.isfinite(res_boom.pos).all()
     assert res_rest.diverged_at is None and res_rest.n_frames == 20  # the other scene goes on
     np.testing.assert_allclose(res_boom.pos[:, 0, 0], [0, 1, 11, 111, 1111], rtol=1e-6)
-    out = M.trajectory_metrics(res_boom.as_dict(), boom)
+    out = M.trajectory_metrics(res_boom, boom)
     assert out["diverged_at"] == 5 and out["n_frames"] == 5 and np.isfinite(out["mse"])
     # The bound relative to the truth: 10 × max(1 m/s, 1) = 10 m/s, exceeded by 100 m/s.
     (res,) = rollout(Exploding(), [boom], speed_factor=10.0)
@@ -136,8 +138,8 @@ def test_replayed_truth_has_the_metrics_of_the_truth():
     traj.pos = pos.astype(np.float32)
     H = 2
     (res,) = rollout(Replay(traj, H), [traj])
-    direct = M.trajectory_metrics(M.trajectory_dict(traj, "finite"), traj)
-    through = M.trajectory_metrics(res.as_dict(), traj)
+    direct = M.trajectory_metrics(traj.with_finite_velocities(), traj)
+    through = M.trajectory_metrics(res, traj)
     assert direct["pct_sphere"] > 0 and direct["pct_ground"] > 0 and direct["energy_gain"] > 0
     assert through["mse"] < 1e-10 and through["rotation_error"] == 0.0
     for key in ("energy_gain", *M.PENETRATION_KEYS):
@@ -157,17 +159,18 @@ def test_batched_scenes_of_different_lengths_and_longer_than_the_truth():
 
 
 def test_timings_split_graph_network_integration():
+    timer = StepTimer()
+
     class Timed(Constant):
         def forward(self, state):
-            self.timings["graph"] += 0.25  # cumulative, as LearnedSimulator's
+            timer.graph += 0.25  # graph seconds, as a watched graph builder adds them
             return super().forward(state)
 
     sim = Timed([0.0, 0, 0], [0.0, 0, 0], H=0)
-    sim.timings = {"graph": 0.0, "network": 0.0}
-    (res,) = rollout(sim, [linear_traj([[0, 0, 5]], [[0.0, 0, 0]], frames=5)])
-    assert res.timings["steps"] == 4 and res.timings["graph"] == pytest.approx(1.0)
-    assert res.timings["network"] < 0  # the fake graph seconds exceed the real call time
-    assert res.fps == pytest.approx(4 / res.timings["total"])
+    (res,) = rollout(sim, [linear_traj([[0, 0, 5]], [[0.0, 0, 0]], frames=5)], timer=timer)
+    assert timer.timings["steps"] == 4 and timer.timings["graph"] == pytest.approx(1.0)
+    assert timer.timings["network"] < 0  # the fake graph seconds exceed the real call time
+    assert res.fps == pytest.approx(4 / timer.timings["total"])
 
 
 def test_bad_input_is_one_clear_error():

@@ -9,7 +9,8 @@ from physgnn.data.state import SceneState, TrajectoryFrames
 from physgnn.graph.builder import GraphBuilder
 from physgnn.models.sleeping import SleepingSimulator, subset_state
 from physgnn.physics import quaternion as Q
-from physgnn.physics.scene import Effects, Material, Trajectory, ground_plane
+from physgnn.physics.scene import Effects, Material, ground_plane
+from physgnn.physics.trajectory import Trajectory
 
 
 class Billiard:

@@ -1,4 +1,4 @@
-"""Stability suite (issue 6): hard scenes, their measurements, engine rest, float32 vs float64,
+"""Stability suite: hard scenes, their measurements, engine rest, float32 vs float64,
 gradient clipping and one-line configuration errors. Slow cases: test_stability_slow.py."""
 
 from __future__ import annotations
@@ -16,13 +16,17 @@ from simdata import STATS, trajectory
 from torch import nn
 
 import physgnn.evaluation.stability as S
+from physgnn import metrics
 from physgnn import train as train_command
+from physgnn.groundtruth import hard
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene, pile_positions
 from physgnn.metrics import MetricError
 from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
 from physgnn.models.learned import LearnedSimulator
-from physgnn.physics.scene import WALL, Material, Trajectory, ground_plane, make_plane
+from physgnn.physics.scene import WALL, Material, ground_plane, make_plane
+from physgnn.physics.trajectory import Trajectory
+from physgnn.report import stability as stability_report
 from physgnn.rollout import rollout
 from physgnn.training.train import build
 
@@ -111,18 +115,18 @@ def test_max_penetration_by_hand():
             [[0.0, 0, 0.3], [5.0, 0, 2], [1.0, 0, 5]],  # 0.2 m into the ground; nothing else
         ]
     )
-    out = S.max_penetration(pos, np.full(3, R), planes, kinds)
+    out = metrics.max_penetration(pos, np.full(3, R), planes, kinds)
     assert out == pytest.approx(
         {"max_pen_sphere": 0.2, "max_pen_ground": 0.2, "max_pen_static": 0.1}
     )
-    apart = S.max_penetration(pos[:, :1] + [0, 0, 3], np.full(1, R), planes, kinds)
+    apart = metrics.max_penetration(pos[:, :1] + [0, 0, 3], np.full(1, R), planes, kinds)
     assert apart == {"max_pen_sphere": 0.0, "max_pen_ground": 0.0, "max_pen_static": 0.0}
     bad = pos.copy()
     bad[1, 2, 0] = np.nan
     with pytest.raises(MetricError, match="NaN or inf"):
-        S.max_penetration(bad, np.full(3, R), planes, kinds)
+        metrics.max_penetration(bad, np.full(3, R), planes, kinds)
     with pytest.raises(MetricError, match=r"need pos \[T, N, 3\]"):
-        S.max_penetration(pos[:, :0], np.zeros(0), planes, kinds)
+        metrics.max_penetration(pos[:, :0], np.zeros(0), planes, kinds)
 
 
 def test_static_model_keeps_the_layer_at_rest_exactly():
@@ -156,7 +160,7 @@ def test_exploding_model_reports_steps_to_divergence_and_finite_metrics():
     (row,) = S.rollout_rows("x", "x", Exploding(), [resting_layer()], "hard")
     assert row["diverged_at"] == 5 and row["steps_to_divergence"] == 5 and row["n_frames"] == 5
     assert all(np.isfinite(row[k]) for k in ("max_pen_sphere", "energy_gain", "rest_drift"))
-    text = S.section([row])
+    text = stability_report.section([row])
     assert "⚠ after 5 steps (frame 5)" in text
 
 
@@ -165,11 +169,13 @@ def test_truth_row_of_a_resting_layer_is_zero_and_csv_round_trips(tmp_path):
     assert truth["rest_drift"] == 0.0 and truth["energy_gain"] == 0.0
     assert truth["max_pen_sphere"] == 0.0  # touching exactly is not an intersection
     (x,) = S.rollout_rows("x", "x", Exploding(), [resting_layer()], "hard")
-    path = S.write_csv(tmp_path / "stability.csv", [truth, x])
-    back = S.read_csv(path)
+    path = stability_report.write_csv(tmp_path / "stability.csv", [truth, x])
+    back = stability_report.read_csv(path)
     for want, got in zip([truth, x], back, strict=True):
-        assert {k: got[k] for k in S.COLUMNS} == pytest.approx({k: want[k] for k in S.COLUMNS})
-    assert "No stability measurements" in S.section([])
+        assert {k: got[k] for k in stability_report.COLUMNS} == pytest.approx(
+            {k: want[k] for k in stability_report.COLUMNS}
+        )
+    assert "No stability measurements" in stability_report.section([])
 
 
 # ---------------------------------------------------------------- hard split cache
@@ -183,7 +189,7 @@ def tiny_hard() -> dict:
 
 
 def test_hard_split_is_built_once_then_read_from_the_cache(tmp_path, monkeypatch):
-    first = S.hard_split(tmp_path, tiny_hard())
+    first = hard.hard_split(tmp_path, tiny_hard())
     assert [t.name for t in first] == ["resting_pile", "drop_1000"]
     assert [t.n_frames for t in first] == [5, 6] and first[0].attrs["scene"] == "resting_pile"
 
@@ -191,16 +197,16 @@ def test_hard_split_is_built_once_then_read_from_the_cache(tmp_path, monkeypatch
         raise AssertionError("simulated again")
 
     monkeypatch.setattr("physgnn.groundtruth.engine.simulate", no_engine)
-    again = S.hard_split(tmp_path, tiny_hard())
+    again = hard.hard_split(tmp_path, tiny_hard())
     for a, b in zip(first, again, strict=True):
         np.testing.assert_array_equal(a.pos, b.pos)
     changed = tiny_hard()
     changed["drop_1000"]["height"] = 4.0
     with pytest.raises(AssertionError, match="simulated again"):  # another config: rebuilt
-        S.hard_split(tmp_path, changed)
-    (tmp_path / S.HARD_FILE).write_bytes(b"truncated")
+        hard.hard_split(tmp_path, changed)
+    (tmp_path / hard.HARD_FILE).write_bytes(b"truncated")
     with pytest.raises(AssertionError, match="simulated again"):  # a corrupt cache: rebuilt
-        S.hard_split(tmp_path, tiny_hard())
+        hard.hard_split(tmp_path, tiny_hard())
 
 
 # ---------------------------------------------------------------- float32 against float64
@@ -366,8 +372,8 @@ def fake_eval(tmp_path, monkeypatch, *overrides, entry=None):
 
 def test_eval_reports_stability_of_every_run_on_hard_and_ood_scenes(tmp_path, monkeypatch):
     text, report_dir, outputs = fake_eval(tmp_path, monkeypatch)
-    assert (outputs / "data" / "hard" / S.HARD_FILE).exists()  # cached for the next eval
-    rows = S.read_csv(report_dir / "stability.csv")
+    assert (outputs / "data" / "hard" / hard.HARD_FILE).exists()  # cached for the next eval
+    rows = stability_report.read_csv(report_dir / "stability.csv")
     scenes = ["drop_1000", "layer", "resting_pile", "tight_pack"]
     for run in ("ground_truth", "runs/falling/t0", "runs/exploding/t0"):
         assert sorted(r["scene"] for r in rows if r["run"] == run) == scenes

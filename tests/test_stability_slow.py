@@ -15,6 +15,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 import physgnn.evaluation.stability as S
+from physgnn.groundtruth import hard
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.training.runs import load_run
@@ -83,7 +84,7 @@ def test_trained_model_on_the_resting_pile_reports_a_finite_drift(
     (run_dir / ".hydra").mkdir()
     (run_dir / ".hydra" / "config.yaml").write_text(OmegaConf.to_yaml(cfg))
     simulator, _, _ = load_run(run_dir)
-    (pile,) = S.hard_split(tmp_path / "hard", {"resting_pile": scene_cfg("resting_pile")})
+    (pile,) = hard.hard_split(tmp_path / "hard", {"resting_pile": scene_cfg("resting_pile")})
     assert pile.n_frames == 2000 and pile.n_spheres == 41
     (row,) = S.rollout_rows("tiny", "baseline", simulator, [pile], "hard")
     assert row["n_resting"] == 41  # the ground truth rests

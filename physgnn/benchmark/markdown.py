@@ -1,14 +1,12 @@
-"""``bench.md``: the tables of ``make bench`` and the speed targets of issue 5 (met or not)."""
+"""``bench.md``: the tables of ``make bench`` and its speed targets (met or not)."""
 
 from __future__ import annotations
 
 import math
 import os
 
-from physgnn.report.document import fmt, md_table
-
-BASELINE = "baseline"
-TARGET_FPS, TARGET_SHARE, TARGET_GRAPH, TARGET_LINEAR = 250.0, 0.60, 0.25, 1.5
+from physgnn.benchmark.targets import targets
+from physgnn.report.format import fmt, md_table
 
 
 def _f(x, digits: int = 3) -> str:
@@ -215,82 +213,6 @@ def batched_table(extra: dict) -> str:
     )
 
 
-def _row(extra: dict, n: int) -> dict | None:
-    rows = [r for r in extra["learned"] if r["config"] == BASELINE and r["n_spheres"] == n]
-    return rows[0] if rows else None
-
-
-def _short(factor: float) -> str:
-    """ " (needs ×k)" when a measured value is ``factor`` short of its target (> 1)."""
-    return f" (needs ×{factor:.1f})" if factor > 1 else ""
-
-
-def targets(result: dict, extra: dict, n_ref: int = 154) -> list[list[str]]:
-    """``[target, measured, met]`` rows for issue 5 item 3 (baseline configuration)."""
-    rows = []
-    base = sorted(
-        (r for r in extra["learned"] if r["config"] == BASELINE), key=lambda r: r["n_spheres"]
-    )
-    ref = _row(extra, n_ref) or (base[0] if base else None)
-    if ref is None:
-        return [["baseline not measured", "–", "–"]]
-    n = ref["n_spheres"]
-    ok = lambda b: "met" if b else "not met"  # noqa: E731
-    rows.append(
-        [
-            f"≥ {TARGET_FPS:.0f} FPS at {n} spheres",
-            f"{ref['fps']:.1f} FPS" + _short(TARGET_FPS / ref["fps"]),
-            ok(ref["fps"] >= TARGET_FPS),
-        ]
-    )
-    shares = ", ".join(f"{r['n_spheres']}: {r['share_of_matmul']:.0%}" for r in base)
-    rows.append(
-        [
-            f"network ≥ {TARGET_SHARE:.0%} of the matmul rate",
-            shares,
-            ok(ref["share_of_matmul"] >= TARGET_SHARE)
-            + f" (at {n})"
-            + _short(TARGET_SHARE / max(ref["share_of_matmul"], 1e-9)),
-        ]
-    )
-    graph = ", ".join(f"{r['n_spheres']}: {r['graph_ms'] / r['total_ms']:.0%}" for r in base)
-    rows.append(
-        [
-            f"graph ≤ {TARGET_GRAPH:.0%} of a frame (judged from {n} spheres up)",
-            graph,
-            ok(
-                all(
-                    r["graph_ms"] <= TARGET_GRAPH * r["total_ms"]
-                    for r in base
-                    if r["n_spheres"] >= n
-                )
-            ),
-        ]
-    )
-    per = {r["n_spheres"]: r["total_ms"] / r["n_spheres"] for r in base}
-    big = [k for k in per if k >= 1000] or list(per)
-    lo, hi = min(big), max(big)
-    ratio = per[hi] / per[lo]
-    rows.append(
-        [
-            f"cost ~ linear: (ms/sphere at {hi}) / (ms/sphere at {lo}) ≤ {TARGET_LINEAR}",
-            f"{ratio:.2f}",
-            ok(ratio <= TARGET_LINEAR),
-        ]
-    )
-    pyb = {r["n_spheres"]: r["fps"] for r in result["pybullet"] if r["substeps"] == 10}
-    big = [r for r in base if r["n_spheres"] >= 300 and r["n_spheres"] in pyb]
-    text = ", ".join(f"{r['n_spheres']}: {r['fps']:.1f} vs {pyb[r['n_spheres']]:.1f}" for r in big)
-    rows.append(
-        [
-            "≥ pybullet FPS (10 substeps) from 300 spheres up",
-            text or "–",
-            ok(bool(big) and all(r["fps"] >= pyb[r["n_spheres"]] for r in big)),
-        ]
-    )
-    return rows
-
-
 def write_markdown(result: dict, extra: dict) -> str:
     """The whole ``bench.md`` text."""
     s = extra.get("settings", {})
@@ -306,7 +228,7 @@ def write_markdown(result: dict, extra: dict) -> str:
         + ".",
         "## Machine",
         machine_table(extra),
-        "## Targets (issue 5, baseline M=5 H=2 vi h=128)",
+        "## Targets (baseline M=5 H=2 vi h=128)",
         md_table(["target", "measured", "status"], targets(result, extra)),
         "## Learned simulator per configuration and size",
         "ms/frame = graph + network (incl. normalisation) + integration; share of matmul = "
@@ -324,7 +246,7 @@ def write_markdown(result: dict, extra: dict) -> str:
         accuracy_table(extra),
         "## Training throughput (baseline, Lightning, noise on)",
         training_table(extra),
-        "## Cost follows activity (issue 7)",
+        "## Cost follows activity",
         activity_table(extra),
         "## Speed work in the measured code",
         "\n".join(f"- {note}" for note in s.get("notes", [])) or "–",

@@ -19,7 +19,8 @@ import torch
 from physgnn import __version__
 from physgnn.errors import PhysgnnError
 from physgnn.physics.kinematics import finite_difference_velocities
-from physgnn.physics.scene import PLANE_DIM, Effects, SceneError, Trajectory
+from physgnn.physics.scene import PLANE_DIM, Effects, SceneError
+from physgnn.physics.trajectory import Trajectory
 
 SCHEMA_VERSION = 1
 FRAME_FIELDS = ("pos", "quat", "vel", "angvel")

@@ -14,7 +14,8 @@ import torch
 from torch_geometric.data import Data
 
 from physgnn.physics.kinematics import finite_difference_velocities, history
-from physgnn.physics.scene import EFFECT_NAMES, Effects, Trajectory
+from physgnn.physics.scene import EFFECT_NAMES, Effects
+from physgnn.physics.trajectory import Trajectory
 
 
 class SceneState(Data):
@@ -31,8 +32,16 @@ class SceneState(Data):
     @property
     def scene_dt(self) -> torch.Tensor:
         """Frame interval of every sphere's scene, ``[N]``."""
-        batch = self.batch if getattr(self, "batch", None) is not None else None
-        return self.dt[batch] if batch is not None else self.dt.expand(self.pos.shape[0])
+        return self.dt[scene_of_sphere(self)]
+
+
+def scene_of_sphere(state) -> torch.Tensor:
+    """``[N]`` long: the scene of every sphere of a state, a batch (its ``batch``) or a single
+    scene (zeros)."""
+    batch = getattr(state, "batch", None)
+    if batch is None:
+        return torch.zeros(state.pos.shape[0], dtype=torch.long, device=state.pos.device)
+    return batch.long()
 
 
 def effects_tensor(effects: Effects) -> torch.Tensor:

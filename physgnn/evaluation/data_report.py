@@ -12,7 +12,6 @@ table beside the report's Blender figures and writes ``<dataset>/report.json``:
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -20,9 +19,12 @@ from omegaconf import DictConfig
 from rich.console import Console
 from rich.table import Table
 
+from physgnn.data.dataset import read_split
 from physgnn.errors import PhysgnnError
+from physgnn.files import write_json
+from physgnn.metrics import MetricError, trajectory_metrics
+from physgnn.physics.trajectory import Trajectory
 
-# torch, h5py and scipy are imported when needed: a bad command line fails fast.
 KEYS = (
     "energy_gain",
     "depth_sphere",
@@ -60,13 +62,20 @@ class DataReportError(PhysgnnError, ValueError):
 def split_summary(trajectories: list, tol: float = 0.0, velocities: str = "engine") -> dict:
     """``{metric: {"mean": float, "std": float}}`` over the trajectories of one split
     (energy from the engine's or the finite-difference ``velocities``)."""
-    from physgnn.metrics import trajectory_dict, trajectory_metrics
-
     if not trajectories:
         raise DataReportError("split has no trajectory")
-    rows = [trajectory_metrics(trajectory_dict(t, velocities), None, tol=tol) for t in trajectories]
+    rows = [trajectory_metrics(_velocities(t, velocities), tol=tol) for t in trajectories]
     values = {k: np.array([row[k] for row in rows], dtype=np.float64) for k in KEYS}
     return {k: {"mean": float(v.mean()), "std": float(v.std())} for k, v in values.items()}
+
+
+def _velocities(traj: Trajectory, velocities: str) -> Trajectory:
+    """``traj`` with the engine's velocities or, ``"finite"``, finite-difference ones."""
+    if velocities == "engine":
+        return traj
+    if velocities == "finite":
+        return traj.with_finite_velocities()
+    raise MetricError(f"velocities must be 'engine' or 'finite', got {velocities!r}")
 
 
 def fmt(mean: float, std: float) -> str:
@@ -97,8 +106,6 @@ def data_report(cfg: DictConfig) -> dict:
     folder = Path(cfg.dataset)
     if not folder.is_dir():
         raise DataReportError(f"dataset folder {folder} not found: run `make data` first")
-    from physgnn.data.dataset import read_split
-
     summary, finite = {}, {}
     for split in cfg.splits:
         trajectories = read_split(folder / f"{split}.h5")
@@ -115,7 +122,6 @@ def data_report(cfg: DictConfig) -> dict:
         f"Energy from the engine's velocities. With finite-difference velocities, as a "
         f"rollout records them (the gain a perfect rollout would show): {gains}."
     )
-    out = folder / "report.json"
-    out.write_text(json.dumps(summary, indent=2) + "\n")
+    out = write_json(folder / "report.json", summary)
     print(f"wrote {out}")
     return summary

@@ -11,7 +11,6 @@ ms per frame. Writes ``<out>/sleep_study.json`` and prints a markdown table.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -19,10 +18,15 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn import metrics
+from physgnn.data.dataset import read_split
 from physgnn.errors import ConfigError
+from physgnn.evaluation.runs import dataset_of
+from physgnn.files import write_json
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
-from physgnn.physics.scene import Trajectory
+from physgnn.physics.trajectory import Trajectory
+from physgnn.rollout import rollout
+from physgnn.training.runs import load_run
 
 COLUMNS = ("scene", "sleeping", "rest_drift", "rest_drift_mean", "mse", "mse20", "chamfer",
            "frozen_pct", "ms_per_frame", "diverged_at")  # fmt: skip
@@ -44,12 +48,10 @@ def frozen_share(pos: np.ndarray, start: int) -> float:
 
 def compare(simulator, traj: Trajectory, sleep: dict) -> list[dict]:
     """Rows (``COLUMNS``) of ``traj`` rolled out with sleeping off, then on."""
-    from physgnn.rollout import rollout
-
     rows = []
     for on in (False, True):
         (res,) = rollout(simulator, [traj], sleeping=on, sleep=sleep)
-        m = metrics.trajectory_metrics(res.as_dict(), traj, horizon=20)
+        m = metrics.trajectory_metrics(res, traj, horizon=20)
         drift = metrics.drift_before_hit(res.pos, traj.pos, traj.radius, res.start)
         rows.append(dict(
             scene=traj.name, sleeping="on" if on else "off",
@@ -57,7 +59,7 @@ def compare(simulator, traj: Trajectory, sleep: dict) -> list[dict]:
             rest_drift_mean=float(drift.mean()) if drift.size else None,
             mse=m["mse"], mse20=m["mse20"], chamfer=m["chamfer"],
             frozen_pct=frozen_share(res.pos, res.start),
-            ms_per_frame=1000.0 * res.timings["total"] / max(res.timings["steps"], 1),
+            ms_per_frame=1000.0 / res.fps if res.fps else 0.0,
             diverged_at=res.diverged_at,
         ))  # fmt: skip
     return rows
@@ -74,10 +76,6 @@ def markdown(rows: list[dict]) -> str:
 
 def study(cfg: DictConfig) -> list[dict]:
     """Load ``cfg.run``, compare sleeping off/on on OOD (c) and the pile; write the JSON."""
-    from physgnn.data.dataset import read_split
-    from physgnn.evaluation.evaluate import dataset_of, truncate
-    from physgnn.training.runs import load_run
-
     if not cfg.run:
         raise ConfigError("pass run=PATH (a finished training run folder)")
     torch.set_num_threads(int(cfg.threads))
@@ -85,12 +83,11 @@ def study(cfg: DictConfig) -> list[dict]:
     dataset = Path(cfg.dataset) if cfg.dataset else dataset_of(run_cfg)
     scenes = [t for t in read_split(dataset / "ood.h5") if t.name == "ood_resting_hit"]
     if cfg.max_frames:
-        scenes = [truncate(t, cfg.max_frames) for t in scenes]
+        scenes = [t.truncated(cfg.max_frames) for t in scenes]
     scenes.append(resting_pile(cfg))
     sleep = OmegaConf.to_container(cfg.sleep)
     rows = [row for traj in scenes for row in compare(simulator, traj, sleep)]
     out = Path(cfg.out)
-    out.mkdir(parents=True, exist_ok=True)
     meta = {"run": str(cfg.run), "dataset": str(dataset), "sleep": sleep}
-    (out / "sleep_study.json").write_text(json.dumps({**meta, "rows": rows}, indent=2) + "\n")
+    write_json(out / "sleep_study.json", {**meta, "rows": rows})
     return rows

@@ -1,6 +1,6 @@
 """Sphere–sphere (pp) and surface–sphere (ps) edges with their features, rebuilt every step.
 
-Connectivity (SPEC "Graph"), with ``gap_ij = |p_i − p_j| − r_i − r_j`` and a per-sphere
+Connectivity, with ``gap_ij = |p_i − p_j| − r_i − r_j`` and a per-sphere
 motion allowance ``a_i``:
 
 - ``epsilon``: ``a_i = 0``
@@ -23,7 +23,9 @@ from dataclasses import dataclass
 
 import torch
 
+from physgnn.data.state import scene_of_sphere
 from physgnn.graph.neighbors import BACKENDS, radius_pairs
+from physgnn.physics.geometry import rectangle_distance
 from physgnn.physics.scene import EFFECT_NAMES, GROUND
 
 CONNECTIVITIES = ("epsilon", "vmax", "vi")
@@ -88,23 +90,33 @@ class GraphBuilder:
         self.backend = backend
 
     def __call__(self, state) -> Graph:
-        batch = _node_batch(state)
-        allowance = self._allowance(state, batch)
+        batch = scene_of_sphere(state)
+        allowance = self.allowance(state)
         pp_index, pp_attr = self._pp_edges(state, batch, allowance)
         ps_index, ps_attr = self._ps_edges(state, batch, allowance)
         return Graph(pp_index, pp_attr, ps_index, ps_attr)
 
-    def _allowance(self, state, batch: torch.Tensor) -> torch.Tensor:
-        """Motion allowance ``a_i`` of every sphere, float64 ``[N]``."""
-        n_scenes = state.dt.shape[0]
+    def allowance(self, state, moving: torch.Tensor | None = None) -> torch.Tensor:
+        """Motion allowance ``a_i`` of every sphere, float64 ``[N]``; ``moving [N]`` (bool):
+        only these spheres move, the others count with speed 0 (sleeping spheres)."""
+        batch = scene_of_sphere(state)
         speed = _velocity(state).to(torch.float64).norm(dim=-1)
-        dt = state.dt.to(torch.float64)[batch]
         if self.connectivity == "epsilon":
             return torch.zeros_like(speed)
+        if moving is not None:
+            speed = torch.where(moving, speed, 0.0)
         if self.connectivity == "vmax":
-            vmax = speed.new_zeros(n_scenes).scatter_reduce(0, batch, speed, "amax")
+            vmax = speed.new_zeros(state.dt.shape[0]).scatter_reduce(0, batch, speed, "amax")
             speed = vmax[batch]
-        return self.factor * speed * dt
+        return self.factor * speed * state.dt.to(torch.float64)[batch]
+
+    def pair_within_reach(self, state, i, j, allowance: torch.Tensor) -> torch.Tensor:
+        """``[P]`` bool: the pp rule ``gap_ij ≤ a_i + a_j + ε`` (same scene) for pairs
+        ``(i, j)``, float64."""
+        batch = scene_of_sphere(state)
+        p, r = state.pos.to(torch.float64), state.radius.to(torch.float64)
+        gap = (p[i] - p[j]).norm(dim=-1) - r[i] - r[j]
+        return (batch[i] == batch[j]) & (gap <= allowance[i] + allowance[j] + self.epsilon)
 
     def _pp_edges(self, state, batch, allowance) -> tuple[torch.Tensor, torch.Tensor]:
         pos = state.pos
@@ -116,10 +128,7 @@ class GraphBuilder:
         reach = 2 * float(radius[nodes].max()) + 2 * float(allowance[nodes].max()) + self.epsilon
         local = radius_pairs(pos[nodes], reach * (1 + 1e-9), batch[nodes], self.backend)
         src, dst = nodes[local[0]], nodes[local[1]]
-        p = pos.to(torch.float64)
-        dist = (p[dst] - p[src]).norm(dim=-1)
-        gap = dist - radius[src] - radius[dst]
-        keep = gap <= allowance[src] + allowance[dst] + self.epsilon
+        keep = self.pair_within_reach(state, src, dst, allowance)
         src, dst = src[keep], dst[keep]
         rel = pos[dst] - pos[src]
         attr = torch.cat([rel, torch.linalg.vector_norm(rel, dim=-1, keepdim=True)], dim=-1)
@@ -153,7 +162,7 @@ class GraphBuilder:
         offset = torch.arange(plane.numel(), device=device)
         offset = offset - torch.repeat_interleave(torch.cumsum(per_plane, 0) - per_plane, per_plane)
         sphere = order[first[plane_batch[plane]] + offset]
-        dist = _rectangle_distance(state.pos[sphere], planes[plane])
+        dist = rectangle_distance(state.pos[sphere], planes[plane])
         radius = state.radius.to(torch.float64)[sphere]
         keep = dist - radius <= allowance[sphere] + self.epsilon
         return torch.stack([plane[keep], sphere[keep]])
@@ -162,13 +171,6 @@ class GraphBuilder:
 def build_graph(state, cfg: Mapping) -> Graph:
     """``GraphBuilder(**cfg)(state)``: cfg holds the builder's arguments (config keys)."""
     return GraphBuilder(**dict(cfg))(state)
-
-
-def _node_batch(state) -> torch.Tensor:
-    batch = getattr(state, "batch", None)
-    if batch is None:
-        return torch.zeros(state.pos.shape[0], dtype=torch.long, device=state.pos.device)
-    return batch.long()
 
 
 def _velocity(state) -> torch.Tensor:
@@ -197,23 +199,6 @@ def _ground_edges(state, batch) -> torch.Tensor:
     ground_of = torch.full_like(per_scene, -1)
     ground_of[scene_of_ground] = grounds
     return torch.stack([ground_of[batch[spheres]], spheres])
-
-
-def _rectangle_distance(pos: torch.Tensor, planes: torch.Tensor) -> torch.Tensor:
-    """Distance from points to the closest point of bounded planes, float64.
-
-    pos ``[F, 3]``, planes ``[F, 11]`` (centre, normal, reference direction, half lengths
-    along the reference direction and along normal × reference) → ``[F]``.
-    """
-    p, planes = pos.to(torch.float64), planes.to(torch.float64)
-    centre, normal, ref = planes[:, 0:3], planes[:, 3:6], planes[:, 6:9]
-    other = torch.linalg.cross(normal, ref)
-    rel = p - centre
-    u, w = (rel * ref).sum(-1), (rel * other).sum(-1)
-    h = (rel * normal).sum(-1)
-    du = u - torch.clamp(u, -planes[:, 9], planes[:, 9])
-    dw = w - torch.clamp(w, -planes[:, 10], planes[:, 10])
-    return torch.sqrt(du * du + dw * dw + h * h)
 
 
 def _ps_attr(state, index: torch.Tensor) -> torch.Tensor:

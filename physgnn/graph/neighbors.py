@@ -10,6 +10,9 @@ all backends:
 
 Backends: ``"torch"`` (uniform cell grid, CPU and CUDA), ``"kdtree"`` (scipy cKDTree, CPU),
 ``"cluster"`` (``torch_cluster.radius_graph``, optional) and ``"auto"``.
+
+:class:`BallIndex` answers the other question, asked again and again of one set of points:
+which of them lie within a per-query distance of these other points (candidates only).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import math
 
 import numpy as np
 import torch
+from scipy.spatial import cKDTree
 
 BACKENDS = ("auto", "torch", "kdtree", "cluster")
 
@@ -172,8 +176,6 @@ def _compress(v: torch.Tensor) -> torch.Tensor:
 
 def _kdtree_candidates(pos, batch, r) -> tuple[torch.Tensor, torch.Tensor]:
     """Candidate pairs from one cKDTree in float64, scenes shifted apart along x."""
-    from scipy.spatial import cKDTree
-
     p = pos.detach().to("cpu", torch.float64).numpy()
     b = batch.detach().cpu().numpy()
     p = p - p.min(axis=0)
@@ -206,3 +208,44 @@ def _cluster_candidates(pos, batch, r) -> tuple[torch.Tensor, torch.Tensor]:
         p[order], reach, batch[order], loop=False, max_num_neighbors=pos.shape[0]
     )
     return order[edge[0]], order[edge[1]]
+
+
+# --- a k-d tree kept over one set of points -------------------------------------------------
+
+
+class BallIndex:
+    """A cKDTree over points of a batch of scenes, for repeated queries: which of them lie
+    within ``search_q`` of query point ``q`` (float64, on the CPU).
+
+    The scene id times ``span`` is a 4th coordinate, so the tree seldom proposes pairs across
+    scenes; the answer is a superset of the same-scene pairs (any ``span``): the caller
+    applies the exact rule.
+    """
+
+    def __init__(self, pos: torch.Tensor, batch: torch.Tensor, span: float):
+        self.span = float(span)
+        self.tree = cKDTree(self._points(pos, batch))
+
+    def _points(self, pos: torch.Tensor, batch: torch.Tensor) -> np.ndarray:
+        p = pos.detach().to("cpu", torch.float64).numpy()
+        b = batch.detach().cpu().numpy().astype(np.float64)
+        return np.concatenate([p, (b * self.span)[:, None]], axis=1)
+
+    def near(
+        self, pos: torch.Tensor, batch: torch.Tensor, search: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(query row [P], indexed point [P])`` with centres at most ``search [Q]`` apart,
+        on ``pos.device``."""
+        radii = search.detach().to("cpu", torch.float64).numpy()
+        hits = self.tree.query_ball_point(self._points(pos, batch), radii * (1 + 1e-9) + 1e-12)
+        counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=len(hits))
+        rows = np.repeat(np.arange(len(hits)), counts)
+        cols = np.concatenate([np.asarray(h, dtype=np.int64) for h in hits]) if counts.sum() else []
+        as_long = lambda a: torch.as_tensor(np.asarray(a, np.int64), device=pos.device)  # noqa: E731
+        return as_long(rows), as_long(cols)
+
+
+def extent_span(pos: torch.Tensor, margin: float = 0.0) -> float:
+    """A ``span`` for :class:`BallIndex`: twice the extent of ``pos`` plus ``margin`` and 1 km."""
+    p = pos.detach().to("cpu", torch.float64)
+    return 2.0 * float((p.max(0).values - p.min(0).values).max()) + margin + 1e3

@@ -26,7 +26,8 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from physgnn.physics import quaternion as Q
-from physgnn.physics.scene import GROUND, Scene, SceneError, Trajectory
+from physgnn.physics.scene import GROUND, Scene, SceneError
+from physgnn.physics.trajectory import Trajectory
 
 
 def _import_pybullet_quietly():

@@ -21,7 +21,8 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from physgnn.data.dataset import compute_stats, write_split, write_stats
 from physgnn.groundtruth.engine import EngineSettings, simulate
 from physgnn.groundtruth.families import build_scene
-from physgnn.physics.scene import SceneError, Trajectory
+from physgnn.physics.scene import SceneError
+from physgnn.physics.trajectory import Trajectory
 
 SPLITS = ("train", "val", "test", "ood")
 FILES = tuple(f"{s}.h5" for s in SPLITS) + ("stats.json",)

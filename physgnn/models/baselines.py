@@ -12,17 +12,10 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from physgnn.data.state import scene_of_sphere
 from physgnn.physics.scene import EFFECT_NAMES, GRAVITY
 
 _GRAVITY = EFFECT_NAMES.index("gravity")
-
-
-def _scene_of_sphere(state) -> torch.Tensor:
-    """``[N]`` scene index of every sphere (zeros for an unbatched state)."""
-    batch = getattr(state, "batch", None)
-    if batch is None:
-        return torch.zeros(state.pos.shape[0], dtype=torch.long, device=state.pos.device)
-    return batch
 
 
 class StaticSimulator(nn.Module):
@@ -44,7 +37,7 @@ class GravityOnlySimulator(nn.Module):
         self.gravity = tuple(float(x) for x in gravity)
 
     def forward(self, state) -> tuple[torch.Tensor, torch.Tensor]:
-        on = state.effects[_scene_of_sphere(state), _GRAVITY].to(state.pos.dtype)  # [N]
+        on = state.effects[scene_of_sphere(state), _GRAVITY].to(state.pos.dtype)  # [N]
         g = torch.tensor(self.gravity, dtype=state.pos.dtype, device=state.pos.device)
         vel_next = state.vel[:, 0] + (on * state.scene_dt)[:, None] * g
         return vel_next, state.angvel[:, 0].clone()

@@ -16,11 +16,10 @@ learns to undo the noise.
 
 from __future__ import annotations
 
-import time
-
 import torch
 from torch import nn
 
+from physgnn.data.state import scene_of_sphere
 from physgnn.errors import PhysgnnError
 from physgnn.graph.builder import GraphBuilder
 from physgnn.nn.epd import EncodeProcessDecode
@@ -106,7 +105,6 @@ class LearnedSimulator(nn.Module):
             num_materials=num_materials,
             material_dim=material_dim,
         )
-        self.timings = {"graph": 0.0, "network": 0.0}
 
     @property
     def node_in(self) -> int:
@@ -121,9 +119,6 @@ class LearnedSimulator(nn.Module):
                 part: state_dict[f"{prefix}{key}_{part}"].tolist() for part in ("mean", "std")
             }
         return stats
-
-    def reset_timings(self) -> None:
-        self.timings = {"graph": 0.0, "network": 0.0}
 
     # ----- features ---------------------------------------------------------------------------
     def node_features(self, state) -> torch.Tensor:
@@ -152,31 +147,17 @@ class LearnedSimulator(nn.Module):
 
     def rotating(self, state) -> torch.Tensor:
         """``[N]`` bool: spheres whose scene has the rotation effect on."""
-        rot = state.effects[:, ROTATION]
-        batch = getattr(state, "batch", None)
-        if batch is None:
-            return rot.expand(state.pos.shape[0])
-        return rot[batch]
+        return state.effects[scene_of_sphere(state), ROTATION]
 
     # ----- prediction -------------------------------------------------------------------------
-    def _clock(self, device: torch.device) -> float:
-        if device.type == "cuda" and not self.training:
-            torch.cuda.synchronize(device)
-        return time.perf_counter()
-
     def normalized_prediction(self, state):
         """Network output ``[N, 6]`` (normalised Δv, Δω) and the graph it was computed on."""
-        t0 = self._clock(state.pos.device)
         graph = self.graph_builder(state)
-        t1 = self._clock(state.pos.device)
         pp_attr, ps_attr = self.edge_features(graph)
         material = state.material if self.num_materials > 0 else None
         pred = self.network(
             self.node_features(state), graph.pp_index, pp_attr, graph.ps_index, ps_attr, material
         )
-        t2 = self._clock(state.pos.device)
-        self.timings["graph"] += t1 - t0
-        self.timings["network"] += t2 - t1
         return pred, graph
 
     def normalized_target(self, state) -> torch.Tensor:

@@ -31,10 +31,11 @@ from __future__ import annotations
 import copy
 import math
 
-import numpy as np
 import torch
 
-from physgnn.graph.neighbors import radius_pairs
+from physgnn.data.state import scene_of_sphere
+from physgnn.graph.builder import GraphBuilder
+from physgnn.graph.neighbors import BallIndex, extent_span, radius_pairs
 
 # Per-sphere fields of a SceneState (first dimension N); the rest are per plane or per scene.
 NODE_KEYS = (
@@ -168,7 +169,7 @@ class SleepingSimulator:
             sleepers = torch.nonzero(self.asleep).flatten()
             self._index = _RestIndex(state, sleepers, self._touching, self._touch_extra(state))
         movers = torch.nonzero(~self.asleep).flatten()
-        reach = _ReachRule(state, self.simulator, ~self.asleep)
+        reach = _Reach(state, self.simulator, ~self.asleep)
         search = state.radius[movers].double() + reach.allow[movers] + reach.max_extra
         q, j = self._index.near(state, movers, search)
         hit = self.asleep[j] & reach(state, q, j)
@@ -189,8 +190,8 @@ class SleepingSimulator:
             return others[:0]
         moving = torch.zeros_like(self.asleep)
         moving[movers] = True
-        reach = _ReachRule(state, self.simulator, moving)
-        hit = _pairs_within(state, movers, others, reach.query_extra(movers), reach.max_extra)
+        reach = _Reach(state, self.simulator, moving)
+        hit = _pairs_within(state, movers, others, reach.allow[movers], reach.max_extra)
         hit = hit[:, reach(state, movers[hit[0]], others[hit[1]])]
         return torch.unique(others[hit[1]])
 
@@ -205,42 +206,22 @@ class SleepingSimulator:
 
 
 # ----- helpers -------------------------------------------------------------------------------
-class _ReachRule:
-    """The graph builder's pp rule ``gap ≤ a_i + a_j + ε`` between a moving sphere ``i`` and
-    one at rest ``j`` (its speed taken as 0). Without a graph builder (baselines): ``gap ≤ 0``.
-    """
+class _Reach:
+    """The simulator's pp rule between moving spheres and spheres at rest (speed 0): its graph
+    builder's ``gap ≤ a_i + a_j + ε``; without a graph builder (baselines) ``gap ≤ 0``."""
 
-    def __init__(self, state, simulator, awake: torch.Tensor):
-        """``awake [N]`` bool: the moving spheres."""
-        builder = getattr(simulator, "graph_builder", None)
-        n = state.pos.shape[0]
-        self.allow = torch.zeros(n, dtype=torch.float64, device=state.pos.device)
-        self.eps = 0.0 if builder is None else builder.epsilon
-        if builder is not None and builder.connectivity != "epsilon":
-            batch = _batch(state)
-            speed = state.vel[:, 0].to(torch.float64).norm(dim=-1)
-            speed = torch.where(awake, speed, 0.0)
-            if builder.connectivity == "vmax":
-                vmax = speed.new_zeros(state.dt.shape[0]).scatter_reduce(0, batch, speed, "amax")
-                speed = vmax[batch]
-            self.allow = builder.factor * speed * state.dt.to(torch.float64)[batch]
+    def __init__(self, state, simulator, moving: torch.Tensor):
+        """``moving [N]`` bool: the spheres that move."""
+        self.builder = getattr(simulator, "graph_builder", None) or _TOUCHING
+        self.allow = self.builder.allowance(state, moving)
         radius = state.radius.to(torch.float64)
-        self.max_extra = float((radius + self.allow).max()) + self.eps
-
-    def query_extra(self, idx: torch.Tensor) -> torch.Tensor:
-        return self.allow[idx]
+        self.max_extra = float((radius + self.allow).max()) + self.builder.epsilon
 
     def __call__(self, state, i: torch.Tensor, j: torch.Tensor) -> torch.Tensor:
-        gap, _ = _gap(state, i, j)
-        batch = _batch(state)
-        return (batch[i] == batch[j]) & (gap <= self.allow[i] + self.allow[j] + self.eps)
+        return self.builder.pair_within_reach(state, i, j, self.allow)
 
 
-def _batch(state) -> torch.Tensor:
-    batch = getattr(state, "batch", None)
-    if batch is None:
-        return torch.zeros(state.pos.shape[0], dtype=torch.long, device=state.pos.device)
-    return batch.long()
+_TOUCHING = GraphBuilder("epsilon", epsilon=0.0)
 
 
 def _gap(state, i: torch.Tensor, j: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -250,37 +231,16 @@ def _gap(state, i: torch.Tensor, j: torch.Tensor) -> tuple[torch.Tensor, torch.T
     return (p[i] - p[j]).norm(dim=-1) - r[i] - r[j], r
 
 
-def _points(state, idx: torch.Tensor, span: float) -> np.ndarray:
-    """``[len(idx), 4]`` float64: positions, and the scene id times ``span`` as a 4th axis
-    (scenes far apart, so a k-d tree seldom proposes pairs across scenes)."""
-    p = state.pos[idx].detach().to("cpu", torch.float64).numpy()
-    b = _batch(state)[idx].cpu().numpy().astype(np.float64)
-    return np.concatenate([p, (b * span)[:, None]], axis=1)
-
-
-def _ball_pairs(tree, points: np.ndarray, search: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rows into ``points`` and tree items with ``|p − x| ≤ search_row`` (float64)."""
-    hits = tree.query_ball_point(points, search * (1 + 1e-9) + 1e-12)
-    counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=len(hits))
-    rows = np.repeat(np.arange(len(hits)), counts)
-    cols = np.concatenate([np.asarray(h, dtype=np.int64) for h in hits]) if counts.sum() else []
-    return rows, np.asarray(cols, dtype=np.int64)
-
-
 class _RestIndex:
     """A k-d tree over spheres at rest and the touching pairs among them. Sleepers do not
     move, so it stays valid until a sphere falls asleep (woken members are filtered out by
     the caller through the current ``asleep`` mask)."""
 
     def __init__(self, state, members: torch.Tensor, touching, touch_reach: float):
-        from scipy.spatial import cKDTree
-
-        pos = state.pos.detach().to("cpu", torch.float64)
-        self.span = 2.0 * float((pos.max(0).values - pos.min(0).values).max()) + 1e3
+        batch = scene_of_sphere(state)
         self.members = members
-        self.r_max = float(state.radius[members].max())
-        self.tree = cKDTree(_points(state, members, self.span))
-        local = radius_pairs(state.pos[members], touch_reach, _batch(state)[members])
+        self.index = BallIndex(state.pos[members], batch[members], extent_span(state.pos))
+        local = radius_pairs(state.pos[members], touch_reach, batch[members])
         i, j = members[local[0]], members[local[1]]
         keep = touching(state, i, j)
         self.pairs = (i[keep], j[keep])
@@ -288,30 +248,23 @@ class _RestIndex:
     def near(self, state, query: torch.Tensor, search: torch.Tensor):
         """Candidate pairs ``(query sphere [P], member [P])`` with centres at most ``search
         [Q]`` apart (a superset: the caller applies the exact rule)."""
-        rows, cols = _ball_pairs(self.tree, _points(state, query, self.span),
-                                 search.detach().cpu().numpy())  # fmt: skip
-        device = query.device
-        return query[torch.as_tensor(rows, device=device)], self.members[
-            torch.as_tensor(cols, device=device)
-        ]
+        rows, cols = self.index.near(state.pos[query], scene_of_sphere(state)[query], search)
+        return query[rows], self.members[cols]
 
 
-def _pairs_within(
-    state, query: torch.Tensor, data: torch.Tensor, extra: torch.Tensor, data_extra: float
-) -> torch.Tensor:
+def _pairs_within(state, query: torch.Tensor, data: torch.Tensor, extra: torch.Tensor,
+                  data_extra: float) -> torch.Tensor:  # fmt: skip
     """Candidate pairs ``[2, P]`` (positions into ``query`` and ``data``) with
     ``|p_q − p_d| ≤ r_q + extra_q + data_extra`` (a superset the caller filters)."""
-    from scipy.spatial import cKDTree
-
     if query.numel() == 0 or data.numel() == 0:
         return torch.empty(2, 0, dtype=torch.long, device=state.pos.device)
-    search = (state.radius[query].double() + extra.double() + data_extra).cpu().numpy()
-    span = 2.0 * float(search.max()) + 1e3
-    pos = state.pos.detach().to("cpu", torch.float64)
-    span += 2.0 * float((pos.max(0).values - pos.min(0).values).max())
-    tree = cKDTree(_points(state, data, span))
-    rows, cols = _ball_pairs(tree, _points(state, query, span), search)
-    return torch.as_tensor(np.stack([rows, cols]), device=state.pos.device).reshape(2, -1)
+    search = state.radius[query].double() + extra.double() + data_extra
+    batch = scene_of_sphere(state)
+    span = extent_span(state.pos, 2.0 * float(search.max()))
+    rows, cols = BallIndex(state.pos[data], batch[data], span).near(
+        state.pos[query], batch[query], search
+    )
+    return torch.stack([rows, cols]).reshape(2, -1)
 
 
 def _spread(reached: torch.Tensor, allowed: torch.Tensor, i: torch.Tensor, j: torch.Tensor):
@@ -335,7 +288,7 @@ def _flood(state, seeds: torch.Tensor, targets: torch.Tensor, linked, reach: flo
     at most ``reach`` apart), ``[R]`` sphere indices."""
     n = state.pos.shape[0]
     nodes = torch.cat([seeds, targets])
-    local = radius_pairs(state.pos[nodes], reach, _batch(state)[nodes])
+    local = radius_pairs(state.pos[nodes], reach, scene_of_sphere(state)[nodes])
     i, j = nodes[local[0]], nodes[local[1]]
     keep = linked(state, i, j)
     is_target = torch.zeros(n, dtype=torch.bool, device=state.pos.device)
@@ -361,6 +314,6 @@ def subset_state(state, mask: torch.Tensor):
         if key in NODE_KEYS or (value.dim() > 0 and value.shape[0] == n):
             sub[key] = value[mask]
     if getattr(state, "ptr", None) is not None:
-        counts = torch.bincount(_batch(state)[mask], minlength=state.dt.shape[0])
+        counts = torch.bincount(scene_of_sphere(state)[mask], minlength=state.dt.shape[0])
         sub.ptr = torch.cat([counts.new_zeros(1), torch.cumsum(counts, 0)])
     return sub

@@ -101,7 +101,7 @@ def angular_velocity(q_prev: torch.Tensor, q_next: torch.Tensor, dt: float) -> t
 
 
 def integrate(q: torch.Tensor, omega: torch.Tensor, dt: float) -> torch.Tensor:
-    """One semi-implicit Euler step of the orientation (SPEC / report §3.4).
+    """One semi-implicit Euler step of the orientation (report §3.4).
 
     ``q ← normalise(q + ½·dt·(0, ω) ⊗ q)``, with ω in the world frame, consistent with
     :func:`angular_velocity`. ``[..., 4] × [..., 3] → [..., 4]``.

@@ -1,6 +1,5 @@
-"""Scene and trajectory containers shared by the generator, the data files and the simulator.
-
-Pure numpy; knows nothing of pybullet or of the network.
+"""Initial conditions of a scene (spheres, planes, materials, effects), shared by the generator,
+the data files and the simulator. Pure numpy; knows nothing of pybullet or of the network.
 
 Planes are rows of ``PLANE_DIM = 11`` numbers: centre ``p_s`` (3), unit normal ``n_s`` (3),
 unit reference direction ``d_s`` (3, perpendicular to ``n_s``), and the **half** lengths
@@ -149,35 +148,3 @@ class Scene:
             if not np.all(np.isfinite(getattr(self, key))):
                 raise SceneError(f"scene '{self.name}': {key} contains NaN or inf")
         return self
-
-
-@dataclass
-class Trajectory:
-    """A scene's static description plus its frames (what one HDF5 group holds).
-
-    pos, vel, angvel ``[T, N, 3]``; quat ``[T, N, 4]`` (w, x, y, z); the rest as in
-    :class:`Scene`. ``attrs`` holds the file attributes (dt, seed, config, …).
-    """
-
-    name: str
-    pos: np.ndarray
-    quat: np.ndarray
-    vel: np.ndarray
-    angvel: np.ndarray
-    radius: np.ndarray
-    mass: np.ndarray
-    material: np.ndarray
-    planes: np.ndarray
-    plane_kind: np.ndarray
-    materials: np.ndarray
-    dt: float
-    effects: Effects = field(default_factory=Effects)
-    attrs: dict = field(default_factory=dict)
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.pos.shape[0])
-
-    @property
-    def n_spheres(self) -> int:
-        return int(self.pos.shape[1])

@@ -1,6 +1,6 @@
 """Figures of the eval report (PNG, matplotlib Agg): sweeps, FPS, energy over time.
 
-Plot functions take already aggregated numbers (see :mod:`physgnn.report.document`) and know nothing
+Plot functions take already aggregated numbers (see :mod:`physgnn.report.sweeps`) and know nothing
 of runs or files other than the PNG they write.
 """
 
@@ -26,7 +26,8 @@ LOG_METRICS = {
 }
 
 
-def _save(fig, path: str | Path) -> Path:
+def save_figure(fig, path: str | Path) -> Path:
+    """Lay out ``fig``, write it as a PNG (folders made) and close it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
@@ -95,7 +96,7 @@ def plot_sweep(
             if r == len(splits) - 1:
                 ax.set_xlabel(xlabel, fontsize=8)
     fig.suptitle(title, fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_fps(
@@ -113,7 +114,7 @@ def plot_fps(
     ax.invert_yaxis()
     ax.set_xlabel("frames per second")
     ax.set_title(title, fontsize=9)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_energy(
@@ -139,4 +140,4 @@ def plot_energy(
         ax.set_ylabel("total energy (J)", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.legend(fontsize=6)
-    return _save(fig, path)
+    return save_figure(fig, path)

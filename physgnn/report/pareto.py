@@ -19,7 +19,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from physgnn.report import document as report  # noqa: E402
+from physgnn.report.figures import save_figure  # noqa: E402
+from physgnn.report.table import SPLITS, diverged_note, group_rows, select, stat  # noqa: E402
 
 PARETO_METRICS = ("chamfer", "energy_gain", "depth_sphere", "depth_ground")
 METRIC_NAMES = {
@@ -62,12 +63,12 @@ def pareto_frontier(costs: list[float], errors: list[float]) -> list[int]:
 def learned_points(rows: list[dict], split: str, metric: str) -> list[Point]:
     """One point per (experiment, configuration) of ``metrics.csv`` rows on ``split``."""
     points = []
-    for (exp, label), group in report.group_rows(rows).items():
-        sel = report.select(group, split)
-        err, fps = report.stat(sel, metric), report.stat(sel, "fps")
+    for (exp, label), group in group_rows(rows).items():
+        sel = select(group, split)
+        err, fps = stat(sel, metric), stat(sel, "fps")
         if err is None or fps is None or fps[0] <= 0:
             continue
-        valid = not report.diverged_note(sel)
+        valid = not diverged_note(sel)
         points.append(Point(f"{exp}: {label}", 1000.0 / fps[0], err[0], "learned", valid))
     return points
 
@@ -160,12 +161,7 @@ def plot_pareto(path: str | Path, metric: str, panels: dict[str, list[Point]]) -
         "bench scene against its fine reference",
         fontsize=8,
     )
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def read_bench(bench_dir: str | Path) -> tuple[dict, dict]:
@@ -182,7 +178,7 @@ def pareto_figures(
     bench_dir: str | Path,
     fig_dir: str | Path,
     metrics=PARETO_METRICS,
-    splits=report.SPLITS,
+    splits=SPLITS,
 ) -> list[Path]:
     """Write ``fig_dir/pareto_<metric>.png`` for each metric; returns the paths written."""
     bench, extra = read_bench(bench_dir)

@@ -18,6 +18,8 @@ import numpy as np
 import torch
 
 from physgnn import metrics
+from physgnn.data.dataset import read_split
+from physgnn.rollout import rollout
 
 VAL_KEYS = {"mse": "val/rollout_mse", "chamfer": "val/chamfer"}
 OOD_KEYS = {k: f"ood/{k}" for k in ("mse", "chamfer", "energy_gain", "depth_sphere", "pct_sphere")}
@@ -42,27 +44,22 @@ class RolloutCallback(L.Callback):
     def _trajectories(self, data_dir: Path, split: str) -> list:
         """Trajectories of a split, cut to ``max_frames`` (read once, then cached)."""
         if split not in self._cache:
-            from physgnn.data.dataset import read_split
-            from physgnn.evaluation.evaluate import truncate
-
             path = data_dir / f"{split}.h5"
             trajs = read_split(path) if path.exists() else []
             if split == "val":
                 trajs = trajs[: self.n_val_trajectories]
-            self._cache[split] = [truncate(t, self.max_frames) for t in trajs]
+            self._cache[split] = [t.truncated(self.max_frames) for t in trajs]
         return self._cache[split]
 
     def rollout_metrics(self, simulator, trajectories: list) -> tuple[list[dict], list[float]]:
         """Metrics and FPS of each trajectory's rollout (eval mode restored afterwards)."""
-        from physgnn.evaluation.evaluate import Prediction, rollout_prediction
-
         was_training = simulator.training
         simulator.eval()
         try:
             rows, fps = [], []
             for traj in trajectories:
-                pred: Prediction = rollout_prediction(simulator, traj)
-                rows.append(metrics.trajectory_metrics(pred.as_metrics_input(), traj))
+                (pred,) = rollout(simulator, [traj])
+                rows.append(metrics.trajectory_metrics(pred, traj))
                 if pred.fps is not None:
                     fps.append(float(pred.fps))
         finally:

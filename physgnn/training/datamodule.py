@@ -14,51 +14,11 @@ from pathlib import Path
 
 import lightning as L
 import torch
-from torch.utils.data import Dataset, Sampler
 from torch_geometric.loader import DataLoader
 
 from physgnn.data.dataset import DatasetError, read_split, read_stats
-from physgnn.data.state import TrajectoryFrames
+from physgnn.data.pairs import EpochSampler, PairDataset
 from physgnn.physics.scene import EFFECT_NAMES
-
-
-class PairDataset(Dataset):
-    """Every valid ``(trajectory, t)`` pair of a list of trajectories; item = ``SceneState``."""
-
-    def __init__(self, trajectories: list, H: int):
-        self.frames = [TrajectoryFrames(traj) for traj in trajectories]
-        self.H = int(H)
-        pairs = [(i, t) for i, f in enumerate(self.frames) for t in range(self.H, f.n_frames - 1)]
-        self.pairs = torch.tensor(pairs, dtype=torch.long).reshape(-1, 2)
-
-    def __len__(self) -> int:
-        return int(self.pairs.shape[0])
-
-    def __getitem__(self, k: int):
-        i, t = self.pairs[k].tolist()
-        return self.frames[i].state(t, self.H)
-
-
-class EpochSampler(Sampler):
-    """``num_samples`` indices drawn uniformly with replacement from ``range(size)``, seeded by
-    ``(seed, epoch)``: epoch k draws the same pairs whether training ran straight through or
-    resumed from a checkpoint. Lightning calls ``set_epoch`` before each epoch; without it
-    (e.g. inside a distributed wrapper) each iteration moves on to the next epoch."""
-
-    def __init__(self, size: int, num_samples: int, seed: int):
-        self.size, self.num_samples, self.seed = int(size), int(num_samples), int(seed)
-        self.epoch = 0
-
-    def set_epoch(self, epoch: int) -> None:
-        self.epoch = int(epoch)
-
-    def __len__(self) -> int:
-        return self.num_samples
-
-    def __iter__(self):
-        generator = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
-        self.epoch += 1
-        yield from torch.randint(self.size, (self.num_samples,), generator=generator).tolist()
 
 
 class StatePairDataModule(L.LightningDataModule):

@@ -23,6 +23,7 @@ from __future__ import annotations
 import lightning as L
 import torch
 
+from physgnn.data.state import scene_of_sphere
 from physgnn.errors import PhysgnnError
 from physgnn.models.learned import LearnedSimulator
 from physgnn.physics import quaternion as Q
@@ -59,9 +60,7 @@ def energy_increase(state, vel_next: torch.Tensor) -> torch.Tensor:
     ``vel_next [N, 3]`` is the predicted ``v̂_{t+1}``; ``E_{t+1}`` uses the Euler-integrated
     position ``p_t + dt·v̂_{t+1}`` and ``v̂_{t+1}``; ``E_t`` uses ``p_t`` and ``v_t``."""
     n_scenes = state.num_graphs if hasattr(state, "num_graphs") else 1
-    batch = getattr(state, "batch", None)
-    if batch is None:
-        batch = torch.zeros(state.pos.shape[0], dtype=torch.long, device=state.pos.device)
+    batch = scene_of_sphere(state)
     pos_next, _ = euler_step(
         state.pos, state.quat, vel_next, vel_next, state.scene_dt, rotate=False
     )

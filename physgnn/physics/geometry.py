@@ -1,0 +1,46 @@
+"""Spheres against planes, in float64 with the boundary included: one rule for the graph's ps
+edges and for the penetration metrics.
+
+A plane row ``[11]`` is centre (3), unit normal (3), unit reference direction (3) and the half
+lengths along the reference direction and along normal × reference
+(:mod:`physgnn.physics.scene`). The ground (kind 0) is a half-space; every other plane is a
+two-sided bounded rectangle.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from physgnn.physics.scene import GROUND
+
+
+def rectangle_distance(pos: torch.Tensor, planes: torch.Tensor) -> torch.Tensor:
+    """Distance from points to the closest point of bounded planes, float64.
+
+    pos ``[..., 3]`` and planes ``[..., 11]`` broadcast against each other → ``[...]``;
+    infinite half lengths give the distance to the unbounded plane.
+    """
+    p, planes = pos.to(torch.float64), planes.to(torch.float64)
+    centre, normal, ref = planes[..., 0:3], planes[..., 3:6], planes[..., 6:9]
+    other = torch.linalg.cross(normal, ref)
+    rel = p - centre
+    u, w = (rel * ref).sum(-1), (rel * other).sum(-1)
+    h = (rel * normal).sum(-1)
+    du = u - torch.clamp(u, -planes[..., 9], planes[..., 9])
+    dw = w - torch.clamp(w, -planes[..., 10], planes[..., 10])
+    return torch.sqrt(du * du + dw * dw + h * h)
+
+
+def plane_depth(
+    pos: torch.Tensor, radius: torch.Tensor, plane: torch.Tensor, kind: int
+) -> torch.Tensor:
+    """How deep spheres reach into one plane, float64 (> 0: they intersect it).
+
+    pos ``[..., N, 3]``, radius ``[N]``, plane ``[11]`` → ``[..., N]``: the ground
+    (``kind == GROUND``) is a half-space, ``r − (p − c)·n`` (a sphere below it is deeper than
+    its radius); other planes are rectangles, ``r − |p − closest point|``.
+    """
+    p, r, plane = pos.to(torch.float64), radius.to(torch.float64), plane.to(torch.float64)
+    if kind == GROUND:
+        return r - ((p - plane[0:3]) * plane[3:6]).sum(-1)
+    return r - rectangle_distance(p, plane)
