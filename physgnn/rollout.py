@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import time
 import warnings
 
 import numpy as np
@@ -139,12 +138,6 @@ def _speed_bound(frames: TrajectoryFrames, bounds: dict) -> float:
     return min(bounds["max_speed"], bounds["speed_factor"] * max(true_max, bounds["min_speed"]))
 
 
-def _clock(device: torch.device) -> float:
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
-    return time.perf_counter()
-
-
 class _Batch:
     """The active scenes of a rollout as one batched SceneState, rebuilt when scenes stop.
 
@@ -255,7 +248,7 @@ def _rollout_batch(simulator, trajs, lengths, *, h, bounds, max_pos, device, dty
     ends = list(lengths)
     hooks = hooks_of(simulator)
     steps, t = 0, h
-    start_time = _clock(device)
+    start_time = StepTimer.clock(device)
     if min(lengths) == h + 1:  # nothing to compute for these
         state.keep([k for k, i in enumerate(state.active) if lengths[i] > h + 1])
     nodes = record.nodes(state.active)
@@ -275,7 +268,7 @@ def _rollout_batch(simulator, trajs, lengths, *, h, bounds, max_pos, device, dty
                 hooks.select(torch.isin(state.node_batch, index))
             state.keep(keep)
             nodes = record.nodes(state.active)
-    total = _clock(device) - start_time
+    total = StepTimer.clock(device) - start_time
     if timer is not None:
         timer.timings["total"] += total
     fps = steps / total if total > 0 else float("inf")

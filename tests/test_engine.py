@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from physgnn.groundtruth.engine import EngineSettings, simulate
+from physgnn.groundtruth.engine import simulate
+from physgnn.groundtruth.settings import EngineSettings
 from physgnn.physics import quaternion as Q
 from physgnn.physics.kinematics import finite_difference_velocities
 from physgnn.physics.scene import Effects, Scene, SceneError, ground_plane

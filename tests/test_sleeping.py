@@ -5,9 +5,9 @@ import pytest
 import torch
 from torch_geometric.data import Batch
 
-from physgnn.data.state import SceneState, TrajectoryFrames
+from physgnn.data.state import SceneState, TrajectoryFrames, subset_state
 from physgnn.graph.builder import GraphBuilder
-from physgnn.models.sleeping import SleepingSimulator, subset_state
+from physgnn.models.sleeping import SleepingSimulator
 from physgnn.physics import quaternion as Q
 from physgnn.physics.scene import Effects, Material, ground_plane
 from physgnn.physics.trajectory import Trajectory

@@ -20,7 +20,8 @@ from physgnn import metrics
 from physgnn import train as train_command
 from physgnn.groundtruth import hard
 from physgnn.groundtruth.engine import simulate
-from physgnn.groundtruth.families import build_scene, pile_positions
+from physgnn.groundtruth.families import build_scene
+from physgnn.groundtruth.layouts import pile_positions
 from physgnn.metrics import MetricError
 from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
 from physgnn.models.learned import LearnedSimulator

@@ -10,7 +10,8 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.groundtruth.engine import simulate
-from physgnn.groundtruth.families import arena_planes, build_scene, materials_array
+from physgnn.groundtruth.families import build_scene
+from physgnn.groundtruth.layouts import arena_planes, materials_array
 from physgnn.physics.scene import GROUND, Effects, Scene
 
 

@@ -8,8 +8,8 @@ split's normalisation statistics (``compute_stats`` / ``write_stats`` / ``read_s
 
 from __future__ import annotations
 
+import dataclasses
 import json
-import os
 from pathlib import Path
 
 import h5py
@@ -18,6 +18,7 @@ import torch
 
 from physgnn import __version__
 from physgnn.errors import PhysgnnError
+from physgnn.files import atomic_path, write_json
 from physgnn.physics.kinematics import finite_difference_velocities
 from physgnn.physics.scene import PLANE_DIM, Effects, SceneError
 from physgnn.physics.trajectory import Trajectory
@@ -69,26 +70,15 @@ def write_split(path, trajectories: list[Trajectory], file_attrs: dict) -> Path:
     Groups are named ``traj_00000``, … unless a trajectory's ``attrs["group"]`` names it.
     ``file_attrs`` should hold ``split`` and ``preset``; ``schema_version`` is added.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        with h5py.File(tmp, "w") as f:
-            f.attrs["schema_version"] = SCHEMA_VERSION
-            for key, value in file_attrs.items():
-                f.attrs[key] = value
-            for i, traj in enumerate(trajectories):
-                name = traj.attrs.get("group", f"traj_{i:05d}")
-                attrs = {k: v for k, v in traj.attrs.items() if k != "group"}
-                _write_traj(f.create_group(name), _with_attrs(traj, attrs))
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
-
-
-def _with_attrs(traj: Trajectory, attrs: dict) -> Trajectory:
-    return Trajectory(**{**traj.__dict__, "attrs": attrs})
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs["schema_version"] = SCHEMA_VERSION
+        for key, value in file_attrs.items():
+            f.attrs[key] = value
+        for i, traj in enumerate(trajectories):
+            name = traj.attrs.get("group", f"traj_{i:05d}")
+            attrs = {k: v for k, v in traj.attrs.items() if k != "group"}
+            _write_traj(f.create_group(name), dataclasses.replace(traj, attrs=attrs))
+    return Path(path)
 
 
 def _attr(value):
@@ -207,11 +197,7 @@ def compute_stats(trajectories: list[Trajectory]) -> dict:
 
 def write_stats(dataset_dir, stats: dict) -> Path:
     """Write ``stats.json`` atomically into ``dataset_dir``."""
-    path = Path(dataset_dir) / "stats.json"
-    tmp = path.with_name("stats.json.tmp")
-    tmp.write_text(json.dumps(stats, indent=2))
-    os.replace(tmp, path)
-    return path
+    return write_json(Path(dataset_dir) / "stats.json", stats)
 
 
 def read_stats(dataset_dir) -> dict:

@@ -9,6 +9,8 @@ rebuilt from it at every step by :mod:`physgnn.graph.builder`.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import torch
 from torch_geometric.data import Data
@@ -16,6 +18,14 @@ from torch_geometric.data import Data
 from physgnn.physics.kinematics import finite_difference_velocities, history
 from physgnn.physics.scene import EFFECT_NAMES, Effects
 from physgnn.physics.trajectory import Trajectory
+
+# Per-sphere fields of a SceneState (first dimension N); the rest are per plane or per scene.
+# Per-sphere fields of a SceneState (first dimension N); the rest are per plane or per scene.
+NODE_KEYS = (
+    "pos", "quat", "vel", "angvel", "radius", "mass", "material", "batch",
+    "target_vel", "target_angvel",
+)  # fmt: skip
+SCENE_KEYS = ("planes", "plane_kind", "plane_batch", "dt", "effects", "ptr")
 
 
 class SceneState(Data):
@@ -90,3 +100,23 @@ class TrajectoryFrames:
             s.target_vel = self.vel[t + 1].clone()
             s.target_angvel = self.angvel[t + 1].clone()
         return s
+
+
+def subset_state(state, mask: torch.Tensor):
+    """A shallow copy of ``state`` (one scene or a Batch) with only the spheres of ``mask [N]``.
+
+    Planes, ``dt`` and ``effects`` are kept whole (every scene stays, even if it lost all its
+    spheres); ``batch`` keeps the scene ids and ``ptr`` is recomputed.
+    """
+    n = state.pos.shape[0]
+    sub = copy.copy(state)
+    for key in state.keys():
+        value = state[key]
+        if not torch.is_tensor(value) or key in SCENE_KEYS:
+            continue
+        if key in NODE_KEYS or (value.dim() > 0 and value.shape[0] == n):
+            sub[key] = value[mask]
+    if getattr(state, "ptr", None) is not None:
+        counts = torch.bincount(scene_of_sphere(state)[mask], minlength=state.dt.shape[0])
+        sub.ptr = torch.cat([counts.new_zeros(1), torch.cumsum(counts, 0)])
+    return sub

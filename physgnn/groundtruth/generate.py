@@ -19,8 +19,9 @@ from omegaconf import DictConfig, OmegaConf
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from physgnn.data.dataset import compute_stats, write_split, write_stats
-from physgnn.groundtruth.engine import EngineSettings, simulate
+from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
+from physgnn.groundtruth.settings import EngineSettings
 from physgnn.physics.scene import SceneError
 from physgnn.physics.trajectory import Trajectory
 

@@ -12,26 +12,21 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import OmegaConf
 
 from physgnn.data.dataset import read_split, write_split
 from physgnn.groundtruth import engine
-from physgnn.groundtruth.families import build_scene
+from physgnn.groundtruth.families import build_scene, plain_config
+from physgnn.groundtruth.settings import EngineSettings
 from physgnn.physics.trajectory import Trajectory
 
 HARD_FILE = "hard.h5"
 
 
-def _plain(cfg) -> dict:
-    if isinstance(cfg, DictConfig):
-        return OmegaConf.to_container(cfg, resolve=True)
-    return dict(cfg or {})
-
-
 def cache_key(scenes: Mapping, engine_cfg: Mapping | None, seed: int) -> str:
     """Canonical JSON of what the hard split is built from (stored as a file attribute)."""
-    settings = engine.EngineSettings.from_cfg(_plain(engine_cfg) if engine_cfg else None)
-    plain = {name: _plain(c) for name, c in scenes.items()}
+    settings = EngineSettings.from_cfg(plain_config(engine_cfg) if engine_cfg else None)
+    plain = {name: plain_config(c) for name, c in scenes.items()}
     return json.dumps(
         {"scenes": plain, "engine": dataclasses.asdict(settings), "seed": int(seed)}, sort_keys=True
     )
@@ -62,9 +57,9 @@ def hard_split(
     if not _cached(path, key):
         trajs = []
         for k, (name, cfg) in enumerate(scenes.items()):
-            c = _plain(cfg)
+            c = plain_config(cfg)
             scene = build_scene(c, np.random.default_rng([seed, k]))
-            traj = engine.simulate(scene, _plain(engine_cfg))
+            traj = engine.simulate(scene, plain_config(engine_cfg))
             traj.attrs.update(group=str(name), scene=c["name"], seed=seed)
             traj.attrs["scene_config"] = OmegaConf.to_yaml(OmegaConf.create(c))
             trajs.append(traj)

@@ -28,21 +28,13 @@ built again only when spheres fall asleep.
 
 from __future__ import annotations
 
-import copy
 import math
 
 import torch
 
-from physgnn.data.state import scene_of_sphere
+from physgnn.data.state import scene_of_sphere, subset_state
 from physgnn.graph.builder import GraphBuilder
 from physgnn.graph.neighbors import BallIndex, extent_span, radius_pairs
-
-# Per-sphere fields of a SceneState (first dimension N); the rest are per plane or per scene.
-NODE_KEYS = (
-    "pos", "quat", "vel", "angvel", "radius", "mass", "material", "batch",
-    "target_vel", "target_angvel",
-)  # fmt: skip
-SCENE_KEYS = ("planes", "plane_kind", "plane_batch", "dt", "effects", "ptr")
 
 
 class SleepingSimulator:
@@ -297,23 +289,3 @@ def _flood(state, seeds: torch.Tensor, targets: torch.Tensor, linked, reach: flo
     start[seeds] = True
     reached = _spread(start, is_target, i[keep], j[keep])
     return torch.nonzero(reached & is_target).flatten()
-
-
-def subset_state(state, mask: torch.Tensor):
-    """A shallow copy of ``state`` (one scene or a Batch) with only the spheres of ``mask [N]``.
-
-    Planes, ``dt`` and ``effects`` are kept whole (every scene stays, even if it lost all its
-    spheres); ``batch`` keeps the scene ids and ``ptr`` is recomputed.
-    """
-    n = state.pos.shape[0]
-    sub = copy.copy(state)
-    for key in state.keys():
-        value = state[key]
-        if not torch.is_tensor(value) or key in SCENE_KEYS:
-            continue
-        if key in NODE_KEYS or (value.dim() > 0 and value.shape[0] == n):
-            sub[key] = value[mask]
-    if getattr(state, "ptr", None) is not None:
-        counts = torch.bincount(scene_of_sphere(state)[mask], minlength=state.dt.shape[0])
-        sub.ptr = torch.cat([counts.new_zeros(1), torch.cumsum(counts, 0)])
-    return sub

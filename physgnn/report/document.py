@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from physgnn.files import write_text
 from physgnn.report import pareto, stability
 from physgnn.report.sections import (
     baselines_table,
@@ -67,25 +68,25 @@ def write_report(
         "## Stability on hard scenes",
         stability_section(root),
     ]
+    parts += _figures(rows, bench_dir, root)
+    if skipped:
+        parts += ["## Runs not evaluated", "\n".join(f"- {s}" for s in skipped)]
+    return write_text(root / "report.md", "\n\n".join(parts) + "\n")
+
+
+def _figures(rows: list[dict], bench_dir, root: Path) -> list[str]:
+    """The sections of figures and videos: runtime, Pareto view, OOD energy, videos."""
+    fig_dir = root / "figures"
     fps = fps_figure(fig_dir / "fps.png", group_rows(rows))
-    parts += [
+    energy = fig_dir / "energy_ood.png"
+    videos = sorted((root / "videos").glob("*.gif"))
+    return [
         "## Runtime (the report's Figure 18)",
         f"![fps]({rel(fps, root)})" if fps else "No learned rollout timed.",
         "## Accuracy versus time (Pareto view)",
         pareto_section(rows, bench_dir, fig_dir, root),
-    ]
-    energy = fig_dir / "energy_ood.png"
-    parts += [
         "## Energy over time on the OOD scenes",
         f"![energy]({rel(energy, root)})" if energy.exists() else "No OOD energy figure.",
-    ]
-    videos = sorted((root / "videos").glob("*.gif"))
-    parts += [
         "## Videos (ground truth left, prediction right)",
         "\n".join(f"- [{v.stem}]({rel(v, root)})" for v in videos) or "No videos.",
     ]
-    if skipped:
-        parts += ["## Runs not evaluated", "\n".join(f"- {s}" for s in skipped)]
-    path = root / "report.md"
-    path.write_text("\n\n".join(parts) + "\n")
-    return path

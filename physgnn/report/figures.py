@@ -54,49 +54,38 @@ def plot_sweep(
     fig, axes = plt.subplots(
         len(splits), len(metrics), squeeze=False, figsize=(3.2 * len(metrics), 2.6 * len(splits))
     )
-    pos = np.arange(len(xs))
     for r, split in enumerate(splits):
         for c, metric in enumerate(metrics):
             ax = axes[r, c]
             vals = stats.get((split, metric), [None] * len(xs))
-            div = diverged.get(split, [False] * len(xs))
-            ok = [i for i, v in enumerate(vals) if v is not None and math.isfinite(v[0])]
-            if ok:
-                mean = np.array([vals[i][0] for i in ok])
-                std = np.array([vals[i][1] for i in ok])
-                ax.errorbar(
-                    pos[ok],
-                    mean,
-                    yerr=std,
-                    fmt="o-",
-                    color="tab:blue",
-                    ecolor="tab:red",
-                    capsize=3,
-                    ms=4,
-                )
-                bad = [j for j, i in enumerate(ok) if div[i]]
-                if bad:
-                    ax.plot(
-                        pos[ok][bad],
-                        mean[bad],
-                        "x",
-                        color="red",
-                        ms=9,
-                        mew=2,
-                        label="diverged (prefix)",
-                    )
-                    ax.legend(fontsize=6)
-                if metric in LOG_METRICS and np.all(mean > 0):
-                    ax.set_yscale("log")
-            else:
-                ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
-            ax.set_xticks(pos, xs, fontsize=7, rotation=30 if max(map(len, xs)) > 6 else 0)
+            _sweep_panel(ax, metric, vals, diverged.get(split, [False] * len(xs)))
+            ax.set_xticks(np.arange(len(xs)), xs, fontsize=7,
+                          rotation=30 if max(map(len, xs)) > 6 else 0)  # fmt: skip
             ax.set_title(f"{split}: {metric}", fontsize=8)
             ax.tick_params(axis="y", labelsize=7)
             if r == len(splits) - 1:
                 ax.set_xlabel(xlabel, fontsize=8)
     fig.suptitle(title, fontsize=10)
     return save_figure(fig, path)
+
+
+def _sweep_panel(ax, metric: str, vals: list, div: list[bool]) -> None:
+    """One metric of one split: mean ± std per setting, red crosses where a rollout diverged."""
+    pos = np.arange(len(vals))
+    ok = [i for i, v in enumerate(vals) if v is not None and math.isfinite(v[0])]
+    if not ok:
+        ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
+        return
+    mean = np.array([vals[i][0] for i in ok])
+    std = np.array([vals[i][1] for i in ok])
+    ax.errorbar(pos[ok], mean, yerr=std, fmt="o-", color="tab:blue", ecolor="tab:red",
+                capsize=3, ms=4)  # fmt: skip
+    bad = [j for j, i in enumerate(ok) if div[i]]
+    if bad:
+        ax.plot(pos[ok][bad], mean[bad], "x", color="red", ms=9, mew=2, label="diverged (prefix)")
+        ax.legend(fontsize=6)
+    if metric in LOG_METRICS and np.all(mean > 0):
+        ax.set_yscale("log")
 
 
 def plot_fps(

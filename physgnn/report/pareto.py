@@ -88,11 +88,14 @@ def pybullet_points(bench: dict, extra: dict, metric: str) -> list[Point]:
     return points
 
 
+def _xy(points: list[Point]) -> tuple[list[float], list[float]]:
+    return [p.ms_per_frame for p in points], [p.error for p in points]
+
+
 def _draw(ax, points: list[Point], title: str, ylabel: str) -> None:
+    """One panel: the points by kind, the diverged ones as red crosses, the frontier."""
     valid = [p for p in points if p.valid]
-    front = [
-        valid[i] for i in pareto_frontier([p.ms_per_frame for p in valid], [p.error for p in valid])
-    ]
+    front = [valid[i] for i in pareto_frontier(*_xy(valid))]
     styles = {
         "learned": dict(marker="o", color="tab:blue"),
         "pybullet": dict(marker="s", color="tab:orange"),
@@ -100,43 +103,21 @@ def _draw(ax, points: list[Point], title: str, ylabel: str) -> None:
     for kind, st in styles.items():
         pts = [p for p in valid if p.kind == kind]
         if pts:
-            ax.scatter(
-                [p.ms_per_frame for p in pts], [p.error for p in pts], label=kind, s=22, **st
-            )
+            ax.scatter(*_xy(pts), label=kind, s=22, **st)
     bad = [p for p in points if not p.valid]
     if bad:
-        ax.scatter(
-            [p.ms_per_frame for p in bad],
-            [p.error for p in bad],
-            marker="x",
-            color="red",
-            label="diverged (prefix)",
-            s=30,
-        )
+        ax.scatter(*_xy(bad), marker="x", color="red", label="diverged (prefix)", s=30)
     if front:
-        ax.step(
-            [p.ms_per_frame for p in front],
-            [p.error for p in front],
-            where="post",
-            color="black",
-            lw=1.0,
-            label="Pareto frontier",
-        )
-        ax.scatter(
-            [p.ms_per_frame for p in front],
-            [p.error for p in front],
-            s=80,
-            facecolors="none",
-            edgecolors="black",
-        )
+        ax.step(*_xy(front), where="post", color="black", lw=1.0, label="Pareto frontier")
+        ax.scatter(*_xy(front), s=80, facecolors="none", edgecolors="black")
     for p in points:
-        ax.annotate(
-            p.label,
-            (p.ms_per_frame, p.error),
-            fontsize=5,
-            xytext=(3, 2),
-            textcoords="offset points",
-        )
+        ax.annotate(p.label, (p.ms_per_frame, p.error), fontsize=5, xytext=(3, 2),
+                    textcoords="offset points")  # fmt: skip
+    _axes(ax, points, title, ylabel)
+
+
+def _axes(ax, points: list[Point], title: str, ylabel: str) -> None:
+    """Log axes when every point is positive, titles, labels and the legend."""
     positive = [p for p in points if p.error > 0 and p.ms_per_frame > 0]
     if points and len(positive) == len(points):
         ax.set_xscale("log")

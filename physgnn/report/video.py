@@ -119,30 +119,8 @@ def render_gif(
         raise ValueError(
             f"prediction shape {pred_pos.shape} does not match truth {truth_pos.shape}"
         )
-    corners = [plane_corners(p) for p, k in zip(planes, plane_kind, strict=True) if k != GROUND]
-    lims = view_limits(truth_pos, radius, corners)
-    colors = plt.get_cmap("tab20")(np.arange(truth_pos.shape[1]) % 20)
-
-    fig, axes = plt.subplots(2, 2, figsize=(8, 6.4), dpi=dpi, gridspec_kw={"height_ratios": [1, 1]})
-    colls = []
-    for col, label in enumerate(("ground truth", "prediction")):
-        for row, (a, b, name) in enumerate(VIEWS):
-            ax = axes[row, col]
-            _draw_static(ax, planes, plane_kind, a, b, lims[row])
-            ax.set_title(f"{label}: {name}", fontsize=8)
-            colls.append((col, a, b, _spheres(ax, truth_pos[0][:, [a, b]], radius, colors)))
-    counter = fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
-    # Blitting: draw the static parts once, then only the spheres and the title per frame.
-    counter.set_visible(False)
-    for *_, coll in colls:
-        coll.set_visible(False)
-    fig.canvas.draw()
-    background = fig.canvas.copy_from_bbox(fig.bbox)
-    counter.set_visible(True)
-    for *_, coll in colls:
-        coll.set_visible(True)
-
+    fig, colls, counter = _layout(truth_pos, radius, planes, plane_kind, title, dpi)
+    background = _background(fig, colls, counter)
     images = []
     for t in frame_indices(n_frames, max_frames):
         fig.canvas.restore_region(background)
@@ -164,3 +142,35 @@ def render_gif(
     path.parent.mkdir(parents=True, exist_ok=True)
     imageio.mimsave(path, images, format="GIF", duration=1000.0 / fps, loop=0)
     return len(images)
+
+
+def _layout(truth_pos, radius, planes, plane_kind, title: str, dpi: int):
+    """The figure (truth left, prediction right; side view above top view), the sphere
+    collections ``(column, axis a, axis b, collection)`` and the title artist."""
+    corners = [plane_corners(p) for p, k in zip(planes, plane_kind, strict=True) if k != GROUND]
+    lims = view_limits(truth_pos, radius, corners)
+    colors = plt.get_cmap("tab20")(np.arange(truth_pos.shape[1]) % 20)
+    fig, axes = plt.subplots(2, 2, figsize=(8, 6.4), dpi=dpi, gridspec_kw={"height_ratios": [1, 1]})
+    colls = []
+    for col, label in enumerate(("ground truth", "prediction")):
+        for row, (a, b, name) in enumerate(VIEWS):
+            ax = axes[row, col]
+            _draw_static(ax, planes, plane_kind, a, b, lims[row])
+            ax.set_title(f"{label}: {name}", fontsize=8)
+            colls.append((col, a, b, _spheres(ax, truth_pos[0][:, [a, b]], radius, colors)))
+    counter = fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return fig, colls, counter
+
+
+def _background(fig, colls, counter):
+    """Blitting: the static parts drawn once (spheres and title hidden meanwhile)."""
+    counter.set_visible(False)
+    for *_, coll in colls:
+        coll.set_visible(False)
+    fig.canvas.draw()
+    background = fig.canvas.copy_from_bbox(fig.bbox)
+    counter.set_visible(True)
+    for *_, coll in colls:
+        coll.set_visible(True)
+    return background

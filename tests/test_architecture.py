@@ -1,0 +1,202 @@
+"""The package's import rules (docs/ARCHITECTURE.md), checked on the source with ``ast``.
+
+Every module of ``physgnn`` belongs to one part; a part may import only the parts below it
+(:data:`ALLOWED`). Also: no import loop between modules, every project import at the top of
+its module, no command module (``python -m physgnn.X``) imported by another module, the
+physics side free of the network, Lightning and Hydra, the network free of Lightning and
+Hydra, and modules and functions of a readable size.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parent.parent / "physgnn"
+COMMANDS = {"train", "generate", "eval", "bench", "data_report", "sleep_study"}
+
+# part -> the parts it may import (besides itself). "base" is physgnn/__init__, errors, files.
+ALLOWED = {
+    "base": set(),
+    "cli": {"base"},
+    "physics": {"base"},
+    "data": {"physics", "base"},
+    "graph": {"data", "physics", "base"},
+    "nn": set(),
+    "metrics": {"graph", "physics", "base"},
+    "groundtruth": {"data", "physics", "base"},
+    "models": {"nn", "graph", "data", "physics", "base"},
+    "rollout": {"models", "data", "physics", "base"},
+    "report": {"metrics", "physics", "base"},
+    "training": {"rollout", "metrics", "models", "data", "physics", "base"},
+    "evaluation": {
+        "training", "report", "rollout", "metrics", "models", "groundtruth", "data",
+        "physics", "base",
+    },
+    "benchmark": {
+        "report", "rollout", "metrics", "models", "groundtruth", "data", "physics", "base",
+    },
+    "commands": {"cli", "training", "groundtruth", "evaluation", "benchmark"},
+}  # fmt: skip
+# Outside libraries a part must not import (prefixes of module names).
+FORBIDDEN = {
+    "physics": ("lightning", "hydra", "omegaconf", "torch_geometric", "physgnn.nn"),
+    "data": ("lightning", "hydra", "torch_geometric.nn"),
+    "graph": ("lightning", "hydra", "omegaconf", "torch_geometric.nn"),
+    "metrics": ("lightning", "hydra", "omegaconf", "torch_geometric.nn"),
+    "groundtruth": ("lightning", "hydra", "torch_geometric.nn", "physgnn.nn"),
+    "nn": ("lightning", "hydra", "omegaconf"),
+    "models": ("lightning", "hydra", "omegaconf"),
+    "rollout": ("lightning", "hydra", "omegaconf"),
+    "report": ("lightning", "hydra", "torch"),
+}
+MAX_MODULE_LINES = 300
+MAX_FUNCTION_LINES = 50
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def part_of(module: str) -> str:
+    rest = module.split(".")[1:]
+    if not rest or rest[0] in ("errors", "files"):
+        return "base"
+    if rest[0] in COMMANDS and len(rest) == 1:
+        return "commands"
+    return rest[0]
+
+
+MODULES = {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+TREES = {name: ast.parse(path.read_text()) for name, path in MODULES.items()}
+
+
+def imports(tree: ast.AST, module: str) -> list[tuple[str, ast.AST]]:
+    """Every module imported anywhere in ``tree`` (``from a import b`` gives ``a.b`` when
+    that is a module, else ``a``), with its node."""
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(alias.name, node) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:  # relative import
+                base = ".".join(module.split(".")[: -node.level] + ([base] if base else []))
+            for alias in node.names:
+                sub = f"{base}.{alias.name}"
+                out.append((sub if sub in MODULES else base, node))
+    return out
+
+
+def project_imports(module: str) -> set[str]:
+    return {m for m, _ in imports(TREES[module], module) if m in MODULES and m != module}
+
+
+def test_every_part_imports_only_the_parts_below_it():
+    wrong = []
+    for module in MODULES:
+        part = part_of(module)
+        for target in project_imports(module):
+            other = part_of(target)
+            if other != part and other not in ALLOWED[part]:
+                wrong.append(f"{module} ({part}) imports {target} ({other})")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_allowed_part_graph_has_no_cycle():
+    done: set[str] = set()
+
+    def visit(part, path):
+        assert part not in path, f"cycle of parts: {' -> '.join([*path, part])}"
+        if part in done:
+            return
+        for below in ALLOWED[part]:
+            visit(below, [*path, part])
+        done.add(part)
+
+    for part in ALLOWED:
+        visit(part, [])
+
+
+def test_no_import_loop_between_modules():
+    state: dict[str, str] = {}
+
+    def visit(module, path):
+        if state.get(module) == "open":
+            loop = path[path.index(module) :] + [module]
+            pytest.fail("import loop: " + " -> ".join(loop))
+        if state.get(module) == "done":
+            return
+        state[module] = "open"
+        for target in sorted(project_imports(module)):
+            visit(target, [*path, module])
+        state[module] = "done"
+
+    for module in MODULES:
+        visit(module, [])
+
+
+def test_project_imports_are_at_the_top_of_their_module():
+    nested = []
+    for module, tree in TREES.items():
+        top = set(map(id, tree.body))
+        for name, node in imports(tree, module):
+            if name.startswith("physgnn") and id(node) not in top:
+                nested.append(f"{module}:{node.lineno} imports {name} inside a block")
+    assert not nested, "\n".join(nested)
+
+
+def test_no_command_module_is_imported_by_another_module():
+    commands = {f"physgnn.{c}" for c in COMMANDS}
+    assert commands <= set(MODULES)
+    wrong = [f"{m} imports {t}" for m in MODULES for t in project_imports(m) if t in commands]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_command_modules_are_thin_wrappers_of_one_function():
+    for command in COMMANDS:
+        module = f"physgnn.{command}"
+        assert len(MODULES[module].read_text().splitlines()) <= 25, module
+        assert "physgnn.cli" in project_imports(module), f"{module} does not use physgnn.cli"
+
+
+def test_every_hydra_main_is_made_by_the_cli_wrapper():
+    users = [m for m in MODULES for name, _ in imports(TREES[m], m) if name == "hydra"]
+    assert users == ["physgnn.cli"]
+
+
+def test_forbidden_libraries_stay_out_of_their_parts():
+    wrong = []
+    for module, tree in TREES.items():
+        for name, _ in imports(tree, module):
+            for prefix in FORBIDDEN.get(part_of(module), ()):
+                if name == prefix or name.startswith(prefix + "."):
+                    wrong.append(f"{module} imports {name}")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_only_training_and_the_bench_import_lightning():
+    users = {
+        part_of(m)
+        for m in MODULES
+        for name, _ in imports(TREES[m], m)
+        if name.startswith("lightning")
+    }
+    assert users <= {"training", "benchmark"}
+
+
+def test_modules_and_functions_are_of_a_readable_size():
+    long = []
+    for module, path in MODULES.items():
+        lines = len(path.read_text().splitlines())
+        if lines > MAX_MODULE_LINES:
+            long.append(f"{module}: {lines} lines")
+        for node in ast.walk(TREES[module]):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                size = node.end_lineno - node.lineno + 1
+                if size > MAX_FUNCTION_LINES:
+                    long.append(f"{module}.{node.name}: {size} lines")
+    assert not long, "\n".join(long)
