@@ -22,18 +22,12 @@ from rich.table import Table
 from physgnn.data.dataset import read_split
 from physgnn.errors import PhysgnnError
 from physgnn.files import write_json
-from physgnn.metrics import MetricError, trajectory_metrics
+from physgnn.metrics import PENETRATION_KEYS, MetricError, trajectory_metrics
 from physgnn.physics.trajectory import Trajectory
+from physgnn.report.sections import BLENDER_TABLE1
+from physgnn.report.table import SPLITS
 
-KEYS = (
-    "energy_gain",
-    "depth_sphere",
-    "depth_ground",
-    "depth_static",
-    "pct_sphere",
-    "pct_ground",
-    "pct_static",
-)
+KEYS = ("energy_gain", *PENETRATION_KEYS)
 LABELS = {
     "energy_gain": "Normalised cumulative energy gain",
     "depth_sphere": "Normalised mean depth (sphere)",
@@ -42,16 +36,6 @@ LABELS = {
     "pct_sphere": "% spheres intersecting (sphere-sphere)",
     "pct_ground": "% spheres intersecting (sphere-ground)",
     "pct_static": "% spheres intersecting (sphere-static)",
-}
-# The report's Table 1 (Blender ground truth): metric -> split -> (mean, std).
-REPORT = {
-    "energy_gain": {"test": (2.11e-2, 1.86e-2), "ood": (2.83e-2, 5.46e-2)},
-    "depth_sphere": {"test": (4.22e-3, 2.17e-3), "ood": (1.65e-3, 1.28e-3)},
-    "depth_ground": {"test": (1.75e-2, 5.31e-3), "ood": (5.11e-7, 2.87e-7)},
-    "depth_static": {"test": (5.91e-5, 1.56e-4), "ood": (9.31e-4, 1.86e-3)},
-    "pct_sphere": {"test": (48.41, 22.97), "ood": (48.70, 49.84)},
-    "pct_ground": {"test": (10.66, 4.98), "ood": (100.0, 0.0)},
-    "pct_static": {"test": (0.198, 0.322), "ood": (8.80, 17.59)},
 }
 
 
@@ -96,7 +80,9 @@ def table(summary: dict) -> Table:
         t.add_column(f"report (Blender) {split}", justify="right")
     for key in KEYS:
         ours = [fmt(**summary[s][key]) for s in splits]
-        theirs = [fmt(*REPORT[key][s]) if s in REPORT[key] else "—" for s in splits]
+        theirs = [
+            fmt(*BLENDER_TABLE1[key][SPLITS.index(s)]) if s in SPLITS else "—" for s in splits
+        ]
         t.add_row(LABELS[key], *ours, *theirs)
     return t
 
