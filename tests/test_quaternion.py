@@ -158,3 +158,10 @@ def test_xyzw_round_trip_and_order():
     torch.testing.assert_close(Q.to_xyzw(q), torch.tensor([[0.2, 0.3, 0.4, 0.1]]))
     torch.testing.assert_close(Q.from_xyzw(Q.to_xyzw(q)), q)
     torch.testing.assert_close(Q.to_xyzw(Q.from_xyzw(q)), q)
+
+
+def test_log_of_a_half_turn_with_a_denormal_component_ignores_scale():
+    # a denormal that rescaling flushes to 0 must not choose the half turn's sign
+    q = Q.normalize(t64([0.0, 0.0, -5e-324, 1.0]))
+    torch.testing.assert_close(Q.log(0.5 * q), Q.log(q), atol=1e-13, rtol=0)
+    torch.testing.assert_close(Q.log(-q), Q.log(q), atol=0, rtol=0)

@@ -64,6 +64,10 @@ def log(q: torch.Tensor) -> torch.Tensor:
     The input is normalised first. ``[..., 4] → [..., 3]``, angle in ``[0, π]``.
     """
     q = normalize(q)
+    # Components below √(smallest normal) (~1e-154 in float64) are zeroed first: they change
+    # the rotation by nothing measurable, but a denormal one would otherwise choose the sign
+    # below, and rescaling q (which may flush it to 0) would then give the other half turn.
+    q = torch.where(q.abs() < torch.finfo(q.dtype).tiny ** 0.5, torch.zeros_like(q), q)
     # Canonical sign: w > 0, or at exactly a half turn (w = 0) the first non-zero of x, y, z
     # positive, so that q and −q give the same rotation vector even there.
     w, x, y, z = q.unbind(-1)
