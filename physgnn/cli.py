@@ -7,6 +7,10 @@ the line to print. An error of the user's making (:class:`~physgnn.errors.Physgn
 Hydra or OmegaConf error raised while running, a file missing or already there) is printed
 as one line ``error: <message>`` and exits with its ``exit_code`` (2 unless it says
 otherwise); anything else is a bug and keeps its traceback.
+
+A command whose arguments Hydra cannot read (``simulate``: ``scene=FILE`` names a file, where
+Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instead: its
+``main(argv=None)`` parses ``sys.argv[1:]`` (or ``argv``) itself, with the same errors.
 """
 
 from __future__ import annotations
@@ -39,11 +43,14 @@ def fail(err: BaseException) -> NoReturn:
 
 
 def command(
-    name: str, run: Callable[[DictConfig], object], done: Callable[[object], str] | None = None
+    name: str,
+    run: Callable[[DictConfig], object],
+    done: Callable[[object], str] | None = None,
+    parse: Callable[[list[str]], DictConfig] | None = None,
 ) -> Callable:
     """``main`` of ``python -m physgnn.<name>`` (config ``conf/<name>.yaml``); it returns what
     ``run`` returns (a Hydra sweeper optimises it). ``main.__wrapped__(cfg)`` is the body
-    without Hydra (for tests)."""
+    without Hydra (for tests). With ``parse`` there is no Hydra (module doc)."""
 
     def main(cfg: DictConfig):
         try:
@@ -56,4 +63,21 @@ def command(
 
     # Hydra names the job (and its log file) after the module of the task function.
     main.__module__ = f"physgnn.{name}"
+    if parse is not None:
+        return _parsed(main, parse)
     return hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main)
+
+
+def _parsed(body: Callable, parse: Callable[[list[str]], DictConfig]) -> Callable:
+    """``main(argv=None)``: ``body(parse(argv))``, a parse error printed as one line."""
+
+    def main(argv: list[str] | None = None):
+        try:
+            cfg = parse(sys.argv[1:] if argv is None else list(argv))
+        except USER_ERRORS as err:
+            fail(err)
+        return body(cfg)
+
+    main.__wrapped__ = body
+    main.__module__ = body.__module__
+    return main

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "physgnn"
-COMMANDS = {"train", "generate", "eval", "bench", "data_report", "sleep_study"}
+COMMANDS = {"train", "generate", "eval", "bench", "data_report", "sleep_study", "simulate"}
 
 # part -> the parts it may import (besides itself). "base" is physgnn/__init__, errors, files.
 ALLOWED = {

@@ -49,6 +49,7 @@ def test_logs_every_key_with_the_oracle_mse():
     values = callback_with(val, ood).log_rollouts(module, data_dir=None)
     assert set(module.logged) == {
         "val/rollout_mse",
+        "val/rollout_score",
         "val/chamfer",
         "ood/mse",
         "ood/chamfer",
@@ -60,6 +61,7 @@ def test_logs_every_key_with_the_oracle_mse():
     }
     assert module.logged == values
     assert values["val/rollout_mse"] == pytest.approx(np.mean([held_mse(t) for t in val]))
+    assert values["val/rollout_score"] == values["val/rollout_mse"]  # nothing diverged
     assert values["ood/mse"] == pytest.approx(held_mse(ood[0]))
     assert values["ood/diverged"] == 0.0 and values["rollout/fps"] > 0
 
@@ -67,24 +69,44 @@ def test_logs_every_key_with_the_oracle_mse():
 def test_ood_off_logs_validation_only():
     module = FakeModule()
     callback_with([trajectory(2, 8)], [trajectory(2, 8)], ood=False).log_rollouts(module, None)
-    assert set(module.logged) == {"val/rollout_mse", "val/chamfer", "rollout/fps"}
+    assert set(module.logged) == {
+        "val/rollout_mse", "val/rollout_score", "val/chamfer", "rollout/fps"
+    }  # fmt: skip
 
 
 def test_runs_every_n_epochs_and_skips_sanity_check():
     cb = callback_with([trajectory(2, 8)], [], every_n_epochs=2)
     module = FakeModule()
     trainer = SimpleNamespace(
-        sanity_checking=False, current_epoch=0, datamodule=SimpleNamespace(data_dir="unused")
+        sanity_checking=True, current_epoch=0, datamodule=SimpleNamespace(data_dir="unused")
     )
     cb.on_validation_epoch_end(trainer, module)
     assert module.logged == {}
-    trainer.current_epoch = 1
-    trainer.sanity_checking = True
-    cb.on_validation_epoch_end(trainer, module)
-    assert module.logged == {}
     trainer.sanity_checking = False
+    cb.on_validation_epoch_end(trainer, module)  # no score yet: rolls out at once
+    assert "val/rollout_mse" in module.logged
+    first = module.logged["val/rollout_score"]
+    module.logged.clear()
+    trainer.current_epoch = 2  # not due: the latest score is logged again, no rollout
+    cb.on_validation_epoch_end(trainer, module)
+    assert module.logged == {"val/rollout_score": first}
+    trainer.current_epoch = 3  # due
     cb.on_validation_epoch_end(trainer, module)
     assert "val/rollout_mse" in module.logged
+    assert cb.state_dict() == {"score": module.logged["val/rollout_score"]}
+
+
+def test_a_diverged_validation_rollout_scores_infinity():
+    class Exploding(torch.nn.Module):
+        H = 2
+
+        def forward(self, state):
+            return state.vel[:, 0] * 1e6, state.angvel[:, 0]
+
+    module = FakeModule()
+    module.simulator = Exploding()
+    callback_with([trajectory(2, 10)], [], ood=False).log_rollouts(module, None)
+    assert module.logged["val/rollout_score"] == float("inf")
 
 
 def test_bad_arguments_are_refused():

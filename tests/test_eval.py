@@ -260,10 +260,11 @@ TINY_TRAIN = [
     "datamodule.batch_size=4",
     "datamodule.pairs_per_epoch=8",
     "datamodule.val_pairs=8",
-    "+callbacks.rollout._target_=physgnn.training.callbacks.RolloutCallback",
-    "+callbacks.rollout.every_n_epochs=1",
-    "+callbacks.rollout.n_val_trajectories=1",
-    "+callbacks.rollout.max_frames=8",
+    "++callbacks.rollout._target_=physgnn.training.callbacks.RolloutCallback",
+    "++callbacks.rollout.every_n_epochs=1",
+    "++callbacks.rollout.n_val_trajectories=1",
+    "++callbacks.rollout.max_frames=8",
+    "++callbacks.rollout.ood=true",
 ]
 
 
@@ -317,3 +318,13 @@ def test_a_run_whose_dataset_is_gone_is_one_clear_error(tmp_path, monkeypatch):
     monkeypatch.setattr(physgnn.training.runs, "load_run", lambda run_dir: (Falling(), cfg, {}))
     with pytest.raises(eval_runs.EvalError, match=r"dataset folder .*gone does not exist"):
         ev.evaluate(eval_cfg(f"paths.outputs={out}"))
+
+
+def test_truncated_runs_are_evaluated_and_named_so(tmp_path):
+    outputs = tmp_path / "outputs"
+    for name, status in (("a", "finished"), ("b", "truncated"), ("c", "interrupted")):
+        physgnn.training.runs.write_run_json(outputs / "runs" / name, {"status": status})
+    runs = eval_runs.find_runs(None, outputs)
+    assert [p.name for p in runs] == ["a", "b"]
+    names = [eval_runs.run_info(p, outputs).name for p in runs]
+    assert names == ["runs/a", "runs/b (truncated)"]

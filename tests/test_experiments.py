@@ -66,7 +66,7 @@ def test_experiment_composes_and_every_job_instantiates(name, tiny_dataset, tmp_
     jobs = sweep_jobs(params)
     assert len(jobs) == RUNS[name]
     datamodule, lit, trainer = build(compose_train([f"+experiment={name}", *base, *jobs[0]]))
-    assert trainer.max_epochs == 90 and datamodule.batch_size == 256
+    assert trainer.max_epochs == 90 and datamodule.batch_size == 256  # 2250 steps for all
     stats = datamodule.stats()
     for job in jobs[::3]:  # one seed of each value: the model and module that job trains
         key, value = job[0].split("=")
@@ -138,7 +138,10 @@ def test_other_config_choices_compose(choice, tmp_path):
         assert cfg.trainer.strategy == "ddp" and cfg.trainer.accelerator == "gpu"
     if choice == "callbacks=rollout":
         names = [type(instantiate(c)).__name__ for c in cfg.callbacks.values()]
-        assert names == ["ModelCheckpoint", "LearningRateMonitor", "RolloutCallback"]
+        assert names == ["RolloutCallback", "ModelCheckpoint", "LearningRateMonitor"]
+        assert cfg.callbacks.rollout.ood is True and cfg.callbacks.checkpoint.monitor == (
+            "val/rollout_score"
+        )
 
 
 @pytest.mark.parametrize(

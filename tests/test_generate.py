@@ -38,7 +38,7 @@ def test_tiny_dataset_files_and_schema(tiny_dataset):
     trajs = read_split(tiny_dataset / "ood.h5")
     for traj in trajs:
         assert traj.attrs["scene"] == traj.name and traj.n_frames == 20
-        assert traj.attrs["engine"].startswith("pybullet") and traj.attrs["substeps"] == 20
+        assert traj.attrs["engine"].startswith("pybullet") and traj.attrs["substeps"] == 40
         assert f"name: {traj.name}" in traj.attrs["scene_config"]
     train = read_split(tiny_dataset / "train.h5")
     assert [t.attrs["seed"] for t in train] == [gen.trajectory_seed(0, "train", i) for i in (0, 1)]

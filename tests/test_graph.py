@@ -113,7 +113,8 @@ def test_one_sphere_zero_speed_and_ground_only():
     g = GraphBuilder()(make_state([[1, 2, 3]], vel=[[1, 0, 0]]))
     assert g.pp_index.shape == (2, 0) and g.pp_attr.shape == (0, 4)
     assert ps_of(g) == [(0, 0)]
-    expected = torch.tensor([[1.0, 0, 0, 0, 0, 1, 0, 0, 3, 3]])
+    # height 3 clipped at the reach r + |v|·dt + ε = 0.5 + 0.125 + 0.01
+    expected = torch.tensor([[1.0, 0, 0, 0, 0, 1, 0, 0, 0.635, 0.635]])
     torch.testing.assert_close(g.ps_attr, expected)
 
 
@@ -139,7 +140,7 @@ def test_no_surfaces_but_the_ground_does_no_plane_work(monkeypatch):
     def fail(*args, **kwargs):
         raise AssertionError("plane distances computed for a ground-only scene")
 
-    monkeypatch.setattr(graph_module, "rectangle_distance", fail)
+    monkeypatch.setattr(graph_module, "rectangle_offset", fail)
     g = GraphBuilder()(make_state([[0, 0, 1], [3, 0, 1]]))
     assert ps_of(g) == [(0, 0), (0, 1)]
 
@@ -170,7 +171,7 @@ def test_ps_features_by_hand():
     state = make_state([[3.5, 0, 3]], vel=[[1, 0, 0]], planes=[WALL_ROW], kinds=[WALL])
     g = GraphBuilder("epsilon", epsilon=0.0)(state)
     assert ps_of(g) == [(0, 0), (1, 0)]
-    ground = [1, 0, 0, 0, 0, 1, 0, 0, 3, 3]
+    ground = [1, 0, 0, 0, 0, 1, 0, 0, 0.5, 0.5]  # height 3 clipped at the reach r = 0.5
     # wall: n = (−1, 0, 0), (p − p_s)·n = 0.5, so ((p − p_s)·n) n = (−0.5, 0, 0)
     wall = [1, 0, 0, -1, 0, 0, -0.5, 0, 0, 0.5]
     torch.testing.assert_close(g.ps_attr, torch.tensor([ground, wall], dtype=torch.float32))
@@ -293,7 +294,9 @@ def brute_force(state: Batch, rule: str, eps: float, factor: float):
             u = min(max(float(rel @ d), -float(row[9])), float(row[9]))
             w = min(max(float(rel @ e), -float(row[10])), float(row[10]))
             closest = c + u * d + w * e
-            if surf and float((p[i] - closest).norm()) - float(r[i]) <= allowance(i) + eps:
+            behind = float(rel @ nrm) <= -float(r[i])  # planes are one-sided
+            near = float((p[i] - closest).norm()) - float(r[i]) <= allowance(i) + eps
+            if surf and near and not behind:
                 ps.append((s, i))
     return pairs, sorted(ps)
 
@@ -314,15 +317,25 @@ def test_random_batched_scenes_match_brute_force(rule):
         torch.testing.assert_close(g2.pp_index, g.pp_index)
 
 
-def check_features(state: Batch, g: Graph) -> None:
+def check_features(state: Batch, g: Graph, eps: float) -> None:
+    """Oracle for the vi features: pp offsets; ps offsets from the closest point of the plane
+    (one row at a time), clipped at the reach r + |v|·dt + ε."""
     p, v = state.pos, state.vel[:, 0]
     j, i = g.pp_index
     torch.testing.assert_close(g.pp_attr[:, :3], p[i] - p[j])
     torch.testing.assert_close(g.pp_attr[:, 3], (p[i] - p[j]).norm(dim=-1))
-    s, k = g.ps_index
-    n, c = state.planes[s, 3:6], state.planes[s, 0:3]
-    h = ((p[k] - c) * n).sum(-1, keepdim=True)
-    torch.testing.assert_close(g.ps_attr, torch.cat([v[k], n, h * n, h.abs()], dim=-1))
+    rows = []
+    for s, k in g.ps_index.T.tolist():
+        row = state.planes[s].double()
+        c, nrm, d = row[:3], row[3:6], row[6:9]
+        rel = p[k].double() - c
+        u = (rel @ d).clamp(-row[9], row[9]) if row[9] < math.inf else rel @ d
+        w = (rel @ torch.linalg.cross(nrm, d)).clamp(-row[10], row[10])
+        offset = rel - u * d - w * torch.linalg.cross(nrm, d)
+        reach = float(state.radius[k]) + float(v[k].norm()) * float(state.dt[state.batch[k]]) + eps
+        offset = offset * min(1.0, reach / float(offset.norm()))
+        rows.append(torch.cat([v[k].double(), nrm, offset, (offset @ nrm)[None]]))
+    torch.testing.assert_close(g.ps_attr, torch.stack(rows).float())
 
 
 def test_paired_layout_and_features():
@@ -335,7 +348,7 @@ def test_paired_layout_and_features():
     assert bool((g.pp_index[0, :half] < g.pp_index[1, :half]).all())
     assert torch.equal(g.pp_attr[half:, :3], -g.pp_attr[:half, :3])
     assert torch.equal(g.pp_attr[half:, 3], g.pp_attr[:half, 3])
-    check_features(state, g)
+    check_features(state, g, eps=0.1)
 
 
 def test_batched_graph_is_the_concatenation_of_scene_graphs():
@@ -416,4 +429,37 @@ def test_tight_pack_of_10000_spheres(backend):
     assert g.num_pairs == touching
     assert g.ps_index.shape[1] == 10_000 + ny * nz  # every ground edge + the x = 0 layer
     torch.testing.assert_close(g.pp_attr[:, 3], torch.ones(2 * touching))
-    assert math.isclose(float(g.ps_attr[:, 9].max()), nz - 0.5)
+    # heights above the ground are clipped at the reach r + ε (no absolute altitude)
+    assert math.isclose(float(g.ps_attr[:, 9].max()), 0.51, rel_tol=1e-6)
+
+
+# --- no absolute position in the features ---------------------------------------------------
+
+
+@pytest.mark.parametrize("height", [10.0, 100.0, 1000.0])
+def test_ground_edge_of_a_sphere_in_free_flight_is_the_same_at_any_height(height):
+    low = GraphBuilder()(make_state([[0, 0, 5.0]], vel=[[0.3, 0, -2.0]]))
+    high = GraphBuilder()(make_state([[0, 0, height]], vel=[[0.3, 0, -2.0]]))
+    torch.testing.assert_close(high.ps_index, low.ps_index)
+    torch.testing.assert_close(high.ps_attr, low.ps_attr)
+
+
+def test_sphere_beside_a_bounded_plane_gets_no_plane_edge():
+    ramp = make_plane((0, 0, 2), (0, 0, 1), (1, 0, 0), 1.0, 1.0)  # 2 m x 2 m, facing up
+    beside = make_state([[1.8, 0, 2.2]], planes=[ramp], kinds=[STATIC])  # past its edge
+    above = make_state([[0.5, 0, 2.4]], planes=[ramp], kinds=[STATIC])
+    assert ps_of(GraphBuilder(epsilon=0.1)(beside)) == [(0, 0)]  # the ground only
+    assert ps_of(GraphBuilder(epsilon=0.1)(above)) == [(0, 0), (1, 0)]
+
+
+def test_planes_are_one_sided():
+    wall = make_plane((0, 0, 2), (1, 0, 0), (0, 1, 0), 5.0, 5.0)  # faces +x
+    front = make_state([[0.55, 0, 2]], planes=[wall], kinds=[WALL])
+    touching_behind = make_state([[-0.3, 0, 2]], planes=[wall], kinds=[WALL])
+    through = make_state([[-0.55, 0, 2]], planes=[wall], kinds=[WALL])
+    builder = GraphBuilder(epsilon=0.1)
+    assert ps_of(builder(front)) == [(0, 0), (1, 0)]
+    g = builder(touching_behind)
+    assert ps_of(g) == [(0, 0), (1, 0)]
+    torch.testing.assert_close(g.ps_attr[1, 6:], torch.tensor([-0.3, 0, 0, -0.3]))
+    assert ps_of(builder(through)) == [(0, 0)]  # tunnelled: the wall does not push it back

@@ -10,6 +10,7 @@ import torch
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint
 from simdata import STATS, batch, trajectory
 from torch.testing import assert_close
+from torch_geometric.data import Batch
 from torch_geometric.loader import DataLoader
 
 from physgnn.data.state import SceneState
@@ -82,7 +83,7 @@ def test_energy_term_enters_the_loss_with_lambda():
     assert_close(a["loss_energy"], b["loss_energy"])
 
 
-def test_noise_only_in_training_and_targets_unchanged():
+def test_noise_only_in_training_shaped_like_a_rollout_with_correcting_targets():
     lit = make_lit(noise_std=0.1)
     still = trajectory(40, seed=4, effects=Effects(rotation=False))
     state = batch([trajectory(40, seed=3), still])
@@ -94,16 +95,43 @@ def test_noise_only_in_training_and_targets_unchanged():
     lit.training_step(state, 0)
     clean, noisy = seen
     assert torch.equal(clean.pos, state.pos) and torch.equal(clean.vel, state.vel)
-    assert torch.equal(noisy.target_vel, state.target_vel)
+    dt = state.scene_dt[:, None]
+    dv, dp = noisy.vel - state.vel, noisy.pos - state.pos
+    # the noisy position and velocities are finite differences of one another
+    assert_close(dp, dt * dv.sum(1))
+    # σ·std(v) at the latest velocity (random walk over the H + 1 = 2 entries)
+    assert dv[:, 0, 2].std().item() == pytest.approx(0.1 * 4.0, rel=0.25)
+    # the target brings the noisy position back onto the true next position
+    assert_close(noisy.pos + dt * noisy.target_vel, state.pos + dt * state.target_vel)
     assert torch.equal(noisy.target_angvel, state.target_angvel)
-    # σ·length_scale = 0.1 m on positions, σ·std(v) on velocities
-    assert (noisy.pos - state.pos).std().item() == pytest.approx(0.1, rel=0.2)
-    dv = (noisy.vel - state.vel)[..., 2].std().item()
-    assert dv == pytest.approx(0.1 * 4.0, rel=0.2)
     assert_close(noisy.quat.norm(dim=-1), torch.ones(80))
     assert not torch.equal(noisy.quat[:40], state.quat[:40])
     assert torch.equal(noisy.quat[40:], state.quat[40:])  # rotation off: untouched
     assert torch.equal(noisy.angvel[40:], state.angvel[40:])
+
+
+def test_push_forward_rolls_the_model_and_targets_the_true_frame():
+    from physgnn.data.state import TrajectoryFrames
+    from physgnn.physics.integrator import step
+    from physgnn.training.lit import push_forward
+
+    lit = make_lit()
+    frames = TrajectoryFrames(trajectory(3, frames=8, seed=5))
+    state = Batch.from_data_list([frames.state(3, 2, future=2)])
+    out = push_forward(state, lit.simulator, 2)
+    expected = state.clone()
+    for _ in range(2):  # the same two steps by hand
+        v, w = lit.simulator(expected)
+        expected.pos, expected.quat, expected.vel, expected.angvel = step(
+            expected.pos, expected.quat, expected.vel, expected.angvel, v, w,
+            state.scene_dt, lit.simulator.rotating(expected),
+        )  # fmt: skip
+    assert_close(out.pos, expected.pos)
+    assert_close(out.vel, expected.vel)
+    assert_close(out.target_vel, (frames.pos[6] - out.pos) / 0.1, rtol=1e-4, atol=1e-4)
+    assert_close(out.target_angvel, frames.angvel[6])
+    zero = push_forward(state, lit.simulator, 0)  # no step: the one-step target
+    assert_close(zero.target_vel, (frames.pos[4] - frames.pos[3]) / 0.1, rtol=1e-4, atol=1e-4)
 
 
 def pairs(n_traj: int = 2) -> list:

@@ -109,6 +109,7 @@ def accuracy_table(extra: dict) -> str:
                 fmt(r["depth_sphere"]),
                 fmt(r["depth_ground"]),
                 fmt(r["pct_sphere"]),
+                fmt(r.get("free_fall_error")),
             ]
         )
     return md_table(
@@ -122,6 +123,7 @@ def accuracy_table(extra: dict) -> str:
             "depth sphere",
             "depth ground",
             "% spheres intersecting",
+            "free-fall error after 4 s (m)",
         ],
         body,
     )
@@ -242,7 +244,8 @@ def write_markdown(result: dict, extra: dict) -> str:
         pybullet_table(result),
         "## pybullet: substeps versus accuracy",
         f"From the same state in motion, {s.get('accuracy', {}).get('frames', '?')} frames; "
-        "reference: the most substeps. Physics metrics are of each run itself.",
+        "reference: the most substeps. Physics metrics are of each run itself; free-fall error: "
+        "|z − (z0 − ½gt²)| of one sphere after 4 s (semi-implicit Euler lags by g·h·t/2).",
         accuracy_table(extra),
         "## Training throughput (baseline, Lightning, noise on)",
         training_table(extra),

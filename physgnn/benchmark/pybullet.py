@@ -9,6 +9,7 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn import metrics
 from physgnn.benchmark import scenes
 from physgnn.groundtruth.engine import simulate
+from physgnn.groundtruth.oracles import free_fall_error
 from physgnn.metrics import PENETRATION_KEYS
 
 
@@ -40,7 +41,9 @@ def pybullet_runs(cfg: DictConfig, rng: np.random.Generator) -> dict:
 
 
 def accuracy_sweep(cfg: DictConfig, start) -> list[dict]:
-    """pybullet at each substep count from ``start``: FPS and accuracy vs the reference."""
+    """pybullet at each substep count from ``start``: FPS and accuracy vs the reference, and
+    the free-fall error against ½gt² after 4 s
+    (:func:`physgnn.groundtruth.oracles.free_fall_error`)."""
     engine = OmegaConf.to_container(cfg.engine)
     scene = scenes.with_frames(start, cfg.accuracy.frames + 1)
     ref = simulate(scene, {**engine, "substeps": cfg.accuracy.reference_substeps})
@@ -49,6 +52,7 @@ def accuracy_sweep(cfg: DictConfig, start) -> list[dict]:
             "substeps": cfg.accuracy.reference_substeps,
             "reference": True,
             "fps": None,
+            "free_fall_error": free_fall_error(cfg.accuracy.reference_substeps),
             **_physics(metrics.trajectory_metrics(ref)),
         }
     ]
@@ -62,6 +66,7 @@ def accuracy_sweep(cfg: DictConfig, start) -> list[dict]:
                 "substeps": substeps,
                 "reference": False,
                 "fps": fps,
+                "free_fall_error": free_fall_error(substeps),
                 "mse": m["mse"],
                 "mse5": m["mse5"],
                 "chamfer": m["chamfer"],

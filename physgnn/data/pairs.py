@@ -15,12 +15,18 @@ from physgnn.data.state import TrajectoryFrames
 
 
 class PairDataset(Dataset):
-    """Every valid ``(trajectory, t)`` pair of a list of trajectories; item = ``SceneState``."""
+    """Every valid ``(trajectory, t)`` pair of a list of trajectories; item = ``SceneState``.
 
-    def __init__(self, trajectories: list, H: int):
+    ``future`` = K > 0 adds the K + 1 next frames to each item (push-forward targets) and
+    keeps only the frames ``t ≤ T − K − 2`` that have them."""
+
+    def __init__(self, trajectories: list, H: int, future: int = 0):
         self.frames = [TrajectoryFrames(traj) for traj in trajectories]
-        self.H = int(H)
-        pairs = [(i, t) for i, f in enumerate(self.frames) for t in range(self.H, f.n_frames - 1)]
+        self.H, self.future = int(H), int(future)
+        last = 1 + self.future
+        pairs = [
+            (i, t) for i, f in enumerate(self.frames) for t in range(self.H, f.n_frames - last)
+        ]
         self.pairs = torch.tensor(pairs, dtype=torch.long).reshape(-1, 2)
 
     def __len__(self) -> int:
@@ -28,7 +34,7 @@ class PairDataset(Dataset):
 
     def __getitem__(self, k: int):
         i, t = self.pairs[k].tolist()
-        return self.frames[i].state(t, self.H)
+        return self.frames[i].state(t, self.H, self.future)
 
 
 class EpochSampler(Sampler):

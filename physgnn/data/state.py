@@ -37,6 +37,8 @@ class SceneState(Data):
     - ``planes [S, 11]``, ``plane_kind [S]`` (long), ``plane_batch [S]`` (scene of each plane)
     - ``dt [B]``, ``effects [B, 5]`` (bool, order of ``scene.EFFECT_NAMES``)
     - optional targets ``target_vel [N, 3]``, ``target_angvel [N, 3]`` (``v_{t+1}``, ``ω_{t+1}``)
+    - optional ``future_pos [N, K+1, 3]``, ``future_angvel [N, K+1, 3]``: ``p_{t+1..t+K+1}``,
+      ``ω_{t+1..t+K+1}``, the targets of a push-forward of up to K steps
     """
 
     @property
@@ -63,7 +65,8 @@ class TrajectoryFrames:
     """A trajectory as float32 tensors with its finite-difference velocities precomputed.
 
     ``state(t, h)`` is the :class:`SceneState` at frame ``t`` with ``h + 1`` velocities of
-    history (needs ``t ≥ h``) and, when ``t + 1`` exists, the targets of frame ``t + 1``.
+    history (needs ``t ≥ h``) and, when ``t + 1`` exists, the targets of frame ``t + 1``; with
+    ``future=K`` also the K + 1 next positions and angular velocities (needs ``t + K + 1 < T``).
     """
 
     def __init__(self, traj: Trajectory):
@@ -88,7 +91,7 @@ class TrajectoryFrames:
     def n_frames(self) -> int:
         return int(self.pos.shape[0])
 
-    def state(self, t: int, h: int) -> SceneState:
+    def state(self, t: int, h: int, future: int = 0) -> SceneState:
         s = SceneState(
             pos=self.pos[t].clone(),
             quat=self.quat[t].clone(),
@@ -99,6 +102,9 @@ class TrajectoryFrames:
         if t + 1 < self.n_frames:
             s.target_vel = self.vel[t + 1].clone()
             s.target_angvel = self.angvel[t + 1].clone()
+        if future > 0:
+            s.future_pos = self.pos[t + 1 : t + future + 2].transpose(0, 1).contiguous()
+            s.future_angvel = self.angvel[t + 1 : t + future + 2].transpose(0, 1).contiguous()
         return s
 
 

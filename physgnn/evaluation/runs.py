@@ -54,9 +54,14 @@ def all_runs(target: str | None, outputs: Path) -> list[Path]:
     return sorted({p.parent for r in roots if r.is_dir() for p in r.rglob("run.json")})
 
 
+# A truncated run (its step budget cut short by the time guard) is evaluated, and named so.
+EVALUATED = ("finished", "truncated")
+
+
 def find_runs(target: str | None, outputs: Path) -> list[Path]:
-    """The finished runs of :func:`all_runs`; a named target without one is an error."""
-    runs = [p for p in all_runs(target, outputs) if training_runs.run_status(p) == "finished"]
+    """The finished (or truncated) runs of :func:`all_runs`; a named target without one is an
+    error."""
+    runs = [p for p in all_runs(target, outputs) if training_runs.run_status(p) in EVALUATED]
     if target is not None and not runs:
         if (Path(target) / "run.json").exists():
             status = training_runs.run_status(Path(target))
@@ -80,8 +85,11 @@ def run_info(run_dir: Path, outputs: Path) -> RunInfo:
         overrides = yaml.safe_load((run_dir / ".hydra" / "overrides.yaml").read_text())
     if isinstance(overrides, list | tuple):
         overrides = " ".join(str(o) for o in overrides)
+    name = run_name(run_dir, outputs)
+    if info.get("status") == "truncated":
+        name += " (truncated)"
     return RunInfo(
-        name=run_name(run_dir, outputs),
+        name=name,
         experiment=str(info.get("experiment")),
         overrides=overrides or "",
         seed=info.get("seed"),

@@ -8,9 +8,18 @@ motion allowance ``a_i``:
 - ``vi``:      ``a_i = factor · |v_i| · dt``
 
 pp edge iff ``gap_ij ≤ a_i + a_j + ε``; ps edge to a bounded non-ground plane iff
-(distance from the centre to the closest point of the rectangle) ``− r_i ≤ a_i + ε``; plus
-one edge from every sphere's ground plane. The rules are evaluated in float64 (boundary
-included); the features are in the input dtype and in raw physical units.
+(distance from the centre to the closest point of the rectangle) ``− r_i ≤ a_i + ε`` and the
+centre is not more than ``r_i`` behind the plane (planes are one-sided: a sphere wholly behind
+one has tunnelled and feels nothing); plus one edge from every sphere's ground plane. The
+rules are evaluated in float64 (boundary included); the features are in the input dtype and
+in raw physical units.
+
+**Features see no absolute position.** A ps edge carries the offset ``δ`` from the closest
+point of the plane (the rectangle for bounded planes, the infinite plane for the ground) to
+the sphere's centre, and the signed height ``h = δ·n_s``, both clipped at the sphere's reach
+``ρ_i = r_i + a_i + ε``: a sphere farther than that cannot touch the plane before the next
+frame, and the clipped ground edge of a sphere in free flight is the same at 10, 100 or
+1 000 m (so gravity does not grow with altitude).
 
 Effects (``state.effects``): no pp edges without ``sphere_contact``; no wall/static edges
 without ``surface_contact``; the ground edge exists when ``gravity`` or ``surface_contact``.
@@ -25,7 +34,7 @@ import torch
 
 from physgnn.data.state import scene_of_sphere
 from physgnn.graph.neighbors import BACKENDS, radius_pairs
-from physgnn.physics.geometry import rectangle_distance
+from physgnn.physics.geometry import rectangle_offset
 from physgnn.physics.scene import EFFECT_NAMES, GROUND
 
 CONNECTIVITIES = ("epsilon", "vmax", "vi")
@@ -44,7 +53,8 @@ class Graph:
     - ``pp_attr [E, 4]``: ``[p_i − p_j, |p_i − p_j|]`` (i the target).
     - ``ps_index [2, F]``: row 0 plane index into ``state.planes``, row 1 sphere index,
       sorted by (plane, sphere).
-    - ``ps_attr [F, 10]``: ``[v_i, n_s, ((p_i − p_s)·n_s) n_s, |(p_i − p_s)·n_s|]``.
+    - ``ps_attr [F, 10]``: ``[v_i, n_s, clip(δ_is), clip(h_is)]``: ``δ_is`` the offset from the
+      closest point of plane s to sphere i, ``h_is = δ_is·n_s`` (signed), clipped at ``ρ_i``.
     """
 
     pp_index: torch.Tensor
@@ -136,6 +146,10 @@ class GraphBuilder:
         rev = torch.cat([-attr[:, :3], attr[:, 3:]], dim=-1)
         return index, torch.cat([attr, rev], dim=0)
 
+    def reach(self, state, allowance: torch.Tensor) -> torch.Tensor:
+        """``ρ_i = r_i + a_i + ε``, float64 ``[N]``: the farthest plane a sphere may touch."""
+        return state.radius.to(torch.float64) + allowance + self.epsilon
+
     def _ps_edges(self, state, batch, allowance) -> tuple[torch.Tensor, torch.Tensor]:
         ground = _ground_edges(state, batch)
         bounded = self._bounded_plane_edges(state, batch, allowance)
@@ -143,7 +157,7 @@ class GraphBuilder:
         key = torch.cat([ground[0] * n + ground[1], bounded[0] * n + bounded[1]])
         key = torch.sort(key).values
         index = torch.stack([key // max(n, 1), key % max(n, 1)])
-        return index, _ps_attr(state, index)
+        return index, _ps_attr(state, index, self.reach(state, allowance))
 
     def _bounded_plane_edges(self, state, batch, allowance) -> torch.Tensor:
         """Edges from walls/static planes to spheres within reach, ``[2, F']``."""
@@ -162,9 +176,11 @@ class GraphBuilder:
         offset = torch.arange(plane.numel(), device=device)
         offset = offset - torch.repeat_interleave(torch.cumsum(per_plane, 0) - per_plane, per_plane)
         sphere = order[first[plane_batch[plane]] + offset]
-        dist = rectangle_distance(state.pos[sphere], planes[plane])
+        offset = rectangle_offset(state.pos[sphere], planes[plane])
         radius = state.radius.to(torch.float64)[sphere]
-        keep = dist - radius <= allowance[sphere] + self.epsilon
+        height = (offset * planes[plane, 3:6].to(torch.float64)).sum(-1)
+        near = offset.norm(dim=-1) - radius <= allowance[sphere] + self.epsilon
+        keep = near & (height > -radius)
         return torch.stack([plane[keep], sphere[keep]])
 
 
@@ -201,10 +217,20 @@ def _ground_edges(state, batch) -> torch.Tensor:
     return torch.stack([ground_of[batch[spheres]], spheres])
 
 
-def _ps_attr(state, index: torch.Tensor) -> torch.Tensor:
-    """``[v_i, n_s, ((p_i − p_s)·n_s) n_s, |(p_i − p_s)·n_s|]`` of ps edges, ``[F, 10]``."""
-    plane = state.planes[index[0]].to(state.pos.dtype)
-    centre, normal = plane[:, 0:3], plane[:, 3:6]
+def _ps_attr(state, index: torch.Tensor, reach: torch.Tensor) -> torch.Tensor:
+    """``[v_i, n_s, clip(δ_is), clip(h_is)]`` of ps edges, ``[F, 10]`` (see the module doc);
+    ``reach [N]`` float64 is ``ρ_i``."""
+    planes = state.planes[index[0]].to(torch.float64)
+    pos = state.pos[index[1]].to(torch.float64)
+    height = ((pos - planes[:, 0:3]) * planes[:, 3:6]).sum(-1, keepdim=True)
+    offset = height * planes[:, 3:6]  # the ground: an infinite plane
+    bounded = state.plane_kind[index[0]] != GROUND
+    if bool(bounded.any()):
+        offset[bounded] = rectangle_offset(pos[bounded], planes[bounded])
+    dist = offset.norm(dim=-1, keepdim=True)
+    rho = reach[index[1], None]
+    offset = offset * torch.where(dist > rho, rho / dist, torch.ones_like(dist))
+    height = (offset * planes[:, 3:6]).sum(-1, keepdim=True)
+    dtype = state.pos.dtype
     v = _velocity(state)[index[1]]
-    h = ((state.pos[index[1]] - centre) * normal).sum(-1, keepdim=True)
-    return torch.cat([v, normal, h * normal, h.abs()], dim=-1)
+    return torch.cat([v, planes[:, 3:6].to(dtype), offset.to(dtype), height.to(dtype)], dim=-1)

@@ -74,6 +74,17 @@ def _finish(
     return scene.validate()
 
 
+def _box_size(c: dict, rng: np.random.Generator) -> tuple[int, float, float]:
+    """``(N, arena side, highest centre)`` of a random_box scene (a pile scene or not)."""
+    # The extra draw only when piles are asked for: scenes without them stay as they were.
+    if c.get("pile_fraction", 0.0) > 0 and rng.uniform() < c["pile_fraction"]:
+        n = int(rng.integers((c["n_max"] + 1) // 2, c["n_max"] + 1))
+        side = float(rng.uniform(c["pile_side_min"], c["pile_side_max"]))
+        return n, side, float(c["pile_h_max"])
+    n = int(rng.integers(c["n_min"], c["n_max"] + 1))
+    return n, float(rng.uniform(c["side_min"], c["side_max"])), float(c["h_max"])
+
+
 def random_box(c: dict, rng: np.random.Generator) -> Scene:
     """N ~ U{n_min..n_max} spheres of radius U[radius_min, radius_max] at heights in
     (r, h_max] over a square arena of side U[side_min, side_max] with 4 walls. Initial
@@ -81,7 +92,10 @@ def random_box(c: dict, rng: np.random.Generator) -> Scene:
     velocities uniform in a ball of radius ``max_angvel0`` (more rolling and wall hits).
     With probability ``cluster_fraction`` (default 0) the spheres start as one block of close
     spheres (:func:`clustered_positions`) instead of scattered: many neighbours falling and
-    landing together."""
+    landing together. With probability ``pile_fraction`` (default 0) the scene is a *pile*
+    scene: N ~ U{⌈n_max/2⌉..n_max} spheres scattered (no lattice) over a small arena of side
+    U[pile_side_min, pile_side_max], up to ``pile_h_max``, so that they settle into touching
+    groups and piles that then rest."""
     if c["n_min"] < 1 or c["n_max"] < c["n_min"]:
         raise SceneError(
             f"random_box: need 1 <= n_min <= n_max (got {c['n_min']}, {c['n_max']}): "
@@ -92,20 +106,19 @@ def random_box(c: dict, rng: np.random.Generator) -> Scene:
             f"random_box: need 0 < radius_min <= radius_max "
             f"(got {c['radius_min']}, {c['radius_max']})"
         )
-    n = int(rng.integers(c["n_min"], c["n_max"] + 1))
-    side = float(rng.uniform(c["side_min"], c["side_max"]))
+    n, side, h_max = _box_size(c, rng)
     radius = rng.uniform(c["radius_min"], c["radius_max"], size=n)
     half = side / 2
     pos = None
     # The extra draw only when clusters are asked for: scenes without them stay as they were.
     if c.get("cluster_fraction", 0.0) > 0 and rng.uniform() < c["cluster_fraction"]:
-        pos = clustered_positions(rng, radius, half, c["h_max"], c.get("cluster_max_gap", 0.5))
+        pos = clustered_positions(rng, radius, half, h_max, c.get("cluster_max_gap", 0.5))
     if pos is None:
         pos = spawn_without_overlap(
             rng,
             radius,
             np.array([-half, -half, 0.0]),
-            np.array([half, half, c["h_max"]]),
+            np.array([half, half, h_max]),
             int(c["spawn_tries"]),
         )
     ang = rng.uniform(0, 2 * np.pi, size=n)

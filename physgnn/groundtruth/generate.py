@@ -1,4 +1,5 @@
-"""``python -m physgnn.generate [data=small|tiny|paper] [overwrite=true] [workers=N]``.
+"""``python -m physgnn.generate [data=small|tiny|paper] [overwrite=true] [workers=N]
+[export_scene=FOLDER]``.
 
 Writes ``train.h5, val.h5, test.h5, ood.h5, stats.json`` into ``cfg.data.dir``. Each
 trajectory's seed is derived from the preset seed by ``numpy.random.SeedSequence(seed,
@@ -21,6 +22,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from physgnn.data.dataset import compute_stats, write_split, write_stats
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
+from physgnn.groundtruth.scenefile import write_scene
 from physgnn.groundtruth.settings import EngineSettings
 from physgnn.physics.scene import SceneError
 from physgnn.physics.trajectory import Trajectory
@@ -48,13 +50,18 @@ def trajectory_seed(preset_seed: int, split: str, index: int) -> int:
 
 
 def plan(data: DictConfig, engine: dict) -> list[Job]:
-    """Every trajectory of a preset, in file order."""
+    """Every trajectory of a preset, in file order. ``data.fit_scene`` (optional) overrides keys
+    of ``data.scene`` for the train and val splits only: the test split keeps the plain
+    training family, so test figures stay comparable across training distributions."""
     jobs = []
-    scene = OmegaConf.to_container(data.scene, resolve=True)
+    test_scene = OmegaConf.to_container(data.scene, resolve=True)
+    fit = data.get("fit_scene")
+    fit_scene = test_scene | (OmegaConf.to_container(fit, resolve=True) if fit else {})
     for split in ("train", "val", "test"):
         n = int(data.splits[split])
         if n < 1:
             raise SceneError(f"data.splits.{split} must be >= 1 (got {n})")
+        scene = test_scene if split == "test" else fit_scene
         for i in range(n):
             jobs.append(
                 Job(split, i, f"traj_{i:05d}", scene, engine, trajectory_seed(data.seed, split, i))
@@ -130,9 +137,21 @@ def _swap_in(staging: Path, out: Path) -> None:
     shutil.rmtree(old, ignore_errors=True)
 
 
+def export_scenes(jobs: list[Job], folder: Path) -> Path:
+    """Write each job's initial scene as a YAML scene file ``<split>_<group>.yaml``."""
+    for job in jobs:
+        scene = build_scene(job.scene, np.random.default_rng(job.seed))
+        write_scene(folder / f"{job.split}_{job.group}.yaml", scene)
+    return folder
+
+
 def generate(cfg: DictConfig) -> Path:
-    """Generate the dataset of ``cfg.data`` into ``cfg.data.dir``; returns that folder."""
+    """Generate the dataset of ``cfg.data`` into ``cfg.data.dir``; returns that folder. With
+    ``export_scene=FOLDER``: write the preset's scenes as scene files there instead."""
     data = cfg.data
+    if cfg.get("export_scene"):
+        engine = OmegaConf.to_container(cfg.get("engine") or {}, resolve=True)
+        return export_scenes(plan(data, engine), Path(cfg.export_scene))
     out = Path(data.dir)
     _check_target(out, bool(cfg.overwrite))
     engine = OmegaConf.to_container(cfg.get("engine") or {}, resolve=True)
@@ -154,3 +173,10 @@ def generate(cfg: DictConfig) -> Path:
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return out
+
+
+def written(out: Path) -> str:
+    """The line ``python -m physgnn.generate`` prints: a dataset (it has ``stats.json``) or
+    the scene files of ``export_scene``."""
+    kind = "dataset" if (Path(out) / "stats.json").exists() else "scene files"
+    return f"{kind} written to {out}"

@@ -14,11 +14,13 @@ import torch
 from physgnn.physics.scene import GROUND
 
 
-def rectangle_distance(pos: torch.Tensor, planes: torch.Tensor) -> torch.Tensor:
-    """Distance from points to the closest point of bounded planes, float64.
+def rectangle_offset(pos: torch.Tensor, planes: torch.Tensor) -> torch.Tensor:
+    """Offset from the closest point of bounded planes to points, float64 ``[..., 3]``.
 
-    pos ``[..., 3]`` and planes ``[..., 11]`` broadcast against each other → ``[...]``;
-    infinite half lengths give the distance to the unbounded plane.
+    pos ``[..., 3]`` and planes ``[..., 11]`` broadcast against each other; infinite half
+    lengths (the ground) give the offset from the unbounded plane. Its norm is the distance to
+    the rectangle (:func:`rectangle_distance`); its component along the normal is the signed
+    height above the plane.
     """
     p, planes = pos.to(torch.float64), planes.to(torch.float64)
     centre, normal, ref = planes[..., 0:3], planes[..., 3:6], planes[..., 6:9]
@@ -28,7 +30,13 @@ def rectangle_distance(pos: torch.Tensor, planes: torch.Tensor) -> torch.Tensor:
     h = (rel * normal).sum(-1)
     du = u - torch.clamp(u, -planes[..., 9], planes[..., 9])
     dw = w - torch.clamp(w, -planes[..., 10], planes[..., 10])
-    return torch.sqrt(du * du + dw * dw + h * h)
+    return du[..., None] * ref + dw[..., None] * other + h[..., None] * normal
+
+
+def rectangle_distance(pos: torch.Tensor, planes: torch.Tensor) -> torch.Tensor:
+    """Distance from points to the closest point of bounded planes, float64: the norm of
+    :func:`rectangle_offset` (same broadcasting) → ``[...]``."""
+    return torch.linalg.vector_norm(rectangle_offset(pos, planes), dim=-1)
 
 
 def plane_depth(

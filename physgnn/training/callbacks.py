@@ -7,6 +7,12 @@ and logs through ``pl_module.log`` so every logger receives:
 ``val/rollout_mse``, ``val/chamfer``, ``ood/mse``, ``ood/chamfer``, ``ood/energy_gain``,
 ``ood/depth_sphere``, ``ood/pct_sphere``, ``ood/diverged`` (fraction of rollouts) and
 ``rollout/fps``. Means are over trajectories; a diverged rollout counts on its finite prefix.
+
+``val/rollout_score`` is what checkpoints are chosen on (``conf/callbacks/default.yaml``):
+the mean position MSE of the validation rollouts, or infinity when any of them diverged (a
+diverged rollout's prefix must not look good). Validation data only: test and OOD scenes
+never choose anything. Between two rollout epochs the score of the latest one is logged
+again, so a checkpoint callback monitoring it finds it at every validation.
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ class RolloutCallback(L.Callback):
         self.max_frames = None if max_frames is None else int(max_frames)
         self.ood = bool(ood)
         self._cache: dict[str, list] = {}
+        self._score: float | None = None
 
     def _trajectories(self, data_dir: Path, split: str) -> list:
         """Trajectories of a split, cut to ``max_frames`` (read once, then cached)."""
@@ -67,9 +74,19 @@ class RolloutCallback(L.Callback):
         return rows, fps
 
     def on_validation_epoch_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
-        if trainer.sanity_checking or (trainer.current_epoch + 1) % self.every_n_epochs:
+        if trainer.sanity_checking:
             return
-        self.log_rollouts(pl_module, Path(trainer.datamodule.data_dir))
+        due = (trainer.current_epoch + 1) % self.every_n_epochs == 0
+        if due or self._score is None:
+            self.log_rollouts(pl_module, Path(trainer.datamodule.data_dir))
+        elif self._score is not None:
+            pl_module.log("val/rollout_score", self._score, on_step=False, on_epoch=True)
+
+    def state_dict(self) -> dict:
+        return {"score": self._score}
+
+    def load_state_dict(self, state_dict: dict) -> None:
+        self._score = state_dict.get("score")
 
     def log_rollouts(self, pl_module: L.LightningModule, data_dir: Path) -> dict[str, float]:
         """Roll out, log with ``pl_module.log`` and return what was logged."""
@@ -87,6 +104,12 @@ class RolloutCallback(L.Callback):
                     vals = [r[key] for r in rows if r[key] is not None]
                     if vals:
                         values[name] = float(np.mean(vals))
+                if split == "val":
+                    diverged = any(r["diverged_at"] is not None for r in rows)
+                    self._score = (
+                        float("inf") if diverged else float(np.mean([r["mse"] for r in rows]))
+                    )
+                    values["val/rollout_score"] = self._score
                 if split == "ood":
                     values["ood/diverged"] = float(
                         np.mean([r["diverged_at"] is not None for r in rows])

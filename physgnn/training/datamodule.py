@@ -24,7 +24,9 @@ from physgnn.physics.scene import EFFECT_NAMES
 class StatePairDataModule(L.LightningDataModule):
     """Reads ``<data_dir>/{train,val}.h5`` and ``stats.json`` (written by ``physgnn.generate``).
 
-    ``preset`` only names the dataset in error messages. ``H`` must equal the model's history.
+    ``preset`` only names the dataset in error messages. ``H`` must equal the model's history;
+    ``pushforward_steps`` the Lightning module's (the training pairs carry that many more
+    future frames; validation pairs are one-step).
     """
 
     def __init__(
@@ -37,6 +39,7 @@ class StatePairDataModule(L.LightningDataModule):
         val_pairs: int = 512,
         num_workers: int = 0,
         seed: int = 0,
+        pushforward_steps: int = 0,
     ):
         super().__init__()
         if batch_size < 1 or pairs_per_epoch < 1 or val_pairs < 1:
@@ -49,6 +52,9 @@ class StatePairDataModule(L.LightningDataModule):
         self.val_pairs = int(val_pairs)
         self.num_workers = int(num_workers)
         self.seed = int(seed)
+        if pushforward_steps < 0:
+            raise ValueError(f"pushforward_steps must be >= 0 (got {pushforward_steps})")
+        self.pushforward_steps = int(pushforward_steps)
         self.train_set: PairDataset | None = None
         self.val_set: PairDataset | None = None
 
@@ -68,13 +74,15 @@ class StatePairDataModule(L.LightningDataModule):
 
     def setup(self, stage: str | None = None) -> None:
         if self.train_set is None:
-            self.train_set = self._load("train.h5")
+            self.train_set = self._load("train.h5", self.pushforward_steps)
             self.val_set = self._load("val.h5")
 
-    def _load(self, name: str) -> PairDataset:
-        pairs = PairDataset(read_split(self._path(name)), self.H)
+    def _load(self, name: str, future: int = 0) -> PairDataset:
+        pairs = PairDataset(read_split(self._path(name)), self.H, future)
         if len(pairs) == 0:
-            raise DatasetError(f"{self.data_dir / name} has no trajectory longer than H + 2 frames")
+            raise DatasetError(
+                f"{self.data_dir / name} has no trajectory longer than H + {future + 2} frames"
+            )
         return pairs
 
     def effects_trained(self) -> torch.Tensor:

@@ -12,10 +12,19 @@ Loss of a batch of state pairs:
   ``v̂_{t+1}`` with :func:`physgnn.physics.integrator.euler_step`. Dividing a scene's energy
   increase by its weight ``Σ m·g`` turns joules into *metres of height gained per sphere
   mass*, so ``λ`` means the same for a scene of 1 or 300 spheres, light or heavy.
-- Noise (training only): ``noise_std`` is in normalised units: positions get
-  ``σ · length_scale`` metres, velocity histories ``σ · std(v)`` and ``σ · std(ω)``,
-  orientations ``σ`` per component then renormalised. Spheres of scenes without rotation keep
-  their orientation and angular velocity. Targets stay the clean ``v_{t+1}, ω_{t+1}``.
+- Noise (training only), shaped like the errors a rollout feeds back: a random walk along
+  each velocity history (``σ · std(v)`` at the latest velocity, ``σ`` in normalised units),
+  integrated into the position, so the noisy ``p̃_t`` and ``ṽ`` are again finite differences of
+  one another, as in a rollout; likewise ``σ · std(ω)`` on angular velocity histories, and
+  ``σ`` per quaternion component then renormalised. Spheres of scenes without rotation keep
+  their orientation and angular velocity. The velocity target is the one that brings the
+  noisy position back onto the truth, ``v*_{t+1} = (p_{t+1} − p̃_t)/dt`` (as GNS does with
+  accelerations): the model learns to undo its own drift, e.g. to push apart spheres that a
+  rollout let overlap. ``ω_{t+1}`` stays the clean one.
+- Push-forward (training only, ``pushforward_steps`` = K > 0): each batch first runs
+  ``k ~ U{0..K}`` steps of the model itself, without gradients, from the noisy state, then
+  takes the loss of the next step against ``(p_{t+k+1} − p̂_{t+k})/dt`` and ``ω_{t+k+1}``. The
+  model so sees, and learns to correct, the states its own rollouts reach.
 """
 
 from __future__ import annotations
@@ -28,7 +37,7 @@ from physgnn.errors import PhysgnnError
 from physgnn.models.learned import LearnedSimulator
 from physgnn.physics import quaternion as Q
 from physgnn.physics.energy import scene_energy, scene_weight
-from physgnn.physics.integrator import euler_step
+from physgnn.physics.integrator import euler_step, step
 
 
 class NonFiniteLossError(PhysgnnError, RuntimeError):
@@ -38,20 +47,49 @@ class NonFiniteLossError(PhysgnnError, RuntimeError):
 
 
 def add_noise(state, simulator: LearnedSimulator, std: float, generator=None):
-    """A copy of ``state`` with Gaussian noise on pos, quat, vel and angvel (see module doc)."""
+    """A copy of ``state`` with rollout-shaped noise and the matching velocity target (see the
+    module doc). ``state.vel`` / ``angvel`` are ``[N, H+1, 3]``, latest first."""
 
     def randn_like(x: torch.Tensor) -> torch.Tensor:
         return torch.randn(x.shape, generator=generator, dtype=x.dtype, device=x.device)
 
+    def random_walk(x: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
+        """``[N, H+1, 3]`` cumulative noise from the oldest entry to the latest (std scale)."""
+        steps = randn_like(x) * (scale / x.shape[1] ** 0.5)
+        return torch.cumsum(steps.flip(1), dim=1).flip(1)
+
     noisy = state.clone()
     rot = simulator.rotating(state)[:, None]
-    noisy.pos = state.pos + std * simulator.length_scale * randn_like(state.pos)
-    noisy.vel = state.vel + std * simulator.vel_std * randn_like(state.vel)
+    dt = state.scene_dt[:, None]
+    dv = random_walk(state.vel, std * simulator.vel_std)
+    noisy.vel = state.vel + dv
+    dp = dt * dv.sum(1)  # p̃_t − p_t: the velocity noise integrated along the history
+    noisy.pos = state.pos + dp
+    if getattr(state, "target_vel", None) is not None:
+        noisy.target_vel = state.target_vel - dp / dt
     quat = Q.normalize(state.quat + std * randn_like(state.quat))
     noisy.quat = torch.where(rot, quat, state.quat)
-    angvel = state.angvel + std * simulator.angvel_std * randn_like(state.angvel)
+    angvel = state.angvel + random_walk(state.angvel, std * simulator.angvel_std)
     noisy.angvel = torch.where(rot[:, :, None], angvel, state.angvel)
     return noisy
+
+
+@torch.no_grad()
+def push_forward(state, simulator: LearnedSimulator, steps: int):
+    """The state after ``steps`` frames of the simulator's own rollout from ``state``, with
+    the targets of the frame after: ``(p_{t+k+1} − p̂_{t+k})/dt`` and ``ω_{t+k+1}``
+    (``state.future_pos`` / ``future_angvel [N, K+1, 3]``, K ≥ steps)."""
+    out = state.clone()
+    dt = state.scene_dt
+    for _ in range(steps):  # the rollout's own integration step
+        vel_next, angvel_next = simulator(out)
+        out.pos, out.quat, out.vel, out.angvel = step(
+            out.pos, out.quat, out.vel, out.angvel, vel_next, angvel_next, dt,
+            simulator.rotating(out),
+        )  # fmt: skip
+    out.target_vel = (state.future_pos[:, steps] - out.pos) / dt[:, None]
+    out.target_angvel = state.future_angvel[:, steps]
+    return out
 
 
 def energy_increase(state, vel_next: torch.Tensor) -> torch.Tensor:
@@ -81,8 +119,9 @@ class LitSimulator(L.LightningModule):
     """Trains a :class:`LearnedSimulator` on one-step pairs.
 
     ``optimizer``: a partial (``_partial_: true``) taking the parameters; ``scheduler``: an
-    optional partial taking the optimizer, stepped once per epoch. ``seed`` seeds the noise of
-    each step together with the step number.
+    optional partial taking the optimizer, stepped once per epoch. ``seed`` seeds the noise and
+    the push-forward length of each step together with the step number.
+    ``pushforward_steps`` = K (0: one-step training only) starts at step ``pushforward_after``.
     """
 
     def __init__(
@@ -93,10 +132,14 @@ class LitSimulator(L.LightningModule):
         lambda_energy: float = 0.0,
         noise_std: float = 0.01,
         seed: int = 0,
+        pushforward_steps: int = 0,
+        pushforward_after: int = 0,
     ):
         super().__init__()
-        if lambda_energy < 0 or noise_std < 0:
-            raise ValueError("lambda_energy and noise_std must be >= 0")
+        if min(lambda_energy, noise_std, pushforward_steps, pushforward_after) < 0:
+            raise ValueError(
+                "lambda_energy, noise_std, pushforward_steps and pushforward_after must be >= 0"
+            )
         self.save_hyperparameters(ignore=["simulator", "optimizer", "scheduler"])
         self.simulator = simulator
         self.optimizer_factory = optimizer
@@ -104,6 +147,8 @@ class LitSimulator(L.LightningModule):
         self.lambda_energy = float(lambda_energy)
         self.noise_std = float(noise_std)
         self.seed = int(seed)
+        self.pushforward_steps = int(pushforward_steps)
+        self.pushforward_after = int(pushforward_after)
         self.pairs_seen = 0
         self.nodes_seen = 0
 
@@ -133,9 +178,20 @@ class LitSimulator(L.LightningModule):
         generator = torch.Generator(device=self.device)
         return generator.manual_seed(self.seed * 1_000_003 + self.global_step)
 
+    def _unroll_length(self, generator: torch.Generator) -> int:
+        """Push-forward steps of this batch, ``U{0..K}`` (0 before ``pushforward_after``)."""
+        if self.pushforward_steps == 0 or self.global_step < self.pushforward_after:
+            return 0
+        high = self.pushforward_steps + 1
+        return int(torch.randint(high, (1,), generator=generator, device=generator.device))
+
     def training_step(self, batch, batch_idx: int) -> torch.Tensor:
+        generator = self._noise_generator()
         if self.noise_std > 0:
-            batch = add_noise(batch, self.simulator, self.noise_std, self._noise_generator())
+            batch = add_noise(batch, self.simulator, self.noise_std, generator)
+        steps = self._unroll_length(generator)
+        if steps > 0:
+            batch = push_forward(batch, self.simulator, steps)
         losses = self.losses(batch)
         loss = losses["loss"]
         if not torch.isfinite(loss):

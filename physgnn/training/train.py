@@ -13,6 +13,7 @@ from pathlib import Path
 import lightning as L
 from hydra.core.hydra_config import HydraConfig
 from hydra.utils import instantiate
+from lightning.pytorch.callbacks import Timer
 from omegaconf import DictConfig
 
 from physgnn.errors import ConfigError
@@ -89,11 +90,11 @@ def train(cfg: DictConfig) -> dict:
     elapsed = time.perf_counter() - start
     _save_final(trainer)
     info.update(
-        # interrupted (Ctrl-C): resumable from checkpoints/last.ckpt, not evaluated
-        status="interrupted" if trainer.interrupted else "finished",
+        status=_final_status(trainer),
         train_time_s=elapsed,
         epochs=int(trainer.current_epoch),
         max_epochs=trainer.max_epochs,
+        max_steps=trainer.max_steps,
         global_step=int(trainer.global_step),
         pairs_seen=lit.pairs_seen,
         pairs_per_s=lit.pairs_seen / elapsed,
@@ -106,6 +107,18 @@ def train(cfg: DictConfig) -> dict:
     )
     write_run_json(run_dir, info)
     return info
+
+
+def _final_status(trainer: L.Trainer) -> str:
+    """``interrupted`` (Ctrl-C: resumable from checkpoints/last.ckpt, not evaluated),
+    ``truncated`` (a step budget cut short by ``trainer.max_time``: evaluated, flagged) or
+    ``finished``."""
+    if trainer.interrupted:
+        return "interrupted"
+    timers = [c for c in trainer.callbacks if isinstance(c, Timer)]
+    if timers and timers[0].time_remaining() <= 0:
+        return "truncated"
+    return "finished"
 
 
 def _save_final(trainer: L.Trainer) -> None:

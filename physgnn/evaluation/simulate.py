@@ -1,0 +1,128 @@
+"""Simulate one YAML scene file (``python -m physgnn.simulate``; the command is thin).
+
+Simulates the scene (:mod:`physgnn.groundtruth.scenefile`) with pybullet and, given a trained
+run, rolls the learned simulator out from the same start (its first H+1 ground-truth frames,
+as ``make eval`` does). Writes into ``out`` (default ``outputs/simulate/<scene name>``):
+
+- ``simulate.h5``: the dataset schema (:mod:`physgnn.data.dataset`), group ``truth`` and,
+  with a run, group ``prediction`` (its finite prefix if it diverged);
+- ``metrics.json``: the metrics of the prediction against the truth (``make eval``'s
+  columns), or the truth's own physics (energy gain, penetration) without a run;
+- ``video.gif`` / ``video.mp4``: truth (left) and prediction (right; the truth again without
+  a run) side by side (:mod:`physgnn.evaluation.video3d`).
+
+Arguments are ``key=value`` over :data:`KEYS` (not Hydra: ``scene=`` names a file here, where
+Hydra would read the ``scene`` config group).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+from omegaconf import DictConfig, OmegaConf
+
+from physgnn import metrics
+from physgnn.data.dataset import write_split
+from physgnn.errors import PhysgnnError
+from physgnn.evaluation.video3d import render_side_by_side
+from physgnn.groundtruth.engine import simulate as engine_simulate
+from physgnn.groundtruth.scenefile import load_scene
+from physgnn.physics.trajectory import Trajectory
+from physgnn.rollout import rollout
+from physgnn.training.runs import load_run
+
+KEYS = {"scene": None, "run": None, "out": None, "video": "true", "frames": None, "tol": "0"}
+METRIC_KEYS = ("mse", "mse20", "chamfer", "energy_gain", "rotation_error", "diverged_at")
+
+
+class SimulateError(PhysgnnError, ValueError):
+    """Bad command line (one line naming the problem)."""
+
+
+def parse_args(argv: list[str]) -> DictConfig:
+    """``key=value`` arguments over :data:`KEYS` defaults."""
+    args = dict(KEYS)
+    for item in argv:
+        key, eq, value = item.partition("=")
+        if not eq or key not in KEYS:
+            raise SimulateError(f"bad argument '{item}'; use key=value with keys {list(KEYS)}")
+        args[key] = value
+    if not args["scene"]:
+        raise SimulateError("missing scene=FILE (a YAML scene file, e.g. conf/scenes/throw.yaml)")
+    return OmegaConf.create(args)
+
+
+def rollout_prediction(simulator, truth: Trajectory) -> Trajectory:
+    """The simulator's rollout of ``truth`` from its first H+1 frames (finite prefix)."""
+    return rollout(simulator, [truth])[0]
+
+
+def learned(run_dir: str, truth: Trajectory) -> tuple[Trajectory, str]:
+    """Roll the run's simulator out on ``truth``; returns the prediction and its checkpoint."""
+    if not Path(run_dir).is_dir():
+        raise SimulateError(f"run folder {run_dir} does not exist")
+    simulator, _, info = load_run(run_dir)
+    return rollout_prediction(simulator, truth), str(info.get("checkpoint", run_dir))
+
+
+def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dict:
+    """Prediction vs truth (``pred``), or the truth's own physics (``pred`` None)."""
+    mine = pred if pred is not None else truth.with_finite_velocities()
+    m = metrics.trajectory_metrics(mine, truth, tol=tol, horizon=20)
+    keys = (*METRIC_KEYS, *metrics.PENETRATION_KEYS) if pred is not None else (
+        "energy_gain", *metrics.PENETRATION_KEYS)  # fmt: skip
+    out = {k: m.get(k) for k in keys}
+    return {k: (None if v is None else float(v)) for k, v in out.items()}
+
+
+def simulate(args: DictConfig | dict) -> dict:
+    """Simulate, roll out, write the files; returns what was written and the metrics."""
+    scene = load_scene(args["scene"])
+    if args["frames"]:
+        scene.n_frames = int(args["frames"])
+    out = Path(args["out"] or Path("outputs") / "simulate" / scene.name)
+    truth = engine_simulate(scene)
+    truth.attrs.update(
+        group="truth", scene=scene.name, scene_config=Path(args["scene"]).read_text()
+    )
+    pred, source = (None, "") if not args["run"] else learned(args["run"], truth)
+    trajs = [truth]
+    if pred is not None:
+        attrs = {**truth.attrs, "group": "prediction", "diverged_at": pred.diverged_at}
+        trajs.append(dataclasses.replace(pred, attrs=attrs))
+    h5 = write_split(out / "simulate.h5", trajs, {"split": "simulate", "preset": scene.name})
+    result = {
+        "scene": scene.name,
+        "n_spheres": scene.n_spheres,
+        "n_frames": scene.n_frames,
+        "run": source or None,
+        "metrics": scene_metrics(truth, pred, float(args["tol"])),
+        "files": {"hdf5": str(h5)},
+    }
+    if str(args["video"]).lower() == "true":
+        result["files"].update(write_videos(out, truth, pred, bool(source)))
+    (out / "metrics.json").write_text(json.dumps(result, indent=2))
+    return result
+
+
+run = simulate
+
+
+def write_videos(out: Path, truth: Trajectory, pred: Trajectory | None, learned: bool) -> dict:
+    right = truth.pos if pred is None else pred.pos
+    quats = (truth.quat, truth.quat if pred is None else pred.quat)
+    label = "prediction" if learned else "ground truth (no run given)"
+    return render_side_by_side(
+        out / "video", truth, right, quats, right_label=label,
+        diverged_at=None if pred is None else pred.diverged_at,
+    )  # fmt: skip
+
+
+def summary(result: dict) -> str:
+    """What ``python -m physgnn.simulate`` prints: the metrics, then the files."""
+    m = ", ".join(f"{k} {v:.3g}" for k, v in result["metrics"].items() if v is not None)
+    lines = [f"{result['scene']}: {result['n_spheres']} spheres, {result['n_frames']} frames; {m}"]
+    lines += [f"  {kind}: {path}" for kind, path in result["files"].items()]
+    return "\n".join(lines)

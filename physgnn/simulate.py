@@ -1,0 +1,14 @@
+"""``python -m physgnn.simulate scene=FILE [run=RUN_DIR] [out=DIR] [video=true] [frames=N]``.
+
+The work is :func:`physgnn.evaluation.simulate.simulate`: the truth and, given a run, the
+learned rollout of a YAML scene file, to HDF5, metrics.json and a shaded 3-D video. Arguments
+are ``key=value`` (not Hydra: ``scene=`` names a file).
+"""
+
+from physgnn.cli import command
+from physgnn.evaluation.simulate import parse_args, simulate, summary
+
+main = command("simulate", simulate, done=summary, parse=parse_args)
+
+if __name__ == "__main__":
+    main()
