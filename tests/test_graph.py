@@ -463,3 +463,15 @@ def test_planes_are_one_sided():
     assert ps_of(g) == [(0, 0), (1, 0)]
     torch.testing.assert_close(g.ps_attr[1, 6:], torch.tensor([-0.3, 0, 0, -0.3]))
     assert ps_of(builder(through)) == [(0, 0)]  # tunnelled: the wall does not push it back
+
+
+def test_clip_margin_separates_resting_from_falling_and_keeps_heights_out():
+    builder = GraphBuilder(epsilon=0.01, clip_margin=1.0)
+    resting = builder(make_state([[0, 0, 0.5]]))
+    hovering = builder(make_state([[0, 0, 0.52]]))
+    assert float(resting.ps_attr[0, 9]) == pytest.approx(0.5)
+    assert float(hovering.ps_attr[0, 9]) == pytest.approx(0.52)  # within the margin: exact
+    far = [builder(make_state([[0, 0, h]])).ps_attr for h in (10.0, 100.0, 1000.0)]
+    assert float(far[0][0, 9]) == pytest.approx(1.51)  # r + ε + margin
+    torch.testing.assert_close(far[1], far[0])
+    torch.testing.assert_close(far[2], far[0])

@@ -72,6 +72,7 @@ class LearnedSimulator(nn.Module):
         material_dim: int = 0,
         neighbor_backend: str = "auto",
         length_scale: float | None = None,
+        clip_margin: float = 0.0,
     ):
         super().__init__()
         if H < 0 or M < 1:
@@ -91,7 +92,11 @@ class LearnedSimulator(nn.Module):
         self.use_surfaces = bool(use_surfaces)
         self.num_materials = int(num_materials)
         self.graph_builder = GraphBuilder(
-            connectivity=connectivity, epsilon=epsilon, factor=factor, backend=neighbor_backend
+            connectivity=connectivity,
+            epsilon=epsilon,
+            factor=factor,
+            backend=neighbor_backend,
+            clip_margin=clip_margin,
         )
         self.network = EncodeProcessDecode(
             node_in=self.node_in,
