@@ -92,11 +92,7 @@ class LearnedSimulator(nn.Module):
         self.use_surfaces = bool(use_surfaces)
         self.num_materials = int(num_materials)
         self.graph_builder = GraphBuilder(
-            connectivity=connectivity,
-            epsilon=epsilon,
-            factor=factor,
-            backend=neighbor_backend,
-            clip_margin=clip_margin,
+            connectivity, epsilon, factor, neighbor_backend, clip_margin
         )
         self.network = EncodeProcessDecode(
             node_in=self.node_in,
