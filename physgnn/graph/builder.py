@@ -18,8 +18,8 @@ in raw physical units.
 point of the plane (the rectangle for bounded planes, the infinite plane for the ground) to
 the sphere's centre, and the signed height ``h = δ·n_s``, both clipped at the sphere's reach
 ``ρ_i = r_i + a_i + ε`` plus ``clip_margin``: a sphere farther than the reach cannot touch the
-plane before the next frame, and the clipped ground edge of a sphere in free flight is the same at 10, 100 or
-1 000 m (so gravity does not grow with altitude).
+plane before the next frame, and the clipped ground edge of a sphere in free flight is the
+same at 10, 100 or 1 000 m (so gravity does not grow with altitude).
 
 Effects (``state.effects``): no pp edges without ``sphere_contact``; no wall/static edges
 without ``surface_contact``; the ground edge exists when ``gravity`` or ``surface_contact``.
