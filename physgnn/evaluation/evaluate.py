@@ -7,7 +7,8 @@ and OOD trajectory is rolled out from its first H+1 frames; a diverged rollout's
 on its finite prefix and carry ``diverged_at``. With ``stability=true`` (default) every learned
 run is also rolled out on the hard scenes of ``hard`` and measured with
 :mod:`physgnn.evaluation.stability` (``stability.csv`` and the report's stability section).
-Writes metrics.csv, report.md, figures and videos into ``report_dir``.
+Every learned run also falls freely from ``freefall.heights`` (:mod:`physgnn.evaluation.freefall`,
+``freefall.csv``). Writes metrics.csv, report.md, figures and videos into ``report_dir``.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
+from physgnn.evaluation.freefall import freefall_rows
 from physgnn.evaluation.rollouts import (
     Collected,
     hard_rows,
@@ -33,7 +35,7 @@ from physgnn.evaluation.runs import (
     pick_video_run,
     references,
 )
-from physgnn.report import figures, stability, table, video
+from physgnn.report import figures, freefall, stability, table, video
 from physgnn.report.document import write_report
 
 
@@ -60,6 +62,7 @@ def evaluate(cfg: DictConfig) -> Path:
         stability.write_csv(report_dir / "stability.csv", stab + hard_rows(runs, cfg))
     else:
         (report_dir / "stability.csv").unlink(missing_ok=True)  # no stale section
+    freefall.write_csv(report_dir / "freefall.csv", _freefall(runs, cfg.freefall, settings))
     if out.energies:
         dts = {name: _dt(data, name) for name in out.energies}
         figures.plot_energy(report_dir / "figures" / "energy_ood.png", out.energies, dts)
@@ -67,6 +70,15 @@ def evaluate(cfg: DictConfig) -> Path:
         write_videos(report_dir / "videos", film, out.films, cfg.video_frames)
     bench_dir = cfg.paths.get("bench_dir")
     return write_report(report_dir, out.rows, bench_dir=bench_dir, skipped=skipped)
+
+
+def _freefall(runs: list[RunInfo], cfg: DictConfig, settings: dict) -> list[dict]:
+    """Every learned run dropped from ``cfg.heights`` (:mod:`physgnn.evaluation.freefall`)."""
+    args = list(cfg.heights), float(cfg.seconds), float(cfg.dt), float(cfg.floor)
+    rows = []
+    for run in runs:
+        rows += freefall_rows(run.name, run.simulator, *args, **settings)
+    return rows
 
 
 def _dt(data: dict, scene: str) -> float:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from physgnn.files import write_text
-from physgnn.report import pareto, stability
+from physgnn.report import freefall, pareto, stability
 from physgnn.report.sections import (
     baselines_table,
     components_section,
@@ -33,6 +33,12 @@ def stability_section(root: Path) -> str:
     if not path.exists():
         return "No stability measurements (`make eval` with `stability=true` writes them)."
     return stability.section(stability.read_csv(path))
+
+
+def freefall_section(root: Path) -> str:
+    """The free-fall table from ``root/freefall.csv`` (written by the eval)."""
+    path = root / "freefall.csv"
+    return freefall.section(freefall.read_csv(path) if path.exists() else [])
 
 
 def write_report(
@@ -67,6 +73,8 @@ def write_report(
         sleeping_section(rows),
         "## Stability on hard scenes",
         stability_section(root),
+        "## Free fall against ½gt²",
+        freefall_section(root),
     ]
     parts += _figures(rows, bench_dir, root)
     if skipped:
