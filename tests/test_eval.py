@@ -226,7 +226,9 @@ def test_report_links_figures_and_one_video_per_ood_scene(evaluated):
     for scene in ("ood_cubes", report_table.SLEEP_SCENE):
         gif = report_dir / "videos" / f"{scene}.gif"
         assert len(imageio.mimread(gif)) == 5
-        assert f"(videos/{scene}.gif)" in text
+        with imageio.get_reader(gif.with_suffix(".mp4")) as mp4:
+            assert mp4.count_frames() == 5
+        assert f"[{scene}](videos/{scene}.gif) ([MP4](videos/{scene}.mp4))" in text
     assert (report_dir / "figures" / "energy_ood.png").stat().st_size > 1000
     assert "![energy](figures/energy_ood.png)" in text
     assert "with sleeping off and on" in text and "| on |" in text
@@ -297,6 +299,7 @@ def test_tiny_run_logs_rollouts_then_make_eval_reports_it(tiny_dataset, tmp_path
     text = path.read_text()
     assert "| baseline: default |" in text and "### `baseline`" in text
     assert len(list((outputs / "report" / "videos").glob("*.gif"))) == 4
+    assert len(list((outputs / "report" / "videos").glob("*.mp4"))) == 4
 
 
 def test_eval_of_a_dataset_alone_reports_the_references(tmp_path):

@@ -33,7 +33,8 @@ from physgnn.evaluation.runs import (
     pick_video_run,
     references,
 )
-from physgnn.report import figures, stability, table, video
+from physgnn.evaluation.video3d import render_side_by_side
+from physgnn.report import figures, stability, table
 from physgnn.report.document import write_report
 
 
@@ -78,20 +79,12 @@ def _dt(data: dict, scene: str) -> float:
 
 
 def write_videos(video_dir: Path, film: RunInfo, films: dict, max_frames: int) -> list[Path]:
-    """One GIF per OOD scene: ground truth beside the filmed run's rollout."""
+    """Per OOD scene ``<scene>.gif``, ``.mp4`` and ``_frame.png``: the shaded 3-D view of the
+    ground truth beside the filmed run's rollout; returns the GIFs."""
     paths = []
     for scene, (traj, pred) in sorted(films.items()):
-        path = video_dir / f"{scene}.gif"
-        video.render_gif(
-            path,
-            traj.pos,
-            pred.pos,
-            traj.radius,
-            traj.planes,
-            traj.plane_kind,
-            title=f"{scene} · {film.name}",
-            diverged_at=pred.diverged_at,
-            max_frames=max_frames,
-        )
-        paths.append(path)
+        label = f"prediction\n{film.name}"
+        stem = video_dir / scene
+        render_side_by_side(stem, traj, pred, right_label=label, title=scene, max_frames=max_frames)
+        paths.append(stem.with_name(f"{scene}.gif"))
     return paths

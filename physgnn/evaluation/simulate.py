@@ -111,13 +111,9 @@ run = simulate
 
 
 def write_videos(out: Path, truth: Trajectory, pred: Trajectory | None, learned: bool) -> dict:
-    right = truth.pos if pred is None else pred.pos
-    quats = (truth.quat, truth.quat if pred is None else pred.quat)
     label = "prediction" if learned else "ground truth (no run given)"
-    return render_side_by_side(
-        out / "video", truth, right, quats, right_label=label,
-        diverged_at=None if pred is None else pred.diverged_at,
-    )  # fmt: skip
+    return render_side_by_side(out / "video", truth, truth if pred is None else pred,
+                               right_label=label, title=truth.attrs.get("scene", ""))  # fmt: skip
 
 
 def summary(result: dict) -> str:
