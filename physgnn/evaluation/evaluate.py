@@ -7,7 +7,8 @@ and OOD trajectory is rolled out from its first H+1 frames; a diverged rollout's
 on its finite prefix and carry ``diverged_at``. With ``stability=true`` (default) every learned
 run is also rolled out on the hard scenes of ``hard`` and measured with
 :mod:`physgnn.evaluation.stability` (``stability.csv`` and the report's stability section).
-Writes metrics.csv, report.md, figures and videos into ``report_dir``.
+Writes metrics.csv, report.md, figures and videos into ``report_dir``; with ``rerun=true``
+also ``videos/<ood scene>.rrd``, the filmed run's rollouts as Rerun recordings.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
+from physgnn.evaluation import rerun_log
 from physgnn.evaluation.rollouts import (
     Collected,
     hard_rows,
@@ -41,6 +43,8 @@ from physgnn.report.document import write_report
 def evaluate(cfg: DictConfig) -> Path:
     """Evaluate the runs named by ``cfg`` and write ``cfg.report_dir``; returns report.md."""
     outputs, report_dir = Path(cfg.paths.outputs), Path(cfg.report_dir)
+    if cfg.get("rerun"):
+        rerun_log.require()  # before the rollouts, not after them
     runs, skipped = load_runs(cfg, outputs)
     if not runs and not cfg.dataset:
         raise EvalError(f"no finished run under {outputs} (make train first, or pass dataset=PATH)")
@@ -66,6 +70,9 @@ def evaluate(cfg: DictConfig) -> Path:
         figures.plot_energy(report_dir / "figures" / "energy_ood.png", out.energies, dts)
     if cfg.videos and film is not None:
         write_videos(report_dir / "videos", film, out.films, cfg.video_frames)
+    if cfg.get("rerun"):
+        for scene, (traj, pred) in sorted(out.films.items()):
+            rerun_log.log_rerun(report_dir / "videos" / f"{scene}.rrd", traj, pred)
     bench_dir = cfg.paths.get("bench_dir")
     return write_report(report_dir, out.rows, bench_dir=bench_dir, skipped=skipped)
 
