@@ -33,31 +33,38 @@ def test_a_wall_faces_the_camera_only_from_its_inner_side():
     assert not V.faces(wall, np.array([20.0, 0.0, 10.0]))  # behind it: it would hide all
 
 
-def test_camera_target_ignores_a_short_excursion():
+def test_camera_box_ignores_a_short_excursion():
     # 10 spheres resting at z = 0.5 in [0, 9] along x for 100 frames; one of them is 200 m up
     # during the first 3 frames (3 of 1000 positions): the view stays on the resting spheres
     pos = np.zeros((100, 10, 3))
     pos[..., 0], pos[..., 2] = np.arange(10), 0.5
     pos[:3, 0, 2] = 200.0
-    centre, extent = V.camera_target(pos, np.full(10, 0.5))
-    assert centre[2] < 1.0 and extent < 6.0
+    lo, hi = V.camera_box(pos, np.full(10, 0.5))
+    np.testing.assert_allclose(lo, [-0.5, -0.5, 0.0])
+    np.testing.assert_allclose(hi, [9.5, 0.5, 1.0])
 
 
-def test_walls_before_the_spheres_are_cut_away(monkeypatch):
-    # simdata's trajectory: spheres inside 4 walls 10 m wide; any camera outside them sees
-    # the spheres only through a cut-away. A frame changes when the spheres are taken away.
-    traj = trajectory(n=3, frames=2)
-    centre, extent = V.camera_target(traj.pos, traj.radius)
-    xyzw = np.tile([0.0, 0.0, 0.0, 1.0], (3, 1))
-    away = np.full((3, 3), -100.0)
+def ndc(view, point, distance: float) -> np.ndarray:
+    """Normalised device coordinates (x, y) of ``point`` seen by the renderer's camera."""
+    proj = np.asarray(p.computeProjectionMatrixFOV(V.FOV, V.WIDTH / V.HEIGHT, 0.05, 10 * distance))
+    clip = proj.reshape(4, 4).T @ np.asarray(view).reshape(4, 4).T @ np.append(point, 1.0)
+    return clip[:2] / clip[3]
 
-    def seen(render: V.Renderer) -> float:
-        with render as r:
-            return float(np.abs(r.frame(traj.pos[0], xyzw) - r.frame(away, xyzw).astype(int)).sum())
 
-    assert seen(V.Renderer(traj.radius, traj.planes, traj.plane_kind, centre, extent)) > 0
-    monkeypatch.setattr(V, "faces", lambda row, eye: True)  # every wall drawn: hidden
-    assert seen(V.Renderer(traj.radius, traj.planes, traj.plane_kind, centre, extent)) == 0
+@pytest.mark.parametrize("hi", [(10.0, 2.0, 1.0), (1.0, 1.0, 30.0), (4.0, 6.0, 3.0)])
+def test_fit_distance_frames_the_box_just(hi):
+    lo, hi = np.zeros(3), np.asarray(hi)
+    centre = (lo + hi) / 2
+    unit = p.computeViewMatrixFromYawPitchRoll(centre.tolist(), 1.0, V.YAW, V.PITCH, 0.0, 2)
+    d = V.fit_distance(unit, lo, hi, margin=1.0)
+    corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T
+
+    def widest(distance):
+        view = p.computeViewMatrixFromYawPitchRoll(centre.tolist(), distance, V.YAW, V.PITCH, 0, 2)
+        return max(np.abs(ndc(view, c, distance)).max() for c in corners)
+
+    assert widest(d) == pytest.approx(1.0, abs=1e-4)  # a corner on the picture's edge
+    assert widest(1.1 * d) < 1.0 < widest(0.9 * d)
 
 
 def test_diverged_prediction_is_held_and_marked():
