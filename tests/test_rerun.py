@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,17 +15,7 @@ from physgnn import metrics
 from physgnn.evaluation.rerun_log import RerunMissing, log_rerun
 from physgnn.simulate import main
 
-SCENE = """
-name: pair
-dt: 0.1
-frames: 5
-spheres:
-  - {radius: 0.5, position: [0, 0, 2], velocity: [1, 0, 0]}
-  - {radius: 0.5, position: [1.5, 0, 0.5]}
-planes:
-  - {kind: static, centre: [3, 0, 1], normal: [-1, 0, 0], reference: [0, 1, 0],
-     half_lengths: [2, 1]}
-"""
+SCENE = Path(__file__).resolve().parents[1] / "conf" / "scenes" / "head_on.yaml"
 
 
 def read_back(path) -> dict:
@@ -62,9 +53,8 @@ def test_recording_holds_truth_prediction_planes_and_energy(tmp_path):
 
 def test_simulate_writes_the_recording(tmp_path, capsys):
     pytest.importorskip("rerun")
-    (tmp_path / "pair.yaml").write_text(SCENE)
-    rrd = tmp_path / "pair.rrd"
-    main([f"scene={tmp_path / 'pair.yaml'}", f"out={tmp_path}", "video=false", f"rerun={rrd}"])
+    rrd = tmp_path / "head_on.rrd"
+    main([f"scene={SCENE}", f"out={tmp_path}", "frames=5", "video=false", f"rerun={rrd}"])
     assert f"rerun: {rrd}" in capsys.readouterr().out
     chunks = read_back(rrd)
     assert chunks["/truth/spheres"].num_rows == 5 and "/prediction/spheres" not in chunks
@@ -72,9 +62,8 @@ def test_simulate_writes_the_recording(tmp_path, capsys):
 
 def test_simulate_without_the_extra_is_one_line_before_any_work(tmp_path, monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "rerun", None)  # import rerun raises ImportError
-    (tmp_path / "pair.yaml").write_text(SCENE)
     with pytest.raises(SystemExit) as e:
-        main([f"scene={tmp_path / 'pair.yaml'}", f"out={tmp_path}", "rerun=x.rrd"])
+        main([f"scene={SCENE}", f"out={tmp_path}", "rerun=x.rrd"])
     err = capsys.readouterr().err
     assert e.value.code == 2 and err.count("\n") == 1
     assert 'needs the optional rerun-sdk: pip install -e ".[rerun]"' in err
