@@ -49,8 +49,8 @@ def write_report(
 ) -> Path:
     """Write ``report.md`` (and the sweep / FPS / Pareto figures) from ``report_dir/metrics.csv``.
 
-    Figures the eval already wrote (``figures/energy_ood.png``, ``videos/*.gif``) are linked;
-    the Pareto view needs ``bench_dir/bench.json``.
+    Figures the eval already wrote (``figures/energy_ood.png``, ``videos/*.gif`` and
+    ``.mp4``) are linked; the Pareto view needs ``bench_dir/bench.json``.
     """
     root = Path(report_dir)
     rows = read_csv(root / "metrics.csv") if rows is None else rows
@@ -82,6 +82,14 @@ def write_report(
     return write_text(root / "report.md", "\n\n".join(parts) + "\n")
 
 
+def _video_line(gif: Path, root: Path) -> str:
+    """``- [scene](videos/scene.gif) ([MP4](videos/scene.mp4))``, the MP4 when there is one."""
+    mp4 = gif.with_suffix(".mp4")
+    return f"- [{gif.stem}]({rel(gif, root)})" + (
+        f" ([MP4]({rel(mp4, root)}))" if mp4.exists() else ""
+    )
+
+
 def _figures(rows: list[dict], bench_dir, root: Path) -> list[str]:
     """The sections of figures and videos: runtime, Pareto view, OOD energy, videos."""
     fig_dir = root / "figures"
@@ -95,6 +103,6 @@ def _figures(rows: list[dict], bench_dir, root: Path) -> list[str]:
         pareto_section(rows, bench_dir, fig_dir, root),
         "## Energy over time on the OOD scenes",
         f"![energy]({rel(energy, root)})" if energy.exists() else "No OOD energy figure.",
-        "## Videos (ground truth left, prediction right)",
-        "\n".join(f"- [{v.stem}]({rel(v, root)})" for v in videos) or "No videos.",
+        "## Videos (ground truth left, prediction right; shaded 3-D)",
+        "\n".join(_video_line(v, root) for v in videos) or "No videos.",
     ]
