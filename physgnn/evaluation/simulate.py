@@ -18,7 +18,6 @@ Hydra would read the ``scene`` config group).
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
@@ -27,6 +26,7 @@ from physgnn import metrics
 from physgnn.data.dataset import write_split
 from physgnn.errors import PhysgnnError
 from physgnn.evaluation.video3d import render_side_by_side
+from physgnn.files import write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.groundtruth.scenefile import load_scene
 from physgnn.physics.trajectory import Trajectory
@@ -103,7 +103,7 @@ def simulate(args: DictConfig | dict) -> dict:
     }
     if str(args["video"]).lower() == "true":
         result["files"].update(write_videos(out, truth, pred, bool(source)))
-    (out / "metrics.json").write_text(json.dumps(result, indent=2))
+    write_json(out / "metrics.json", result)
     return result
 
 

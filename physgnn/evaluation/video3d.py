@@ -19,6 +19,7 @@ import numpy as np
 import torch
 from PIL import Image, ImageDraw
 
+from physgnn.files import atomic_path
 from physgnn.groundtruth.engine import p, plane_box_pose
 from physgnn.physics import quaternion as Q
 from physgnn.physics.scene import GROUND
@@ -138,11 +139,14 @@ def render_side_by_side(
                            (200, 0, 0) if stopped else (0, 0, 0))  # fmt: skip
             images.append(np.concatenate([left, right], axis=1))
     files = {"gif": stem.with_suffix(".gif"), "png": stem.with_name(stem.name + "_frame.png")}
-    imageio.mimsave(files["gif"], images, format="GIF", duration=1000.0 / fps, loop=0)
-    imageio.imwrite(files["png"], images[len(images) // 2])
+    with atomic_path(files["gif"], keep_suffix=True) as tmp:
+        imageio.mimsave(tmp, images, format="GIF", duration=1000.0 / fps, loop=0)
+    with atomic_path(files["png"], keep_suffix=True) as tmp:
+        imageio.imwrite(tmp, images[len(images) // 2])
     try:
         files["mp4"] = stem.with_suffix(".mp4")
-        imageio.mimsave(files["mp4"], images, format="FFMPEG", fps=fps, macro_block_size=16)
+        with atomic_path(files["mp4"], keep_suffix=True) as tmp:
+            imageio.mimsave(tmp, images, format="FFMPEG", fps=fps, macro_block_size=16)
     except (ImportError, ValueError, RuntimeError) as e:  # no ffmpeg: GIF only
         print(f"warning: no MP4 written ({str(e).splitlines()[0]}); the GIF is there")
         files.pop("mp4")
