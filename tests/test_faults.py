@@ -19,11 +19,13 @@ import pytest
 import torch
 from conftest import compose_generate
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 from test_train import CONF, SHORT, config, outputs_of, run_main
 
 import physgnn.groundtruth.generate as gen
 from physgnn import generate as generate_command
 from physgnn import train as train_command
+from physgnn.cli import command
 from physgnn.data.dataset import DATASET_MARKER
 from physgnn.errors import ConfigError, interrupt_signal, sigterm_interrupts
 from physgnn.evaluation.data_report import DataReportError, data_report
@@ -121,20 +123,25 @@ def test_export_scene_replaces_no_file(tmp_path):
 # --- Ctrl-C and SIGTERM during training -----------------------------------------------------
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_mid_epoch_stops_saves_and_resumes(tiny_dataset, tmp_path, signum):
     budget = [*SHORT, "trainer.max_epochs=2", "datamodule.pairs_per_epoch=16"]  # 4 steps/epoch
+    run_dir = tmp_path / "runs" / "stopped"
     handler = signal.getsignal(signum)
     with pytest.raises(TrainingInterrupted, match=f"stopped by {signum.name} at step 2") as stop:
-        train(config(tiny_dataset, tmp_path, *budget, *signal_at(signum, 2)))
+        train(config(tiny_dataset, run_dir, *budget, *signal_at(signum, 2)))
     assert stop.value.exit_code == 128 + signum and signal.getsignal(signum) == handler
-    info = read_run_json(tmp_path)
+    info = read_run_json(run_dir)
     assert info["status"] == "interrupted" and info["error"] == f"stopped by {signum.name}"
     assert info["global_step"] == 2 and info["pairs_seen"] == 8 and info["epochs"] == 0
-    last = tmp_path / "checkpoints" / "last.ckpt"
+    last = run_dir / "checkpoints" / "last.ckpt"
     assert info["checkpoints"]["last"] == str(last)
     assert torch.load(last, weights_only=True)["global_step"] == 2  # mid-epoch
-    resumed = train(config(tiny_dataset, tmp_path, *budget))  # the same folder: resumes
+    note = f"`runs/stopped`: status interrupted (stopped by {signum.name})"
+    assert load_runs(compose_eval(tmp_path), tmp_path) == ([], [note])  # eval lists it
+    with pytest.raises(ConfigError, match="model.M must be a whole number"):  # a typo on restart
+        train(config(tiny_dataset, run_dir, *budget, "model.M=abc"))
+    resumed = train(config(tiny_dataset, run_dir, *budget))  # the same folder: resumes
     assert resumed["status"] == "finished" and resumed["resumed_from"] == str(last)
     assert resumed["global_step"] == 8 and resumed["pairs_seen"] == 32
     assert resumed["sessions"] == 2 and resumed["train_time_s"] > info["train_time_s"]
@@ -226,11 +233,25 @@ def test_resuming_a_missing_or_foreign_checkpoint_is_one_line(tiny_dataset, tmp_
     assert read_run_json(tmp_path / "b")["status"] == "failed"
 
 
-def test_a_run_folder_is_never_trained_over(tiny_dataset, tmp_path):
-    train(config(tiny_dataset, tmp_path, *SHORT))
-    with pytest.raises(ConfigError, match=f"run_dir {tmp_path} already holds a finished run"):
+@pytest.mark.parametrize("status", ["finished", "truncated", "diverged", "debug"])
+def test_a_run_folder_is_never_trained_over(tiny_dataset, tmp_path, status):
+    (tmp_path / "checkpoints").mkdir()
+    (tmp_path / "checkpoints" / "best-epoch001.ckpt").write_bytes(b"weights")
+    (tmp_path / "run.json").write_text(json.dumps({"status": status}))
+    with pytest.raises(ConfigError, match=f"run_dir {tmp_path} already holds a {status} run"):
         train(config(tiny_dataset, tmp_path, *SHORT))
-    assert read_run_json(tmp_path)["status"] == "finished"
+    assert read_run_json(tmp_path) == {"status": status}
+    assert (tmp_path / "checkpoints" / "best-epoch001.ckpt").read_bytes() == b"weights"
+
+
+def test_any_command_stopped_by_ctrl_c_is_one_line(capsys):
+    def stopped(cfg):
+        raise KeyboardInterrupt
+
+    with pytest.raises(SystemExit) as exit_info:
+        command("eval", stopped).__wrapped__(OmegaConf.create())
+    assert exit_info.value.code == 130
+    assert capsys.readouterr().err == "error: eval interrupted (exit code 130)\n"
 
 
 @pytest.mark.parametrize(
@@ -327,7 +348,7 @@ def children(pid: int) -> list[int]:
     return [int(p) for p in found.stdout.split()]
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_killing_generate_is_one_line_and_leaves_the_dataset(tiny_dataset, tmp_path, signum):
     data = copy_dataset(tiny_dataset, tmp_path)
     before = {p.name: p.read_bytes() for p in data.iterdir()}

@@ -18,8 +18,9 @@ from physgnn.training.runs import RUN_JSON, run_status
 
 HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
 # A run folder in one of these states is resumed from its last.ckpt when trained again (a
-# requeued cluster job); any other run with checkpoints is never trained over.
-RESUMABLE = ("interrupted", "running")
+# requeued cluster job; a run killed outright; a run whose restart had a config mistake); any
+# other run with checkpoints (finished, truncated, diverged, debug) is never trained over.
+RESUMABLE = ("interrupted", "running", "failed")
 WORDS = {int: "a whole number", float: "a number", bool: "true or false", str: "a string"}
 
 
