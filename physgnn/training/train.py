@@ -111,14 +111,15 @@ def _log_to_run_file() -> None:
             logger.propagate = True
 
 
-def _start(cfg: DictConfig, run_dir: Path, ckpt_path: str | None) -> dict:
+def _start(cfg: DictConfig, run_dir: Path) -> dict:
+    """run.json of a run that starts (``resumed_from`` is filled in once known)."""
     return {
         "status": "running",
         "experiment": cfg.experiment_name,
         "overrides": _overrides(),
         "seed": int(cfg.seed),
         "run_dir": str(run_dir),
-        "resumed_from": ckpt_path,
+        "resumed_from": None,
         "started": datetime.now().isoformat(timespec="seconds"),
         "host": socket.gethostname(),
         "pid": os.getpid(),
@@ -132,7 +133,7 @@ def train(cfg: DictConfig) -> dict:
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     check_run_dir(cfg, run_dir)  # before run.json is written: the folder may be another run's
-    info = _start(cfg, run_dir, None)
+    info = _start(cfg, run_dir)
     progress, stop, trainer = RunProgress(), StopOnSignal(), None
     stop.install()
     try:
