@@ -6,7 +6,12 @@ console script or a test), ``run(cfg)`` does the work and ``done(result)`` (opti
 the line to print. An error of the user's making (:class:`~physgnn.errors.PhysgnnError`, a
 Hydra or OmegaConf error raised while running, a file missing or already there) is printed
 as one line ``error: <message>`` and exits with its ``exit_code`` (2 unless it says
-otherwise); anything else is a bug and keeps its traceback.
+otherwise); anything else is a bug and keeps its traceback. Ctrl-C and SIGTERM print one
+line too and exit with 128 + the signal (:class:`~physgnn.errors.Interrupted`).
+
+In a sweep (``-m``, ``hydra.mode=MULTIRUN``) a failing job does not end the sweep: its error
+is printed (one line, or the traceback of a bug) and the job returns None; the run records the
+failure (``run.json``) and the sweep's summary counts it. An interruption still stops it.
 
 A command whose arguments Hydra cannot read (``simulate``: ``scene=FILE`` names a file, where
 Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instead: its
@@ -16,16 +21,25 @@ Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instea
 from __future__ import annotations
 
 import sys
+import traceback
 from collections.abc import Callable
 from typing import NoReturn
 
 import hydra
+from hydra.core.hydra_config import HydraConfig
 from hydra.errors import HydraException
+from hydra.types import RunMode
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
-from physgnn.errors import PhysgnnError, one_line
+from physgnn.errors import (
+    Interrupted,
+    PhysgnnError,
+    interrupt_signal,
+    one_line,
+    sigterm_interrupts,
+)
 
 USER_ERRORS = (
     PhysgnnError,
@@ -54,9 +68,18 @@ def command(
 
     def main(cfg: DictConfig):
         try:
-            result = run(cfg)
-        except USER_ERRORS as err:
-            fail(err)
+            with sigterm_interrupts():
+                result = run(cfg)
+        except KeyboardInterrupt as err:
+            signum = interrupt_signal(err)
+            fail(Interrupted(f"{name} interrupted (exit code {128 + signum})", signum))
+        except Exception as err:
+            if _in_sweep() and not isinstance(err, Interrupted):
+                _report_failed_job(err)
+                return None
+            if isinstance(err, USER_ERRORS):
+                fail(err)
+            raise
         if done is not None:
             print(done(result))
         return result
@@ -66,6 +89,17 @@ def command(
     if parse is not None:
         return _parsed(main, parse)
     return hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main)
+
+
+def _in_sweep() -> bool:
+    return HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
+
+
+def _report_failed_job(err: Exception) -> None:
+    """One line for a user error, the traceback for a bug; the sweep goes on."""
+    if not isinstance(err, USER_ERRORS):
+        traceback.print_exception(err)
+    print(f"error: {one_line(err)} (this job failed; the sweep goes on)", file=sys.stderr)
 
 
 def _parsed(body: Callable, parse: Callable[[list[str]], DictConfig]) -> Callable:

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import pytest
+from hydra.core.hydra_config import HydraConfig
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 
@@ -57,3 +59,14 @@ def tiny_run(tiny_dataset, tmp_path_factory) -> Path:
     (run_dir / ".hydra").mkdir()
     (run_dir / ".hydra" / "config.yaml").write_text(OmegaConf.to_yaml(cfg))
     return run_dir
+
+
+@pytest.fixture(autouse=True)
+def hydra_leaves_nothing_behind():
+    """An in-process Hydra ``main`` gives the root logger handlers on this test's captured
+    streams and keeps its config: both are put back after each test."""
+    handlers, level = logging.root.handlers[:], logging.root.level
+    yield
+    logging.root.handlers[:] = handlers
+    logging.root.setLevel(level)
+    HydraConfig.instance().cfg = None

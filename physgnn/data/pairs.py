@@ -41,19 +41,25 @@ class EpochSampler(Sampler):
     """``num_samples`` indices drawn uniformly with replacement from ``range(size)``, seeded by
     ``(seed, epoch)``: epoch k draws the same pairs whether training ran straight through or
     resumed from a checkpoint. Lightning calls ``set_epoch`` before each epoch; without it
-    (e.g. inside a distributed wrapper) each iteration moves on to the next epoch."""
+    each iteration moves on to the next epoch.
 
-    def __init__(self, size: int, num_samples: int, seed: int):
+    With ``world_size`` > 1 (DDP) process ``rank`` takes every ``world_size``-th index from
+    the ``rank``-th (the draw cut to a multiple of ``world_size``): the processes' batches of a
+    step together are the batch of one process with a ``world_size`` times larger batch."""
+
+    def __init__(self, size: int, num_samples: int, seed: int, rank: int = 0, world_size: int = 1):
         self.size, self.num_samples, self.seed = int(size), int(num_samples), int(seed)
+        self.rank, self.world_size = int(rank), int(world_size)
         self.epoch = 0
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = int(epoch)
 
     def __len__(self) -> int:
-        return self.num_samples
+        return self.num_samples // self.world_size
 
     def __iter__(self):
         generator = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
         self.epoch += 1
-        yield from torch.randint(self.size, (self.num_samples,), generator=generator).tolist()
+        drawn = torch.randint(self.size, (self.num_samples,), generator=generator)
+        yield from drawn[self.rank : len(self) * self.world_size : self.world_size].tolist()

@@ -20,7 +20,6 @@ Hydra would read the ``scene`` config group).
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
@@ -30,6 +29,7 @@ from physgnn.data.dataset import write_split
 from physgnn.errors import PhysgnnError
 from physgnn.evaluation import rerun_log
 from physgnn.evaluation.video3d import render_side_by_side
+from physgnn.files import write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.groundtruth.scenefile import load_scene
 from physgnn.physics.trajectory import Trajectory
@@ -118,7 +118,7 @@ def simulate(args: DictConfig | dict) -> dict:
         result["files"].update(write_videos(out, truth, pred, bool(source)))
     if args["rerun"]:
         result["files"]["rerun"] = str(rerun_log.log_rerun(args["rerun"], truth, pred))
-    (out / "metrics.json").write_text(json.dumps(result, indent=2))
+    write_json(out / "metrics.json", result)
     return result
 
 

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 from PIL import Image, ImageDraw
 
+from physgnn.files import atomic_path
 from physgnn.groundtruth.engine import p, plane_box_pose
 from physgnn.physics import quaternion as Q
 from physgnn.physics.scene import GROUND, WALL
@@ -216,10 +217,13 @@ def render_side_by_side(
     stem.parent.mkdir(parents=True, exist_ok=True)
     images = side_by_side_frames(truth, pred, right_label, title, max_frames)
     files = {"gif": f"{stem}.gif", "png": f"{stem}_frame.png"}
-    imageio.mimsave(files["gif"], images, format="GIF", duration=1000.0 / fps, loop=0)
-    imageio.imwrite(files["png"], images[len(images) // 2])
+    with atomic_path(files["gif"], keep_suffix=True) as tmp:
+        imageio.mimsave(tmp, images, format="GIF", duration=1000.0 / fps, loop=0)
+    with atomic_path(files["png"], keep_suffix=True) as tmp:
+        imageio.imwrite(tmp, images[len(images) // 2])
     try:
-        imageio.mimsave(f"{stem}.mp4", images, format="FFMPEG", fps=fps, macro_block_size=16)
+        with atomic_path(f"{stem}.mp4", keep_suffix=True) as tmp:
+            imageio.mimsave(tmp, images, format="FFMPEG", fps=fps, macro_block_size=16)
         files["mp4"] = f"{stem}.mp4"
     except (ImportError, ValueError, RuntimeError) as e:  # no ffmpeg: GIF only
         print(f"warning: no MP4 written ({str(e).splitlines()[0]}); the GIF is there")

@@ -3,8 +3,9 @@
 A *pair* is a frame ``t`` of a training trajectory with ``t ∈ [H, T − 2]``: the state at ``t``
 with ``H + 1`` velocities of history, and the finite-difference velocities of frame ``t + 1``
 as targets (:class:`physgnn.data.state.TrajectoryFrames`). An epoch is ``pairs_per_epoch`` pairs
-drawn uniformly with replacement by a sampler seeded by (seed, epoch); validation is a fixed
-seeded subset of the validation split. Input noise is added by the Lightning module, not
+drawn uniformly with replacement by a sampler seeded by (seed, epoch), shared out between DDP
+processes; validation is a fixed seeded subset of the validation split (each process
+validates all of it). Input noise is added by the Lightning module, not
 here, so the data stream is the same with or without noise.
 """
 
@@ -104,7 +105,12 @@ class StatePairDataModule(L.LightningDataModule):
 
     def train_dataloader(self) -> DataLoader:
         self.setup()
-        sampler = EpochSampler(len(self.train_set), self.pairs_per_epoch, self.seed)
+        # Under DDP each process draws its share itself (the trainer is built with
+        # use_distributed_sampler=False: Lightning's sampler would reshuffle the step's pairs)
+        rank, world = (
+            (self.trainer.global_rank, self.trainer.world_size) if self.trainer else (0, 1)
+        )
+        sampler = EpochSampler(len(self.train_set), self.pairs_per_epoch, self.seed, rank, world)
         return self._loader(self.train_set, sampler=sampler)
 
     def val_dataloader(self) -> DataLoader:
