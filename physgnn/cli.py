@@ -8,6 +8,10 @@ Hydra or OmegaConf error raised while running, a file missing or already there) 
 as one line ``error: <message>`` and exits with its ``exit_code`` (2 unless it says
 otherwise); anything else is a bug and keeps its traceback.
 
+Before the work, torch gets as many threads as the cores other processes leave free
+(:func:`free_threads`): on a busy machine a second thread only waits for a core, and steps
+ran several times slower than on one thread. ``OMP_NUM_THREADS``, when set, wins.
+
 A command whose arguments Hydra cannot read (``simulate``: ``scene=FILE`` names a file, where
 Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instead: its
 ``main(argv=None)`` parses ``sys.argv[1:]`` (or ``argv``) itself, with the same errors.
@@ -15,11 +19,14 @@ Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instea
 
 from __future__ import annotations
 
+import math
+import os
 import sys
 from collections.abc import Callable
 from typing import NoReturn
 
 import hydra
+import torch
 from hydra.errors import HydraException
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
@@ -42,6 +49,20 @@ def fail(err: BaseException) -> NoReturn:
     sys.exit(getattr(err, "exit_code", 2))
 
 
+def free_threads() -> int | None:
+    """Set torch's threads to the cores the 1-minute load average leaves free (at least 1) and
+    return that count; None (threads untouched) when ``OMP_NUM_THREADS`` is set."""
+    if os.environ.get("OMP_NUM_THREADS"):
+        return None
+    cores = os.cpu_count() or 1
+    load = os.getloadavg()[0]
+    threads = max(1, min(cores, cores - math.floor(load + 0.5)))
+    if threads < torch.get_num_threads():
+        print(f"threads: {threads} of {cores} cores (load average {load:.1f}; OMP_NUM_THREADS=N)")
+    torch.set_num_threads(threads)
+    return threads
+
+
 def command(
     name: str,
     run: Callable[[DictConfig], object],
@@ -53,6 +74,7 @@ def command(
     without Hydra (for tests). With ``parse`` there is no Hydra (module doc)."""
 
     def main(cfg: DictConfig):
+        free_threads()
         try:
             result = run(cfg)
         except USER_ERRORS as err:

@@ -12,7 +12,7 @@ import functools
 import lightning as L
 import pytest
 import torch
-from lightning.pytorch.callbacks import Callback
+from lightning.pytorch.callbacks import Callback, ModelCheckpoint
 from simdata import STATS, trajectory
 from torch.testing import assert_close
 from torch_geometric.loader import DataLoader as PygLoader
@@ -140,3 +140,26 @@ def test_short_training_losses_equal_the_per_pair_path(data_dir):
     assert_close(torch.stack(new.val), torch.stack(old.val), rtol=1e-6, atol=1e-7)
     for key, value in old_weights.items():
         assert_close(new_weights[key], value, rtol=1e-6, atol=1e-7)
+
+
+def test_a_run_resumed_mid_epoch_equals_a_straight_one(data_dir, tmp_path):
+    """A checkpoint after 4 of 6 steps (epoch 1 of 3 batches, one batch done), resumed: the
+    same batches, noise and weights as the straight run."""
+    straight, straight_weights = short_training(
+        lambda trainer, lit: trainer.fit(lit, datamodule=module(data_dir, 3, 2))
+    )
+    saver = ModelCheckpoint(dirpath=tmp_path, every_n_train_steps=4, save_top_k=-1)
+
+    def with_saver(trainer, lit):
+        trainer.callbacks.append(saver)
+        trainer.fit(lit, datamodule=module(data_dir, 3, 2))
+
+    short_training(with_saver)
+    [mid] = list(tmp_path.glob("*step=4.ckpt"))
+    resumed, resumed_weights = short_training(
+        lambda trainer, lit: trainer.fit(lit, datamodule=module(data_dir, 3, 2), ckpt_path=mid)
+    )
+    assert len(resumed.train) == 2
+    assert_close(torch.stack(resumed.train), torch.stack(straight.train[4:]))
+    for key, value in straight_weights.items():
+        assert_close(resumed_weights[key], value)

@@ -16,6 +16,8 @@ would give (same fields, same values, same order), without building one object p
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 from torch_geometric.data import Batch
@@ -130,10 +132,17 @@ class EpochSampler(Sampler):
     """``num_samples`` indices drawn uniformly with replacement from ``range(size)``, seeded by
     ``(seed, epoch)``: epoch k draws the same pairs whether training ran straight through or
     resumed from a checkpoint. Lightning calls ``set_epoch`` before each epoch; without it
-    (e.g. inside a distributed wrapper) each iteration moves on to the next epoch."""
+    (e.g. inside a distributed wrapper) each iteration moves on to the next epoch.
 
-    def __init__(self, size: int, num_samples: int, seed: int):
+    ``batches_done()`` (optional) is the number of batches trained so far, read when a pass
+    starts: a run resumed from a mid-epoch checkpoint then leaves out the ``batch_size``-sized
+    batches its epoch had already given, and goes on as a straight run would."""
+
+    def __init__(
+        self, size: int, num_samples: int, seed: int, batch_size: int = 1, batches_done=None
+    ):
         self.size, self.num_samples, self.seed = int(size), int(num_samples), int(seed)
+        self.batch_size, self.batches_done = int(batch_size), batches_done
         self.epoch = 0
 
     def set_epoch(self, epoch: int) -> None:
@@ -144,5 +153,14 @@ class EpochSampler(Sampler):
 
     def __iter__(self):
         generator = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
+        skip = self._resumed_batches() * self.batch_size
         self.epoch += 1
-        yield from torch.randint(self.size, (self.num_samples,), generator=generator).tolist()
+        drawn = torch.randint(self.size, (self.num_samples,), generator=generator)
+        yield from drawn[skip:].tolist()
+
+    def _resumed_batches(self) -> int:
+        """Batches of the epoch starting now that were trained before (0 unless resumed)."""
+        if self.batches_done is None:
+            return 0
+        per_epoch = math.ceil(self.num_samples / self.batch_size)
+        return min(max(int(self.batches_done()) - self.epoch * per_epoch, 0), per_epoch)

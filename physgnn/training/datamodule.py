@@ -91,8 +91,23 @@ class StatePairDataModule(L.LightningDataModule):
 
     def train_dataloader(self) -> torch.utils.data.DataLoader:
         self.setup()
-        sampler = EpochSampler(len(self.train_set), self.pairs_per_epoch, self.seed)
+        sampler = EpochSampler(
+            len(self.train_set),
+            self.pairs_per_epoch,
+            self.seed,
+            self.batch_size,
+            self._batches_done,
+        )
         return pair_loader(self.train_set, self.batch_size, sampler, self.num_workers)
+
+    def _batches_done(self) -> int:
+        """Batches trained so far (the trainer's step count; 0 without a trainer or with
+        several processes): a run resumed mid-epoch goes on with the pairs its epoch had not
+        reached (so Lightning's warning of a loader that cannot resume does not apply)."""
+        trainer = self.trainer
+        if trainer is None or trainer.world_size > 1:
+            return 0
+        return trainer.global_step * trainer.accumulate_grad_batches
 
     def val_dataloader(self) -> torch.utils.data.DataLoader:
         self.setup()
