@@ -74,7 +74,8 @@ class PairDataset(Dataset):
         return self.batch(torch.as_tensor(ks, dtype=torch.long))
 
     def batch(self, index: torch.Tensor) -> Batch:
-        """The batched :class:`SceneState` of the pairs ``index [B]``, in that order."""
+        """The batched :class:`SceneState` of the pairs ``index [B]``, in that order
+        (``num_graphs`` from ``ptr``; it keeps no per-pair slices for ``to_data_list``)."""
         traj, t = self.pairs[index].unbind(1)
         node_graph, local, ptr = _segments(self.n_spheres[traj])
         n = self.n_spheres[traj][node_graph][:, None]  # [N, 1] spheres of the node's scene
@@ -96,9 +97,7 @@ class PairDataset(Dataset):
         if self.future > 0:
             ahead = base + (frame + 1 + torch.arange(self.future + 1)) * n  # [N, K+1]
             fields["future_pos"], fields["future_angvel"] = tab["pos"][ahead], tab["angvel"][ahead]
-        out = Batch(_base_cls=SceneState, **fields, batch=node_graph, ptr=ptr)
-        out._num_graphs = int(index.numel())
-        return out
+        return Batch(_base_cls=SceneState, **fields, batch=node_graph, ptr=ptr)
 
 
 def _segments(counts: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
