@@ -8,8 +8,8 @@ TORCH_PIN ?= torch==2.13.0
 PRESET ?= small
 ARGS ?=
 EXPERIMENT ?= ablation_M
-# OpenMP threads spin briefly, then sleep: the default 300 000 spins made 2-thread steps up to
-# 9x slower when other processes kept the cores busy (physgnn/__init__.py, docs/PERFORMANCE.md).
+# OpenMP threads spin briefly, then sleep: the default 300 000 spins made 2-thread steps about
+# 8x slower when other processes kept the cores busy (physgnn/__init__.py, docs/PERFORMANCE.md).
 export GOMP_SPINCOUNT ?= 1000
 
 help: ## List the targets

@@ -11,8 +11,8 @@ CONF_DIR = str(_Path(__file__).resolve().parent.parent / "conf")
 
 # OpenMP threads that wait for work spin 300 000 rounds by default (GNU OpenMP, which torch's
 # CPU wheel uses) before they sleep. When other processes keep the cores busy, those spinning
-# threads take the CPU from the one thread still working: 2-thread training steps ran up to
-# 9x slower than 1-thread ones (docs/PERFORMANCE.md). 1 000 rounds (tens of microseconds)
-# still bridge the gaps between the operations of one step. Read by the OpenMP runtime when
-# torch is first imported, so it acts for `python -m physgnn.X`; an explicit setting wins.
+# threads take the CPU from the one thread still working: 2-thread training steps ran about
+# 8x slower than 1-thread ones (docs/PERFORMANCE.md). 1 000 rounds still bridge the short
+# gaps between the operations of one step. Read by the OpenMP runtime when torch is first
+# imported, so it acts for `python -m physgnn.X`; an explicit setting wins.
 _os.environ.setdefault("GOMP_SPINCOUNT", "1000")
