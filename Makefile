@@ -15,12 +15,12 @@ export GOMP_SPINCOUNT ?= 1000
 help: ## List the targets
 	@grep -hE '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-12s\033[0m %s\n", $$1, $$2}'
 
-install: ## Make .venv and install physgnn with its dev tools (CPU torch wheel, nothing compiled)
+install: ## Make .venv and install physgnn with its dev tools and the Hydra launchers (CPU torch wheel, nothing compiled)
 	test -x $(PY) || python3 -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q "$(TORCH_PIN)"
-	$(PIP) install -q -e ".[dev]"
-	$(PY) -c "import torch, torch_geometric, lightning, pybullet, h5py; print('physgnn environment ready: torch', torch.__version__)"
+	$(PIP) install -q -e ".[dev,launchers]"
+	$(PY) -c "import torch, torch_geometric, lightning, pybullet, h5py, submitit, hydra_plugins.hydra_joblib_launcher; print('physgnn environment ready: torch', torch.__version__)"
 
 test: ## Run the fast test suite
 	$(PY) -m pytest $(ARGS)
@@ -39,8 +39,8 @@ format: ## Format and autofix with ruff
 data: ## Generate the dataset (PRESET=small|tiny|paper) under outputs/data/<preset>
 	$(PY) -m physgnn.generate data=$(PRESET) $(ARGS)
 
-data-report: ## Print Table 1 of the dataset (PRESET=small)
-	$(PY) -m physgnn.data_report dataset=outputs/data/$(PRESET) $(ARGS)
+data-report: ## Print Table 1 of the dataset (PRESET=small; PHYSGNN_OUTPUTS moves outputs/)
+	$(PY) -m physgnn.data_report preset=$(PRESET) $(ARGS)
 
 train: ## Train the baseline on data=small (ARGS: Hydra overrides, e.g. ARGS="model.M=3 seed=1")
 	$(PY) -m physgnn.train $(ARGS)

@@ -6,7 +6,12 @@ console script or a test), ``run(cfg)`` does the work and ``done(result)`` (opti
 the line to print. An error of the user's making (:class:`~physgnn.errors.PhysgnnError`, a
 Hydra or OmegaConf error raised while running, a file missing or already there) is printed
 as one line ``error: <message>`` and exits with its ``exit_code`` (2 unless it says
-otherwise); anything else is a bug and keeps its traceback.
+otherwise); anything else is a bug and keeps its traceback. Ctrl-C and SIGTERM print one
+line too and exit with 128 + the signal (:class:`~physgnn.errors.Interrupted`).
+
+In a sweep (``-m``, ``hydra.mode=MULTIRUN``) a failing job does not end the sweep: its error
+is printed (one line, or the traceback of a bug) and the job returns None; the run records the
+failure (``run.json``) and the sweep's summary counts it. An interruption still stops it.
 
 Before the work, torch gets as many threads as the cores other processes leave free
 (:func:`free_threads`): on a busy machine a second thread only waits for a core, and steps
@@ -22,17 +27,26 @@ from __future__ import annotations
 import math
 import os
 import sys
+import traceback
 from collections.abc import Callable
 from typing import NoReturn
 
 import hydra
 import torch
+from hydra.core.hydra_config import HydraConfig
 from hydra.errors import HydraException
+from hydra.types import RunMode
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
-from physgnn.errors import PhysgnnError, one_line
+from physgnn.errors import (
+    Interrupted,
+    PhysgnnError,
+    interrupt_signal,
+    one_line,
+    sigterm_interrupts,
+)
 
 USER_ERRORS = (
     PhysgnnError,
@@ -76,9 +90,18 @@ def command(
     def main(cfg: DictConfig):
         free_threads()
         try:
-            result = run(cfg)
-        except USER_ERRORS as err:
-            fail(err)
+            with sigterm_interrupts():
+                result = run(cfg)
+        except KeyboardInterrupt as err:
+            signum = interrupt_signal(err)
+            fail(Interrupted(f"{name} interrupted (exit code {128 + signum})", signum))
+        except Exception as err:
+            if _in_sweep() and not isinstance(err, Interrupted):
+                _report_failed_job(err)
+                return None
+            if isinstance(err, USER_ERRORS):
+                fail(err)
+            raise
         if done is not None:
             print(done(result))
         return result
@@ -88,6 +111,17 @@ def command(
     if parse is not None:
         return _parsed(main, parse)
     return hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main)
+
+
+def _in_sweep() -> bool:
+    return HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
+
+
+def _report_failed_job(err: Exception) -> None:
+    """One line for a user error, the traceback for a bug; the sweep goes on."""
+    if not isinstance(err, USER_ERRORS):
+        traceback.print_exception(err)
+    print(f"error: {one_line(err)} (this job failed; the sweep goes on)", file=sys.stderr)
 
 
 def _parsed(body: Callable, parse: Callable[[list[str]], DictConfig]) -> Callable:

@@ -1,4 +1,5 @@
-"""``python -m physgnn.data_report dataset=PATH``: Table 1 of a dataset (``make data-report``).
+"""``python -m physgnn.data_report [preset=NAME | dataset=PATH]``: Table 1 of a dataset
+(``make data-report PRESET=NAME``).
 
 The work is :func:`physgnn.evaluation.data_report.data_report` (prints the table, writes
 ``<dataset>/report.json``).

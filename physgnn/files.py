@@ -13,12 +13,14 @@ from pathlib import Path
 
 
 @contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
+def atomic_path(path: str | Path, keep_suffix: bool = False) -> Iterator[Path]:
     """Yield ``<path>.tmp`` to write; on success it replaces ``path`` (folders are made),
-    on an error it is removed and ``path`` is left as it was."""
+    on an error it is removed and ``path`` is left as it was. ``keep_suffix``:
+    ``<stem>.tmp<suffix>`` instead, for writers that choose the format by the suffix."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
+    name = f"{path.stem}.tmp{path.suffix}" if keep_suffix else path.name + ".tmp"
+    tmp = path.with_name(name)
     try:
         yield tmp
         os.replace(tmp, path)

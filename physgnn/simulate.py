@@ -1,8 +1,9 @@
-"""``python -m physgnn.simulate scene=FILE [run=RUN_DIR] [out=DIR] [video=true] [frames=N]``.
+"""``python -m physgnn.simulate scene=FILE [run=RUN_DIR] [out=DIR] [video=true] [frames=N]
+[tol=0] [rerun=FILE.rrd]``.
 
 The work is :func:`physgnn.evaluation.simulate.simulate`: the truth and, given a run, the
-learned rollout of a YAML scene file, to HDF5, metrics.json and a shaded 3-D video. Arguments
-are ``key=value`` (not Hydra: ``scene=`` names a file).
+learned rollout of a YAML scene file, to HDF5, metrics.json, a shaded 3-D video and (optional)
+a Rerun recording. Arguments are ``key=value`` (not Hydra: ``scene=`` names a file).
 """
 
 from physgnn.cli import command

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import pytest
+from hydra.core.hydra_config import HydraConfig
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 
@@ -26,3 +28,45 @@ def tiny_dataset(tmp_path_factory) -> Path:
     outputs = tmp_path_factory.mktemp("outputs")
     cfg = compose_generate(["data=tiny", f"paths.outputs={outputs}", "workers=1", "progress=false"])
     return generate(cfg)
+
+
+@pytest.fixture(scope="session")
+def tiny_run(tiny_dataset, tmp_path_factory) -> Path:
+    """A real run on the ``tiny`` preset (M = 1, 16 hidden units, one epoch of two batches):
+    its checkpoints and ``.hydra/config.yaml``, as ``python -m physgnn.train`` leaves them.
+    Read-only."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from physgnn.training.train import train
+
+    run_dir = tmp_path_factory.mktemp("tiny_run")
+    overrides = [
+        "data=tiny",
+        f"data.dir={tiny_dataset}",
+        f"run_dir={run_dir}",
+        "debug=short",
+        "model.M=1",
+        "model.hidden=16",
+        "trainer.max_epochs=1",
+        "datamodule.pairs_per_epoch=8",
+        "trainer.enable_progress_bar=false",
+        "trainer.enable_model_summary=false",
+    ]
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose("train", overrides=overrides)
+    train(cfg)
+    (run_dir / ".hydra").mkdir()
+    (run_dir / ".hydra" / "config.yaml").write_text(OmegaConf.to_yaml(cfg))
+    return run_dir
+
+
+@pytest.fixture(autouse=True)
+def hydra_leaves_nothing_behind():
+    """An in-process Hydra ``main`` gives the root logger handlers on this test's captured
+    streams and keeps its config: both are put back after each test."""
+    handlers, level = logging.root.handlers[:], logging.root.level
+    yield
+    logging.root.handlers[:] = handlers
+    logging.root.setLevel(level)
+    HydraConfig.instance().cfg = None

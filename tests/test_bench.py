@@ -97,6 +97,18 @@ def test_bench_values_are_sane(quick):
         assert title in md
 
 
+def test_engine_table_prints_the_free_fall_lag_per_substep_count(quick):
+    # semi-implicit Euler lags ½gt² by g·h·t/2 after t = 4 s (h = 0.1 s / substeps)
+    out, _ = quick
+    rows = json.loads((out / "bench_extra.json").read_text())["pybullet_accuracy"]
+    assert sorted(r["substeps"] for r in rows) == [1, 2, 8]
+    for r in rows:
+        assert r["free_fall_error"] == pytest.approx(9.81 * 0.1 / r["substeps"] * 2, rel=1e-3)
+    md = (out / "bench.md").read_text()
+    assert "free-fall error after 4 s (m)" in md
+    assert "| 8 (reference) |" in md
+
+
 def test_bench_activity_rows(quick):
     out, _ = quick
     rows = {

@@ -20,6 +20,7 @@ from physgnn.data.dataset import read_split, write_split
 from physgnn.evaluation import evaluate as ev
 from physgnn.evaluation import runs as eval_runs
 from physgnn.evaluation.data_report import split_summary
+from physgnn.evaluation.rerun_log import RerunMissing
 from physgnn.models.baselines import GravityOnlySimulator
 from physgnn.report import table as report_table
 from physgnn.report.table import read_csv
@@ -166,10 +167,10 @@ def write_dataset(folder: Path) -> Path:
     return folder
 
 
-@pytest.fixture(scope="module")
-def evaluated(tmp_path_factory):
-    """metrics.csv and report.md of two fake runs: a sound one and one that diverges."""
-    outputs = fake_outputs(tmp_path_factory.mktemp("eval") / "outputs")
+def evaluate_fake_runs(outputs: Path, *overrides: str) -> Path:
+    """``make eval`` of two fake runs on a hand-built dataset: a sound one and one that
+    diverges; returns report.md."""
+    outputs = fake_outputs(outputs)
     data = write_dataset(outputs / "data" / "hand")
     sims = {"baseline": Falling(), "ablation_M": Exploding()}
 
@@ -178,10 +179,16 @@ def evaluated(tmp_path_factory):
         cfg = OmegaConf.create({"datamodule": {"data_dir": str(data)}})
         return sims[experiment], cfg, {}
 
-    cfg = eval_cfg(f"paths.outputs={outputs}", "video_frames=5")
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(physgnn.training.runs, "load_run", fake_load_run)
-        path = ev.evaluate(cfg)
+        return ev.evaluate(eval_cfg(f"paths.outputs={outputs}", *overrides))
+
+
+@pytest.fixture(scope="module")
+def evaluated(tmp_path_factory):
+    """metrics.csv and report.md of the fake runs (:func:`evaluate_fake_runs`)."""
+    outputs = tmp_path_factory.mktemp("eval") / "outputs"
+    path = evaluate_fake_runs(outputs, "video_frames=5")
     return outputs, read_csv(outputs / "report" / "metrics.csv"), path.read_text()
 
 
@@ -226,7 +233,9 @@ def test_report_links_figures_and_one_video_per_ood_scene(evaluated):
     for scene in ("ood_cubes", report_table.SLEEP_SCENE):
         gif = report_dir / "videos" / f"{scene}.gif"
         assert len(imageio.mimread(gif)) == 5
-        assert f"(videos/{scene}.gif)" in text
+        with imageio.get_reader(gif.with_suffix(".mp4")) as mp4:
+            assert mp4.count_frames() == 5
+        assert f"[{scene}](videos/{scene}.gif) ([MP4](videos/{scene}.mp4))" in text
     assert (report_dir / "figures" / "energy_ood.png").stat().st_size > 1000
     assert "![energy](figures/energy_ood.png)" in text
     assert "with sleeping off and on" in text and "| on |" in text
@@ -297,6 +306,7 @@ def test_tiny_run_logs_rollouts_then_make_eval_reports_it(tiny_dataset, tmp_path
     text = path.read_text()
     assert "| baseline: default |" in text and "### `baseline`" in text
     assert len(list((outputs / "report" / "videos").glob("*.gif"))) == 4
+    assert len(list((outputs / "report" / "videos").glob("*.mp4"))) == 4
 
 
 def test_eval_of_a_dataset_alone_reports_the_references(tmp_path):
@@ -328,3 +338,18 @@ def test_truncated_runs_are_evaluated_and_named_so(tmp_path):
     assert [p.name for p in runs] == ["a", "b"]
     names = [eval_runs.run_info(p, outputs).name for p in runs]
     assert names == ["runs/a", "runs/b (truncated)"]
+
+
+def test_eval_rerun_without_the_extra_fails_before_any_rollout(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "rerun", None)  # import rerun raises ImportError
+    with pytest.raises(RerunMissing, match=r"needs the optional rerun-sdk: pip install"):
+        ev.evaluate(eval_cfg(f"paths.outputs={tmp_path / 'nothing'}", "rerun=true"))
+
+
+def test_eval_rerun_records_each_ood_scene_of_the_filmed_run(tmp_path):
+    pytest.importorskip("rerun")
+    outputs = tmp_path / "outputs"
+    evaluate_fake_runs(outputs, "videos=false", "rerun=true", "sleeping_compare=false")
+    videos = outputs / "report" / "videos"
+    names = sorted(p.name for p in videos.iterdir())
+    assert names == sorted(f"{s}.rrd" for s in ("ood_cubes", report_table.SLEEP_SCENE))

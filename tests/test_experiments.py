@@ -135,7 +135,9 @@ def test_other_config_choices_compose(choice, tmp_path):
     if choice == "logger=wandb":
         assert cfg.logger.offline is True
     if choice == "trainer=ddp":
-        assert cfg.trainer.strategy == "ddp" and cfg.trainer.accelerator == "gpu"
+        # the network skips the MLPs of absent interactions: DDP must allow unused parameters
+        assert cfg.trainer.strategy == "ddp_find_unused_parameters_true"
+        assert cfg.trainer.accelerator == "gpu"
     if choice == "callbacks=rollout":
         names = [type(instantiate(c)).__name__ for c in cfg.callbacks.values()]
         assert names == ["RolloutCallback", "ModelCheckpoint", "LearningRateMonitor"]
@@ -149,6 +151,7 @@ def test_other_config_choices_compose(choice, tmp_path):
     [
         ("local", "hydra_plugins.hydra_joblib_launcher"),
         ("slurm", "hydra_plugins.hydra_submitit_launcher"),
+        ("slurm_ddp", "hydra_plugins.hydra_submitit_launcher"),
     ],
 )
 def test_launcher_configs_compose_when_installed(launcher, plugin, tmp_path):

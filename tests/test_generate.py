@@ -12,7 +12,14 @@ import pytest
 from conftest import compose_generate
 
 import physgnn.groundtruth.generate as gen
-from physgnn.data.dataset import SCHEMA_VERSION, compute_stats, read_split, read_stats
+from physgnn.data.dataset import (
+    DATASET_MARKER,
+    SCHEMA_VERSION,
+    compute_stats,
+    read_split,
+    read_stats,
+)
+from physgnn.errors import Interrupted
 from physgnn.physics.scene import SceneError
 
 SPLIT_SIZES = {"train": 2, "val": 1, "test": 1}
@@ -25,7 +32,7 @@ def tiny_cfg(outputs, *extra):
 
 def test_tiny_dataset_files_and_schema(tiny_dataset):
     assert sorted(p.name for p in tiny_dataset.parent.iterdir()) == ["tiny"]  # no leftovers
-    assert sorted(p.name for p in tiny_dataset.iterdir()) == sorted(gen.FILES)
+    assert sorted(p.name for p in tiny_dataset.iterdir()) == sorted([*gen.FILES, DATASET_MARKER])
     for split in ("train", "val", "test", "ood"):
         with h5py.File(tiny_dataset / f"{split}.h5") as f:
             assert f.attrs["schema_version"] == SCHEMA_VERSION
@@ -98,8 +105,9 @@ def test_interrupted_overwrite_leaves_the_previous_dataset(tiny_dataset, tmp_pat
         return real(jobs, *args, **kwargs)
 
     monkeypatch.setattr(gen, "run_jobs", interrupted)
-    with pytest.raises(KeyboardInterrupt):
+    with pytest.raises(Interrupted, match="generation stopped by SIGINT") as stopped:
         gen.generate(tiny_cfg(outputs, "workers=1", "overwrite=true", "data.seed=5"))
+    assert stopped.value.exit_code == 130
     after = {p.name: p.read_bytes() for p in (outputs / "data" / "tiny").iterdir()}
     assert after == before
     assert sorted(p.name for p in (outputs / "data").iterdir()) == ["tiny"]

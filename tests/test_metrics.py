@@ -84,8 +84,15 @@ def test_sphere_crossing_a_bounded_wall_inside_vs_outside_its_extent():
     assert edge["depth_static"] == pytest.approx(0.5 - math.sqrt(0.13))
     far = pen([[[0.2, 10, 5]]], [r], planes)  # crosses the infinite plane, not the wall
     assert far["pct_static"] == 0.0 and far["depth_static"] == 0.0
-    on_side = pen([[[-0.1, 0, 5]]], [r], planes)  # two-sided: from behind as well
-    assert on_side["depth_static"] == pytest.approx(0.4)
+    # One-sided: a centre 0.1 behind the wall has crossed it (depth r + 0.1, over 0.5 d).
+    behind = pen([[[-0.1, 0, 5]]], [r], planes)
+    assert behind["depth_static"] == pytest.approx(0.6)
+    # Behind the plane but beside the rectangle: the distance to its edge, as in front.
+    beside = pen([[[-0.2, 2.3, 5]]], [r], planes)
+    assert beside["depth_static"] == pytest.approx(0.5 - math.sqrt(0.13))
+    # More than r behind: the far side (of a cube, say), counted as in front: no contact.
+    far_behind = pen([[[-0.7, 0, 5]]], [r], planes)
+    assert far_behind["pct_static"] == 0.0
 
 
 def test_static_planes_count_with_walls_and_never_as_ground():
@@ -119,6 +126,14 @@ def test_energy_gain_sums_positive_steps_over_initial_energy():
     assert M.energy_gain([10, 8, 9, 12, 11]) == pytest.approx(4 / 10)
     assert M.energy_gain([10, 9, 1]) == 0.0
     assert M.energy_gain([7.0]) == 0.0
+
+
+def test_energy_rise_is_the_largest_climb_above_the_start():
+    assert M.energy_rise([10, 8, 9, 12, 11]) == pytest.approx(2 / 10)
+    assert M.energy_rise([10, 9, 1]) == 0.0
+    assert M.energy_rise([0.0, 1.0, 0.5], scale=2.0) == pytest.approx(0.5)
+    with pytest.raises(M.MetricError, match="NaN or inf at frame 1"):
+        M.energy_rise([1.0, math.nan])
 
 
 def test_zero_initial_energy_divides_by_sum_m_g_r_or_errors():

@@ -1,16 +1,23 @@
-"""python -m physgnn.simulate on a tiny scene: truth only, and with an (untrained) model."""
+"""python -m physgnn.simulate on a tiny scene: truth only, with an untrained model, and with a
+real (tiny) trained run."""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 from simdata import STATS
 
 import physgnn.evaluation.simulate as S
+from physgnn import metrics
+from physgnn.data.dataset import read_split
 from physgnn.models.learned import LearnedSimulator
+from physgnn.rollout import rollout
 from physgnn.simulate import main
+from physgnn.training.runs import load_run
 
 SCENE = """
 name: tiny
@@ -50,6 +57,25 @@ def test_learned_rollout_from_the_same_start(scene_file, tmp_path, monkeypatch):
         assert list(f) == ["prediction", "truth"]
         assert (f["truth/pos"][:2] == f["prediction/pos"][:2]).all()  # H + 1 start frames
     assert {"mse", "chamfer", "energy_gain", "depth_sphere"} <= set(result["metrics"])
+
+
+def test_a_trained_run_end_to_end(tiny_run, scene_file, tmp_path, capsys):
+    out = tmp_path / "out"
+    main([f"scene={scene_file}", f"run={tiny_run}", f"out={out}", "frames=8"])
+    printed = capsys.readouterr().out
+    result = json.loads((out / "metrics.json").read_text())
+    simulator, _, info = load_run(tiny_run)
+    assert result["run"] == info["checkpoint"] and result["n_frames"] == 8
+    groups = {t.attrs["group"]: t for t in read_split(out / "simulate.h5")}
+    truth, pred = groups["truth"], groups["prediction"]
+    expected = rollout(simulator, [truth])[0]  # the same rollout, from the truth on file
+    assert pred.n_frames == expected.n_frames == 8 and pred.diverged_at is None
+    np.testing.assert_allclose(pred.pos, expected.pos, rtol=1e-6, atol=1e-6)
+    mse = metrics.trajectory_metrics(expected, truth, horizon=20)["mse"]
+    assert result["metrics"]["mse"] == pytest.approx(mse, rel=1e-5) and mse > 0
+    assert f"mse {mse:.3g}" in printed
+    for kind in ("gif", "mp4", "png"):
+        assert Path(result["files"][kind]).stat().st_size > 0
 
 
 @pytest.mark.parametrize(

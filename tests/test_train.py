@@ -47,11 +47,14 @@ def weights(path) -> dict:
 
 def test_fast_dev_run(tiny_dataset, tmp_path):
     info = train(config(tiny_dataset, tmp_path, "debug=fast", "model.hidden=16"))
-    assert info["status"] == "finished" and info["global_step"] == 1
+    assert info["status"] == "debug" and info["global_step"] == 1
+    assert info["pairs_seen"] == 8  # debug=fast's batch, not the default 256
     assert info["train_loss"] > 0 and info["val_loss"] > 0
     assert info["pairs_per_s"] > 0 and info["nodes_per_s"] >= info["pairs_per_s"]
     saved = json.loads((tmp_path / "run.json").read_text())
-    assert saved["status"] == "finished" and saved["seed"] == 0
+    assert saved["status"] == "debug" and saved["seed"] == 0
+    assert info["checkpoints"] == {"best": None, "last": None}
+    assert not list(tmp_path.rglob("*.ckpt"))  # nothing eval could take for a trained model
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +90,9 @@ def test_resume_equals_straight_training(runs):
     assert runs["a"]["epochs"] == 1 and runs["a"]["global_step"] == 2
     resumed, straight = runs["resumed"], runs["straight"]
     assert resumed["epochs"] == 2 and resumed["global_step"] == 4
-    assert resumed["pairs_seen"] == 8  # only the second epoch ran
+    assert resumed["pairs_seen"] == straight["pairs_seen"] == 16  # the whole run's count
+    assert resumed["sessions"] == 2 and straight["sessions"] == 1
+    assert resumed["train_time_s"] > runs["a"]["train_time_s"]
     wr, ws = weights(resumed["checkpoints"]["last"]), weights(straight["checkpoints"]["last"])
     assert all(torch.equal(wr[k], ws[k]) for k in ws)
     assert resumed["val_loss"] == straight["val_loss"]

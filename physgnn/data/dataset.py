@@ -4,6 +4,8 @@
 file under the real name. ``read_split`` checks everything it reads and raises
 :class:`DatasetError` with one line naming the problem. ``stats.json`` holds the training
 split's normalisation statistics (``compute_stats`` / ``write_stats`` / ``read_stats``).
+A folder physgnn generated carries the marker file :data:`DATASET_MARKER`: only such a folder
+is ever replaced or removed (``python -m physgnn.generate overwrite=true``).
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ STATIC_FIELDS = ("radius", "mass", "material", "materials", "planes", "plane_kin
 STD_FLOOR = 1e-6
 # Chunks hold this many frames of one trajectory (time-major, so a window is one read).
 CHUNK_FRAMES = 64
+# Written first into every dataset folder physgnn generates: the proof that it may replace it.
+DATASET_MARKER = "physgnn-dataset.json"
 
 
 class DatasetError(PhysgnnError, RuntimeError):
@@ -38,6 +42,22 @@ class DatasetError(PhysgnnError, RuntimeError):
 def _generate_hint(path: Path) -> str:
     preset = path.parent.name
     return f"run `make data PRESET={preset}` or `python -m physgnn.generate data={preset}`"
+
+
+def generate_hint(folder: str | Path) -> str:
+    """How to make the dataset folder ``folder`` (its name is the preset)."""
+    return _generate_hint(Path(folder) / "stats.json")
+
+
+def write_marker(folder: str | Path, preset: str) -> Path:
+    """Mark ``folder`` (made if needed) as a dataset folder written by physgnn."""
+    info = {"physgnn_version": __version__, "schema_version": SCHEMA_VERSION, "preset": preset}
+    return write_json(Path(folder) / DATASET_MARKER, info)
+
+
+def is_dataset(folder: str | Path) -> bool:
+    """True when ``folder`` carries physgnn's :data:`DATASET_MARKER`."""
+    return (Path(folder) / DATASET_MARKER).is_file()
 
 
 def _write_traj(group: h5py.Group, traj: Trajectory) -> None:
@@ -213,4 +233,19 @@ def read_stats(dataset_dir) -> dict:
     missing = [k for k in keys if k not in stats]
     if missing:
         raise DatasetError(f"{path}: missing key(s) {missing}")
+    for key in keys[:6]:
+        _check_std(path, key, stats[key])
     return stats
+
+
+def _check_std(path: Path, key: str, entry) -> None:
+    """A normaliser divides by ``std``: it must be a positive finite number (or vector)."""
+    try:
+        std = np.asarray(entry["std"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        std = np.asarray(np.nan)
+    if not np.all(np.isfinite(std)) or np.any(std <= 0):
+        raise DatasetError(
+            f"{path}: {key}.std must be positive and finite (got {np.asarray(std).tolist()}); "
+            f"regenerate the dataset ({_generate_hint(path)} overwrite=true)"
+        )

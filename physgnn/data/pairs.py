@@ -131,16 +131,29 @@ class EpochSampler(Sampler):
     """``num_samples`` indices drawn uniformly with replacement from ``range(size)``, seeded by
     ``(seed, epoch)``: epoch k draws the same pairs whether training ran straight through or
     resumed from a checkpoint. Lightning calls ``set_epoch`` before each epoch; without it
-    (e.g. inside a distributed wrapper) each iteration moves on to the next epoch.
+    each iteration moves on to the next epoch.
 
-    ``batches_done()`` (optional) is the number of batches trained so far, read when a pass
-    starts: a run resumed from a mid-epoch checkpoint then leaves out the ``batch_size``-sized
-    batches its epoch had already given, and goes on as a straight run would."""
+    With ``world_size`` > 1 (DDP) process ``rank`` takes every ``world_size``-th index from
+    the ``rank``-th (the draw cut to a multiple of ``world_size``): the processes' batches of a
+    step together are the batch of one process with a ``world_size`` times larger batch.
+
+    ``batches_done()`` (optional) is the number of batches this process has trained on so far,
+    read when a pass starts: a run resumed from a mid-epoch checkpoint then leaves out the
+    ``batch_size``-sized batches its epoch had already given, and goes on as a straight run
+    would."""
 
     def __init__(
-        self, size: int, num_samples: int, seed: int, batch_size: int = 1, batches_done=None
+        self,
+        size: int,
+        num_samples: int,
+        seed: int,
+        rank: int = 0,
+        world_size: int = 1,
+        batch_size: int = 1,
+        batches_done=None,
     ):
         self.size, self.num_samples, self.seed = int(size), int(num_samples), int(seed)
+        self.rank, self.world_size = int(rank), int(world_size)
         self.batch_size, self.batches_done = int(batch_size), batches_done
         self.epoch = 0
 
@@ -148,18 +161,19 @@ class EpochSampler(Sampler):
         self.epoch = int(epoch)
 
     def __len__(self) -> int:
-        return self.num_samples
+        return self.num_samples // self.world_size
 
     def __iter__(self):
         generator = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
         skip = self._resumed_batches() * self.batch_size
         self.epoch += 1
         drawn = torch.randint(self.size, (self.num_samples,), generator=generator)
-        yield from drawn[skip:].tolist()
+        share = drawn[self.rank : len(self) * self.world_size : self.world_size]
+        yield from share[skip:].tolist()
 
     def _resumed_batches(self) -> int:
         """Batches of the epoch starting now that were trained before (0 unless resumed)."""
         if self.batches_done is None:
             return 0
-        per_epoch = math.ceil(self.num_samples / self.batch_size)
+        per_epoch = math.ceil(len(self) / self.batch_size)
         return min(max(int(self.batches_done()) - self.epoch * per_epoch, 0), per_epoch)

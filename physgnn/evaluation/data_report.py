@@ -1,4 +1,4 @@
-"""``python -m physgnn.data_report dataset=outputs/data/small``: Table 1 of a dataset.
+"""``python -m physgnn.data_report [preset=small | dataset=PATH]``: Table 1 of a dataset.
 
 The report's Table 1 measures the physics of the ground truth itself: normalised cumulative
 energy gain and penetration (depth and percentage of spheres; sphere–sphere, sphere–ground,
@@ -19,7 +19,7 @@ from omegaconf import DictConfig
 from rich.console import Console
 from rich.table import Table
 
-from physgnn.data.dataset import read_split
+from physgnn.data.dataset import generate_hint, read_split
 from physgnn.errors import PhysgnnError
 from physgnn.files import write_json
 from physgnn.metrics import PENETRATION_KEYS, MetricError, trajectory_metrics
@@ -91,7 +91,7 @@ def data_report(cfg: DictConfig) -> dict:
     """Compute, print and write ``report.json`` for ``cfg.dataset``; returns its content."""
     folder = Path(cfg.dataset)
     if not folder.is_dir():
-        raise DataReportError(f"dataset folder {folder} not found: run `make data` first")
+        raise DataReportError(f"dataset folder {folder} not found: {generate_hint(folder)}")
     summary, finite = {}, {}
     for split in cfg.splits:
         trajectories = read_split(folder / f"{split}.h5")

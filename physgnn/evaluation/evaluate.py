@@ -7,7 +7,9 @@ and OOD trajectory is rolled out from its first H+1 frames; a diverged rollout's
 on its finite prefix and carry ``diverged_at``. With ``stability=true`` (default) every learned
 run is also rolled out on the hard scenes of ``hard`` and measured with
 :mod:`physgnn.evaluation.stability` (``stability.csv`` and the report's stability section).
-Writes metrics.csv, report.md, figures and videos into ``report_dir``.
+Every learned run also falls freely from ``freefall.heights`` (:mod:`physgnn.evaluation.freefall`,
+``freefall.csv``). Writes metrics.csv, report.md, figures and videos into ``report_dir``; with
+``rerun=true`` also ``videos/<ood scene>.rrd``, the filmed run's rollouts as Rerun recordings.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
+from physgnn.evaluation import rerun_log
+from physgnn.evaluation.freefall import freefall_rows
 from physgnn.evaluation.rollouts import (
     Collected,
     hard_rows,
@@ -33,13 +37,16 @@ from physgnn.evaluation.runs import (
     pick_video_run,
     references,
 )
-from physgnn.report import figures, stability, table, video
+from physgnn.evaluation.video3d import render_side_by_side
+from physgnn.report import figures, freefall, stability, table
 from physgnn.report.document import write_report
 
 
 def evaluate(cfg: DictConfig) -> Path:
     """Evaluate the runs named by ``cfg`` and write ``cfg.report_dir``; returns report.md."""
     outputs, report_dir = Path(cfg.paths.outputs), Path(cfg.report_dir)
+    if cfg.get("rerun"):
+        rerun_log.require()  # before the rollouts, not after them
     runs, skipped = load_runs(cfg, outputs)
     if not runs and not cfg.dataset:
         raise EvalError(f"no finished run under {outputs} (make train first, or pass dataset=PATH)")
@@ -60,13 +67,26 @@ def evaluate(cfg: DictConfig) -> Path:
         stability.write_csv(report_dir / "stability.csv", stab + hard_rows(runs, cfg))
     else:
         (report_dir / "stability.csv").unlink(missing_ok=True)  # no stale section
+    freefall.write_csv(report_dir / "freefall.csv", _freefall(runs, cfg.freefall, settings))
     if out.energies:
         dts = {name: _dt(data, name) for name in out.energies}
         figures.plot_energy(report_dir / "figures" / "energy_ood.png", out.energies, dts)
     if cfg.videos and film is not None:
         write_videos(report_dir / "videos", film, out.films, cfg.video_frames)
+    if cfg.get("rerun"):
+        for scene, (traj, pred) in sorted(out.films.items()):
+            rerun_log.log_rerun(report_dir / "videos" / f"{scene}.rrd", traj, pred)
     bench_dir = cfg.paths.get("bench_dir")
     return write_report(report_dir, out.rows, bench_dir=bench_dir, skipped=skipped)
+
+
+def _freefall(runs: list[RunInfo], cfg: DictConfig, settings: dict) -> list[dict]:
+    """Every learned run dropped from ``cfg.heights`` (:mod:`physgnn.evaluation.freefall`)."""
+    args = list(cfg.heights), float(cfg.seconds), float(cfg.dt), float(cfg.floor)
+    rows = []
+    for run in runs:
+        rows += freefall_rows(run.name, run.simulator, *args, **settings)
+    return rows
 
 
 def _dt(data: dict, scene: str) -> float:
@@ -78,20 +98,12 @@ def _dt(data: dict, scene: str) -> float:
 
 
 def write_videos(video_dir: Path, film: RunInfo, films: dict, max_frames: int) -> list[Path]:
-    """One GIF per OOD scene: ground truth beside the filmed run's rollout."""
+    """Per OOD scene ``<scene>.gif``, ``.mp4`` and ``_frame.png``: the shaded 3-D view of the
+    ground truth beside the filmed run's rollout; returns the GIFs."""
     paths = []
     for scene, (traj, pred) in sorted(films.items()):
-        path = video_dir / f"{scene}.gif"
-        video.render_gif(
-            path,
-            traj.pos,
-            pred.pos,
-            traj.radius,
-            traj.planes,
-            traj.plane_kind,
-            title=f"{scene} · {film.name}",
-            diverged_at=pred.diverged_at,
-            max_frames=max_frames,
-        )
-        paths.append(path)
+        label = f"prediction\n{film.name}"
+        stem = video_dir / scene
+        render_side_by_side(stem, traj, pred, right_label=label, title=scene, max_frames=max_frames)
+        paths.append(stem.with_name(f"{scene}.gif"))
     return paths

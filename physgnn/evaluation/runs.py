@@ -146,8 +146,7 @@ def load_runs(cfg: DictConfig, outputs: Path) -> tuple[list[RunInfo], list[str]]
     """Every finished run with its simulator and dataset, and one note per run left out
     (not finished, or failing to load: one bad run must not stop the report of the others)."""
     run_dirs = find_runs(cfg.runs, outputs)
-    skipped = [f"`{run_name(p, outputs)}`: status {training_runs.run_status(p)}"
-               for p in all_runs(cfg.runs, outputs) if p not in run_dirs]  # fmt: skip
+    skipped = [_not_evaluated(p, outputs) for p in all_runs(cfg.runs, outputs) if p not in run_dirs]
     infos = []
     for run_dir in run_dirs:
         info = run_info(run_dir, outputs)
@@ -162,6 +161,13 @@ def load_runs(cfg: DictConfig, outputs: Path) -> tuple[list[RunInfo], list[str]]
             continue
         infos.append(info)
     return infos, skipped
+
+
+def _not_evaluated(run_dir: Path, outputs: Path) -> str:
+    """The note of a run left out: its status and, if it failed or stopped, why."""
+    status = training_runs.run_status(run_dir)
+    error = training_runs.read_run_json(run_dir).get("error") if status != "unreadable" else None
+    return f"`{run_name(run_dir, outputs)}`: status {status}" + (f" ({error})" if error else "")
 
 
 def pick_video_run(runs: list[RunInfo], wanted: str | None) -> RunInfo | None:

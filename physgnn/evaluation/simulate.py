@@ -9,7 +9,9 @@ as ``make eval`` does). Writes into ``out`` (default ``outputs/simulate/<scene n
 - ``metrics.json``: the metrics of the prediction against the truth (``make eval``'s
   columns), or the truth's own physics (energy gain, penetration) without a run;
 - ``video.gif`` / ``video.mp4``: truth (left) and prediction (right; the truth again without
-  a run) side by side (:mod:`physgnn.evaluation.video3d`).
+  a run) side by side (:mod:`physgnn.evaluation.video3d`);
+- with ``rerun=FILE.rrd``: both as a Rerun recording (:mod:`physgnn.evaluation.rerun_log`,
+  the optional ``rerun`` extra).
 
 Arguments are ``key=value`` over :data:`KEYS` (not Hydra: ``scene=`` names a file here, where
 Hydra would read the ``scene`` config group).
@@ -18,7 +20,6 @@ Hydra would read the ``scene`` config group).
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
@@ -26,14 +27,24 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn import metrics
 from physgnn.data.dataset import write_split
 from physgnn.errors import PhysgnnError
+from physgnn.evaluation import rerun_log
 from physgnn.evaluation.video3d import render_side_by_side
+from physgnn.files import write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.groundtruth.scenefile import load_scene
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
 from physgnn.training.runs import load_run
 
-KEYS = {"scene": None, "run": None, "out": None, "video": "true", "frames": None, "tol": "0"}
+KEYS = {
+    "scene": None,
+    "run": None,
+    "out": None,
+    "video": "true",
+    "frames": None,
+    "tol": "0",
+    "rerun": None,
+}
 METRIC_KEYS = ("mse", "mse20", "chamfer", "energy_gain", "rotation_error", "diverged_at")
 
 
@@ -80,6 +91,8 @@ def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dic
 def simulate(args: DictConfig | dict) -> dict:
     """Simulate, roll out, write the files; returns what was written and the metrics."""
     scene = load_scene(args["scene"])
+    if args["rerun"]:
+        rerun_log.require()  # before the work, not after it
     if args["frames"]:
         scene.n_frames = int(args["frames"])
     out = Path(args["out"] or Path("outputs") / "simulate" / scene.name)
@@ -103,7 +116,9 @@ def simulate(args: DictConfig | dict) -> dict:
     }
     if str(args["video"]).lower() == "true":
         result["files"].update(write_videos(out, truth, pred, bool(source)))
-    (out / "metrics.json").write_text(json.dumps(result, indent=2))
+    if args["rerun"]:
+        result["files"]["rerun"] = str(rerun_log.log_rerun(args["rerun"], truth, pred))
+    write_json(out / "metrics.json", result)
     return result
 
 
@@ -111,13 +126,9 @@ run = simulate
 
 
 def write_videos(out: Path, truth: Trajectory, pred: Trajectory | None, learned: bool) -> dict:
-    right = truth.pos if pred is None else pred.pos
-    quats = (truth.quat, truth.quat if pred is None else pred.quat)
     label = "prediction" if learned else "ground truth (no run given)"
-    return render_side_by_side(
-        out / "video", truth, right, quats, right_label=label,
-        diverged_at=None if pred is None else pred.diverged_at,
-    )  # fmt: skip
+    return render_side_by_side(out / "video", truth, truth if pred is None else pred,
+                               right_label=label, title=truth.attrs.get("scene", ""))  # fmt: skip
 
 
 def summary(result: dict) -> str:

@@ -7,10 +7,12 @@ scenes. One row per (run, scene), columns :data:`physgnn.report.stability.COLUMN
 - ``diverged_at``: first non-finite / runaway frame (None: stable to the end);
   ``steps_to_divergence`` = ``diverged_at − start`` (steps the model took before it).
 - ``max_pen_sphere``, ``max_pen_ground``, ``max_pen_static``: the deepest intersection of the
-  rollout (:func:`physgnn.metrics.max_penetration`).
+  rollout, ``mean_pen_sphere`` the mean sphere–sphere depth and ``tunnelled`` the spheres whose
+  centre crossed a plane (:func:`physgnn.metrics.max_penetration`; planes are one-sided).
 - ``energy_gain``: :func:`physgnn.metrics.energy_gain` of the rollout's energy (its own
   finite-difference velocities; the ground-truth row uses the engine's positions with
-  finite-difference velocities too, so the rows compare like with like).
+  finite-difference velocities too, so the rows compare like with like); ``energy_rise`` the
+  largest climb above the initial energy (:func:`physgnn.metrics.energy_rise`).
 - ``rest_drift``: largest displacement, in radii, of the spheres that rest in the ground truth
   (move less than ``rest_tol`` radii over the whole trajectory; ``n_resting`` of them); None
   when no sphere rests.
@@ -31,6 +33,7 @@ def measure(truth: Trajectory, pred: Trajectory, rest_tol: float = 0.01) -> dict
     energy = metrics.energy_series(pred.pos, pred.vel, truth.mass, truth.radius)
     resting = metrics.resting_mask(truth.pos, truth.radius, rest_tol)
     diverged_at, start = pred.diverged_at, int(pred.start)
+    scale = metrics.energy_scale(truth.mass, truth.radius)
     return {
         "scene": truth.name,
         "n_spheres": truth.n_spheres,
@@ -39,7 +42,8 @@ def measure(truth: Trajectory, pred: Trajectory, rest_tol: float = 0.01) -> dict
         "diverged_at": diverged_at,
         "steps_to_divergence": None if diverged_at is None else int(diverged_at) - start,
         **metrics.max_penetration(pred.pos, truth.radius, truth.planes, truth.plane_kind),
-        "energy_gain": metrics.energy_gain(energy, metrics.energy_scale(truth.mass, truth.radius)),
+        "energy_gain": metrics.energy_gain(energy, scale),
+        "energy_rise": metrics.energy_rise(energy, scale),
         "rest_drift": metrics.rest_drift(pred.pos, truth.radius, resting),
         "n_resting": int(resting.sum()),
     }

@@ -4,14 +4,18 @@
 Writes ``train.h5, val.h5, test.h5, ood.h5, stats.json`` into ``cfg.data.dir``. Each
 trajectory's seed is derived from the preset seed by ``numpy.random.SeedSequence(seed,
 spawn_key=(split, index))``, so the data depend on the config and seed only, never on the
-number of workers. Files are written into a staging folder that replaces the dataset only
-when complete: an interrupted run leaves a previous dataset intact.
+number of workers. Files are written into a staging folder ``<dir>.partial`` that replaces the
+dataset only when complete: an interrupted run leaves a previous dataset intact. Only folders
+carrying physgnn's dataset marker (:data:`physgnn.data.dataset.DATASET_MARKER`) are ever
+replaced or removed, and an existing dataset only with ``overwrite=true``: any other folder in
+the way is an error. Ctrl-C or SIGTERM stop the workers quietly and end in one line.
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
 import shutil
+import signal
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,7 +23,15 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from physgnn.data.dataset import compute_stats, write_split, write_stats
+from physgnn.data.dataset import (
+    DATASET_MARKER,
+    compute_stats,
+    is_dataset,
+    write_marker,
+    write_split,
+    write_stats,
+)
+from physgnn.errors import ConfigError, Interrupted, interrupt_signal, signal_name
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.scenefile import write_scene
@@ -106,7 +118,7 @@ def run_jobs(jobs: list[Job], workers: int, progress: bool = True) -> list[Traje
                 results[k] = run_job(job)
                 bar.update(task, advance=1, description=f"{job.split}/{job.group}")
         else:
-            with mp.get_context("fork").Pool(workers) as pool:
+            with mp.get_context("fork").Pool(workers, initializer=_quiet_worker) as pool:
                 it = pool.imap_unordered(_indexed, list(enumerate(jobs)))
                 for k, traj in it:
                     results[k] = traj
@@ -118,30 +130,78 @@ def _indexed(item: tuple[int, Job]) -> tuple[int, Trajectory]:
     return item[0], run_job(item[1])
 
 
+def _quiet_worker() -> None:
+    """Pool workers leave Ctrl-C to the main process (no traceback per worker) and die on
+    the pool's SIGTERM."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def check_workers(workers) -> int:
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ConfigError(f"workers must be a whole number >= 1 (processes), got {workers!r}")
+    return workers
+
+
 def _check_target(out: Path, overwrite: bool) -> None:
-    existing = [f for f in FILES if (out / f).exists()]
-    if existing and not overwrite:
+    """``out`` may be written: absent, an empty folder, or physgnn's dataset and overwrite."""
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise FileExistsError(f"data.dir {out} is a file: choose another data.dir")
+    if not is_dataset(out):
+        if any(out.iterdir()):
+            raise FileExistsError(
+                f"data.dir {out} is a folder with files that physgnn did not write (no "
+                f"{DATASET_MARKER}); it is never replaced: choose another data.dir"
+            )
+        return
+    if not overwrite:
+        existing = [f for f in FILES if (out / f).exists()] or [DATASET_MARKER]
         raise FileExistsError(
             f"dataset {out} already exists ({', '.join(existing)}); "
             "pass overwrite=true to replace it"
         )
 
 
+def _in_the_way(path: Path) -> None:
+    """A staging or old folder's place must be free or hold a leftover of physgnn's."""
+    if path.exists() and not is_dataset(path):
+        raise FileExistsError(f"{path} is in the way and physgnn did not write it: move it away")
+
+
+def _clear(path: Path) -> None:
+    """Remove a leftover staging or old folder of an earlier run; anything else is an error."""
+    _in_the_way(path)
+    if path.exists():
+        shutil.rmtree(path)
+
+
 def _swap_in(staging: Path, out: Path) -> None:
-    """Replace ``out`` by the complete ``staging`` folder (the old one is removed last)."""
+    """Replace ``out`` (absent, empty or physgnn's: :func:`_check_target`) by the complete
+    ``staging`` folder; the old dataset is removed last."""
     old = out.with_name(out.name + ".old")
-    shutil.rmtree(old, ignore_errors=True)
-    if out.exists():
+    _clear(old)
+    if is_dataset(out):
         out.rename(old)
+    elif out.exists():
+        out.rmdir()  # empty
     staging.rename(out)
-    shutil.rmtree(old, ignore_errors=True)
+    _clear(old)
 
 
 def export_scenes(jobs: list[Job], folder: Path) -> Path:
-    """Write each job's initial scene as a YAML scene file ``<split>_<group>.yaml``."""
-    for job in jobs:
-        scene = build_scene(job.scene, np.random.default_rng(job.seed))
-        write_scene(folder / f"{job.split}_{job.group}.yaml", scene)
+    """Write each job's initial scene as a YAML scene file ``<split>_<group>.yaml`` (no file
+    already there is replaced)."""
+    paths = [folder / f"{job.split}_{job.group}.yaml" for job in jobs]
+    taken = [p.name for p in paths if p.exists()]
+    if taken:
+        raise FileExistsError(
+            f"export_scene: {folder} already holds {', '.join(taken[:3])}"
+            f"{' ...' if len(taken) > 3 else ''}; choose another folder"
+        )
+    for job, path in zip(jobs, paths, strict=True):
+        write_scene(path, build_scene(job.scene, np.random.default_rng(job.seed)))
     return folder
 
 
@@ -154,24 +214,30 @@ def generate(cfg: DictConfig) -> Path:
         return export_scenes(plan(data, engine), Path(cfg.export_scene))
     out = Path(data.dir)
     _check_target(out, bool(cfg.overwrite))
+    workers = check_workers(cfg.workers)
     engine = OmegaConf.to_container(cfg.get("engine") or {}, resolve=True)
     EngineSettings.from_cfg(engine)  # fail early on a bad key
     jobs = plan(data, engine)
     staging = out.with_name(out.name + ".partial")
-    shutil.rmtree(staging, ignore_errors=True)
+    _in_the_way(out.with_name(out.name + ".old"))
+    _clear(staging)
+    write_marker(staging, data.name)
     try:
         for split in SPLITS:  # one split in memory at a time
             trajs = run_jobs(
-                [j for j in jobs if j.split == split],
-                int(cfg.workers),
-                bool(cfg.get("progress", True)),
+                [j for j in jobs if j.split == split], workers, bool(cfg.get("progress", True))
             )
             write_split(staging / f"{split}.h5", trajs, {"split": split, "preset": data.name})
             if split == "train":
                 write_stats(staging, compute_stats(trajs))
         _swap_in(staging, out)
+    except KeyboardInterrupt as err:
+        signum = interrupt_signal(err)
+        raise Interrupted(
+            f"generation stopped by {signal_name(signum)}: {out} was left as it was", signum
+        ) from None
     finally:
-        shutil.rmtree(staging, ignore_errors=True)
+        _clear(staging)
     return out
 
 

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from physgnn.files import write_text
 from physgnn.groundtruth.layouts import check_clear_of_planes
 from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
 from physgnn.physics.scene import (
@@ -276,8 +277,5 @@ _Dumper.add_representer(list, _represent_list)
 
 def write_scene(path: str | Path, scene: Scene) -> Path:
     """Write ``scene`` as a YAML scene file (vectors on one line)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     text = yaml.dump(scene_to_dict(scene), Dumper=_Dumper, sort_keys=False, width=100)
-    path.write_text(text)
-    return path
+    return write_text(path, text)

@@ -9,7 +9,10 @@ one :class:`MetricError` line instead of returning a silent NaN. Conventions:
   is none); ``pct_*`` the percentage of spheres with at least one intersection whose
   normalised depth exceeds ``tol`` (default 0: any overlap counts, as in the report).
   The ground (kind 0) is a half-space: depth ``r − (p − c)·n``. Other planes (walls, static)
-  are two-sided bounded rectangles: depth ``r − |p − closest point of the rectangle|``.
+  are one-sided bounded rectangles: depth ``r − |p − closest point of the rectangle|`` in
+  front, ``r + |h|`` for a centre at height ``−r < h < 0`` behind the rectangle. A plane depth
+  above ``r`` (normalised 0.5) means the centre crossed the plane: ``tunnelled`` counts
+  those spheres.
 - energy: kinetic + potential ``m·g·(z − r)`` (:mod:`physgnn.physics.energy`) from the velocities
   given (ground truth: the engine's by default; rollouts: their own); the normalised gain is
   ``Σ max(0, E_{k+1} − E_k) / E_0``; when ``E_0`` is zero (``≤ 1e-6·Σ m·g·r``, float noise of a
@@ -29,6 +32,7 @@ from physgnn.metrics.series import (
     chamfer,
     drift_before_hit,
     energy_gain,
+    energy_rise,
     energy_scale,
     energy_series,
     momentum_drift,
@@ -46,6 +50,7 @@ __all__ = [
     "chamfer",
     "drift_before_hit",
     "energy_gain",
+    "energy_rise",
     "energy_scale",
     "energy_series",
     "max_penetration",

@@ -110,6 +110,12 @@ def penetration(pos, radius, planes, plane_kind, tol: float = 0.0) -> dict[str, 
 
 def max_penetration(pos, radius, planes, plane_kind) -> dict[str, float]:
     """Deepest intersection over all frames, as a fraction of the diameter:
-    ``{max_pen_sphere, max_pen_ground, max_pen_static}`` (0 when nothing intersects)."""
+    ``{max_pen_sphere, max_pen_ground, max_pen_static}`` (0 when nothing intersects), the mean
+    sphere–sphere depth ``mean_pen_sphere`` (= ``depth_sphere`` of :func:`penetration`) and
+    ``tunnelled``, the number of spheres whose centre crossed the ground or a plane."""
     parts = _intersections(pos, radius, planes, plane_kind)
-    return {f"max_pen_{key}": max(0.0, float(deepest.max())) for key, (_, deepest) in parts.items()}
+    out = {f"max_pen_{key}": max(0.0, float(deepest.max())) for key, (_, deepest) in parts.items()}
+    crossed = (parts["ground"][1] > 0.5) | (parts["static"][1] > 0.5)
+    out["mean_pen_sphere"] = float(parts["sphere"][0].mean()) if parts["sphere"][0].size else 0.0
+    out["tunnelled"] = int(crossed.sum())
+    return out

@@ -35,20 +35,36 @@ def energy_scale(mass, radius, g: float = G) -> float:
 def energy_gain(energy, scale: float | None = None) -> float:
     """``Σ_k max(0, E_{k+1} − E_k) / E_0``; divided by ``scale`` (``Σ m·g·r``) instead when
     ``E_0 ≤ 1e-6·scale``. energy ``[T]``. Zero initial energy without a scale is an error."""
+    e = _energy(energy)
+    return float(np.clip(np.diff(e), 0.0, None).sum()) / _energy_unit(e, scale)
+
+
+def energy_rise(energy, scale: float | None = None) -> float:
+    """``max_k (E_k − E_0) / E_0``, how far the energy ever climbs above its start (0 when it
+    never does); same divisor as :func:`energy_gain`. energy ``[T]``."""
+    e = _energy(energy)
+    return max(0.0, float(e.max() - e[0])) / _energy_unit(e, scale)
+
+
+def _energy(energy) -> np.ndarray:
     e = np.asarray(energy, dtype=np.float64)
     if e.ndim != 1 or e.size == 0:
         raise MetricError(f"energy series must have shape [T] with T >= 1, got {list(e.shape)}")
     if not np.isfinite(e).all():
         raise MetricError(f"energy series has NaN or inf at frame {int(np.argmin(np.isfinite(e)))}")
-    gain = float(np.clip(np.diff(e), 0.0, None).sum())
+    return e
+
+
+def _energy_unit(e: np.ndarray, scale: float | None) -> float:
+    """``E_0``, or ``scale`` when ``E_0`` is zero (float noise) or negative."""
     floor = 0.0 if scale is None else _ZERO_ENERGY * scale
     if e[0] > floor:
-        return gain / float(e[0])
+        return float(e[0])
     if scale is None or scale <= 0:
         raise MetricError(
             f"initial energy is {e[0]:.3g} <= 0: pass scale = sum(m*g*r) to normalise"
         )
-    return gain / scale
+    return float(scale)
 
 
 # --------------------------------------------------------------------------------- accuracy

@@ -4,7 +4,7 @@ edges and for the penetration metrics.
 A plane row ``[11]`` is centre (3), unit normal (3), unit reference direction (3) and the half
 lengths along the reference direction and along normal × reference
 (:mod:`physgnn.physics.scene`). The ground (kind 0) is a half-space; every other plane is a
-two-sided bounded rectangle.
+one-sided bounded rectangle (its front faces the normal).
 """
 
 from __future__ import annotations
@@ -44,11 +44,19 @@ def plane_depth(
 ) -> torch.Tensor:
     """How deep spheres reach into one plane, float64 (> 0: they intersect it).
 
-    pos ``[..., N, 3]``, radius ``[N]``, plane ``[11]`` → ``[..., N]``: the ground
-    (``kind == GROUND``) is a half-space, ``r − (p − c)·n`` (a sphere below it is deeper than
-    its radius); other planes are rectangles, ``r − |p − closest point|``.
+    pos ``[..., N, 3]``, radius ``[N]``, plane ``[11]`` → ``[..., N]``. Planes are one-sided,
+    as the graph sees them: the ground (``kind == GROUND``) is a half-space, ``r − (p − c)·n``;
+    other planes are rectangles, ``r − |p − closest point|`` in front of them and ``r + |h|``
+    for a centre less than ``r`` behind the rectangle (height ``−r < h < 0`` over its
+    footprint: where the graph still gives it an edge). Either way a depth above ``r`` means
+    the centre has crossed the plane: the sphere tunnelled. Further behind, the distance
+    counts as in front (the far side of a cube is not inside its near face).
     """
     p, r, plane = pos.to(torch.float64), radius.to(torch.float64), plane.to(torch.float64)
     if kind == GROUND:
         return r - ((p - plane[0:3]) * plane[3:6]).sum(-1)
-    return r - rectangle_distance(p, plane)
+    offset = rectangle_offset(p, plane)
+    height = (offset * plane[3:6]).sum(-1)
+    distance = torch.linalg.vector_norm(offset, dim=-1)
+    behind = (height < 0) & (height > -r) & (distance <= -height + 1e-12)  # over the footprint
+    return r + torch.where(behind, -height, -distance)

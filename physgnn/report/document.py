@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from physgnn.files import write_text
-from physgnn.report import pareto, stability
+from physgnn.report import freefall, pareto, stability
 from physgnn.report.sections import (
     baselines_table,
     components_section,
@@ -35,6 +35,12 @@ def stability_section(root: Path) -> str:
     return stability.section(stability.read_csv(path))
 
 
+def freefall_section(root: Path) -> str:
+    """The free-fall table from ``root/freefall.csv`` (written by the eval)."""
+    path = root / "freefall.csv"
+    return freefall.section(freefall.read_csv(path) if path.exists() else [])
+
+
 def write_report(
     report_dir: str | Path,
     rows: list[dict] | None = None,
@@ -43,8 +49,8 @@ def write_report(
 ) -> Path:
     """Write ``report.md`` (and the sweep / FPS / Pareto figures) from ``report_dir/metrics.csv``.
 
-    Figures the eval already wrote (``figures/energy_ood.png``, ``videos/*.gif``) are linked;
-    the Pareto view needs ``bench_dir/bench.json``.
+    Figures the eval already wrote (``figures/energy_ood.png``, ``videos/*.gif`` and
+    ``.mp4``) are linked; the Pareto view needs ``bench_dir/bench.json``.
     """
     root = Path(report_dir)
     rows = read_csv(root / "metrics.csv") if rows is None else rows
@@ -67,11 +73,21 @@ def write_report(
         sleeping_section(rows),
         "## Stability on hard scenes",
         stability_section(root),
+        "## Free fall against ½gt²",
+        freefall_section(root),
     ]
     parts += _figures(rows, bench_dir, root)
     if skipped:
         parts += ["## Runs not evaluated", "\n".join(f"- {s}" for s in skipped)]
     return write_text(root / "report.md", "\n\n".join(parts) + "\n")
+
+
+def _video_line(gif: Path, root: Path) -> str:
+    """``- [scene](videos/scene.gif) ([MP4](videos/scene.mp4))``, the MP4 when there is one."""
+    mp4 = gif.with_suffix(".mp4")
+    return f"- [{gif.stem}]({rel(gif, root)})" + (
+        f" ([MP4]({rel(mp4, root)}))" if mp4.exists() else ""
+    )
 
 
 def _figures(rows: list[dict], bench_dir, root: Path) -> list[str]:
@@ -87,6 +103,6 @@ def _figures(rows: list[dict], bench_dir, root: Path) -> list[str]:
         pareto_section(rows, bench_dir, fig_dir, root),
         "## Energy over time on the OOD scenes",
         f"![energy]({rel(energy, root)})" if energy.exists() else "No OOD energy figure.",
-        "## Videos (ground truth left, prediction right)",
-        "\n".join(f"- [{v.stem}]({rel(v, root)})" for v in videos) or "No videos.",
+        "## Videos (ground truth left, prediction right; shaded 3-D)",
+        "\n".join(_video_line(v, root) for v in videos) or "No videos.",
     ]

@@ -15,6 +15,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from physgnn.files import atomic_path  # noqa: E402
+
 LOG_METRICS = {
     "mse",
     "mse20",
@@ -27,11 +29,11 @@ LOG_METRICS = {
 
 
 def save_figure(fig, path: str | Path) -> Path:
-    """Lay out ``fig``, write it as a PNG (folders made) and close it."""
+    """Lay out ``fig``, write it as a PNG (atomically, folders made) and close it."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
     plt.close(fig)
     return path
 

@@ -21,12 +21,31 @@ COLUMNS = [
     "max_pen_sphere",
     "max_pen_ground",
     "max_pen_static",
+    "mean_pen_sphere",
+    "tunnelled",
     "energy_gain",
+    "energy_rise",
     "rest_drift",
     "n_resting",
 ]
-_FLOATS = ("max_pen_sphere", "max_pen_ground", "max_pen_static", "energy_gain", "rest_drift")
-_INTS = ("n_spheres", "n_frames", "start", "diverged_at", "steps_to_divergence", "n_resting")
+_FLOATS = (
+    "max_pen_sphere",
+    "max_pen_ground",
+    "max_pen_static",
+    "mean_pen_sphere",
+    "energy_gain",
+    "energy_rise",
+    "rest_drift",
+)
+_INTS = (
+    "n_spheres",
+    "n_frames",
+    "start",
+    "diverged_at",
+    "steps_to_divergence",
+    "n_resting",
+    "tunnelled",
+)
 
 
 def write_csv(path, rows: list[dict]) -> Path:
@@ -51,7 +70,10 @@ def section(rows: list[dict]) -> str:
         "max pen. sphere",
         "max pen. ground",
         "max pen. other",
+        "mean pen. sphere",
+        "tunnelled",
         "energy gain",
+        "energy rise",
         "rest drift (radii)",
     ]
     order = sorted(
@@ -71,13 +93,15 @@ def section(rows: list[dict]) -> str:
         body.append(
             [r["scene"], r["source"], f"`{r['run']}`", str(r["n_frames"]), diverged]
             + [fmt(r[k]) for k in ("max_pen_sphere", "max_pen_ground", "max_pen_static")]
-            + [fmt(r["energy_gain"]), drift]
+            + [fmt(r["mean_pen_sphere"]), str(r["tunnelled"])]
+            + [fmt(r["energy_gain"]), fmt(r["energy_rise"]), drift]
         )
     note = (
-        "Penetration: the deepest intersection of the rollout over its diameter (walls and "
-        "other planes are two-sided rectangles: 0.5 means a centre on the plane, i.e. "
-        "passing through it). Energy gain: normalised cumulative gain of the rollout's own "
-        "energy. Rest drift: largest displacement of the spheres that rest in the ground "
-        "truth. A diverged rollout is measured on its finite prefix."
+        "Penetration: the deepest intersection of the rollout over its diameter, and the mean "
+        "sphere–sphere one (planes are one-sided: above 0.5 the centre crossed the plane; "
+        "tunnelled counts those spheres). Energy gain: normalised cumulative gain of the "
+        "rollout's own energy; energy rise: its largest climb above the initial energy, "
+        "over the initial energy. Rest drift: largest displacement of the spheres that rest "
+        "in the ground truth. A diverged rollout is measured on its finite prefix."
     )
     return note + "\n\n" + md_table(header, body)

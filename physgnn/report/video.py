@@ -18,6 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.collections import EllipseCollection, PolyCollection  # noqa: E402
 
+from physgnn.files import atomic_path  # noqa: E402
 from physgnn.physics.scene import GROUND  # noqa: E402
 
 VIEWS = ((0, 2, "side (x–z)"), (0, 1, "top (x–y)"))
@@ -138,9 +139,8 @@ def render_gif(
         fig.draw_artist(counter)
         images.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
     plt.close(fig)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    imageio.mimsave(path, images, format="GIF", duration=1000.0 / fps, loop=0)
+    with atomic_path(path, keep_suffix=True) as tmp:
+        imageio.mimsave(tmp, images, format="GIF", duration=1000.0 / fps, loop=0)
     return len(images)
 
 

@@ -3,10 +3,11 @@
 A *pair* is a frame ``t`` of a training trajectory with ``t ∈ [H, T − 2]``: the state at ``t``
 with ``H + 1`` velocities of history, and the finite-difference velocities of frame ``t + 1``
 as targets (:class:`physgnn.data.state.TrajectoryFrames`). An epoch is ``pairs_per_epoch`` pairs
-drawn uniformly with replacement by a sampler seeded by (seed, epoch); validation is a fixed
-seeded subset of the validation split. Input noise is added by the Lightning module, not
-here, so the data stream is the same with or without noise. Batches are assembled by index
-gathers into the split's stacked tables (:class:`physgnn.data.pairs.PairDataset`).
+drawn uniformly with replacement by a sampler seeded by (seed, epoch), shared out between DDP
+processes; validation is a fixed seeded subset of the validation split (each process
+validates all of it). Input noise is added by the Lightning module, not here, so the data
+stream is the same with or without noise. Batches are assembled by index gathers into the
+split's stacked tables (:class:`physgnn.data.pairs.PairDataset`).
 """
 
 from __future__ import annotations
@@ -91,21 +92,23 @@ class StatePairDataModule(L.LightningDataModule):
 
     def train_dataloader(self) -> torch.utils.data.DataLoader:
         self.setup()
-        sampler = EpochSampler(
-            len(self.train_set),
-            self.pairs_per_epoch,
-            self.seed,
-            self.batch_size,
-            self._batches_done,
+        # Under DDP each process draws its share itself (the trainer is built with
+        # use_distributed_sampler=False: Lightning's sampler would reshuffle the step's pairs)
+        rank, world = (
+            (self.trainer.global_rank, self.trainer.world_size) if self.trainer else (0, 1)
         )
+        sampler = EpochSampler(
+            len(self.train_set), self.pairs_per_epoch, self.seed, rank, world,
+            self.batch_size, self._batches_done,
+        )  # fmt: skip
         return pair_loader(self.train_set, self.batch_size, sampler, self.num_workers)
 
     def _batches_done(self) -> int:
-        """Batches trained so far (the trainer's step count; 0 without a trainer or with
-        several processes): a run resumed mid-epoch goes on with the pairs its epoch had not
-        reached (so Lightning's warning of a loader that cannot resume does not apply)."""
+        """Batches this process has trained on so far (the trainer's step count; 0 without a
+        trainer): a run resumed mid-epoch goes on with the pairs its epoch had not reached (so
+        Lightning's warning of a loader that cannot resume does not apply)."""
         trainer = self.trainer
-        if trainer is None or trainer.world_size > 1:
+        if trainer is None:
             return 0
         return trainer.global_step * trainer.accumulate_grad_batches
 

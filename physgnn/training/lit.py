@@ -162,7 +162,8 @@ class LitSimulator(L.LightningModule):
         return {"loss": mse + self.lambda_energy * energy, "loss_mse": mse, "loss_energy": energy}
 
     def _log_all(self, prefix: str, losses: dict, batch_size: int) -> None:
-        """Epoch means under the exact names ``{prefix}/loss`` etc. (weighted by scene count)."""
+        """Epoch means under the exact names ``{prefix}/loss`` etc. (weighted by scene count;
+        with DDP, averaged over the processes)."""
         for name, value in losses.items():
             self.log(
                 f"{prefix}/{name}",
@@ -171,6 +172,7 @@ class LitSimulator(L.LightningModule):
                 on_step=False,
                 on_epoch=True,
                 prog_bar=name == "loss",
+                sync_dist=True,
             )
 
     def _noise_generator(self) -> torch.Generator:

@@ -1,0 +1,436 @@
+"""Faults injected the way a user or a cluster does (README "Fault handling"): one test per
+row of the fault table, plus generation and training killed in a subprocess. Nothing physgnn
+did not write is replaced, every mistake is one line naming the key or file, an interrupted
+run is a state that resumes, and one failing job never stops a sweep."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import lightning as L
+import pytest
+import torch
+from conftest import compose_generate
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+from test_train import CONF, SHORT, config, outputs_of, run_main
+
+import physgnn.groundtruth.generate as gen
+from physgnn import generate as generate_command
+from physgnn import train as train_command
+from physgnn.cli import command
+from physgnn.data.dataset import DATASET_MARKER
+from physgnn.errors import ConfigError, interrupt_signal, sigterm_interrupts
+from physgnn.evaluation.data_report import DataReportError, data_report
+from physgnn.evaluation.runs import find_runs, load_runs
+from physgnn.training.progress import StopOnSignal
+from physgnn.training.runs import read_run_json
+from physgnn.training.train import TrainingInterrupted, train
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+class SignalAt(L.Callback):
+    """Sends ``signum`` to this process (``times`` times) when training reaches ``step``."""
+
+    def __init__(self, signum: int, step: int, times: int = 1):
+        self.signum, self.step, self.times = signum, step, times
+
+    def on_train_batch_end(self, trainer, *args) -> None:
+        if trainer.global_step == self.step:
+            for _ in range(self.times):
+                os.kill(os.getpid(), self.signum)
+
+
+def signal_at(signum: int, step: int, times: int = 1) -> list[str]:
+    return [
+        "+callbacks.signal._target_=test_faults.SignalAt",
+        f"+callbacks.signal.signum={int(signum)}",
+        f"+callbacks.signal.step={step}",
+        f"+callbacks.signal.times={times}",
+    ]
+
+
+def generate_cfg(outputs, *extra):
+    return compose_generate(["data=tiny", f"paths.outputs={outputs}", "progress=false", *extra])
+
+
+def copy_dataset(tiny_dataset, outputs: Path) -> Path:
+    shutil.copytree(tiny_dataset, outputs / "data" / "tiny")
+    return outputs / "data" / "tiny"
+
+
+# --- generate into an existing folder -------------------------------------------------------
+
+
+@pytest.mark.parametrize("overwrite", ["false", "true"])
+def test_generate_never_replaces_a_folder_it_did_not_write(tmp_path, overwrite):
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    (folder / "thesis.tex").write_text("years of work")
+    with pytest.raises(FileExistsError, match=f"data.dir {folder} is a folder with files that"):
+        gen.generate(generate_cfg(tmp_path, f"data.dir={folder}", f"overwrite={overwrite}"))
+    assert [p.name for p in tmp_path.iterdir()] == ["mine"]  # no staging folder left either
+    assert (folder / "thesis.tex").read_text() == "years of work"
+
+
+def test_generate_into_the_outputs_root_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
+    (tmp_path / "runs" / "baseline").mkdir(parents=True)  # data.dir=$PHYSGNN_OUTPUTS
+    monkeypatch.setenv("PHYSGNN_OUTPUTS", str(tmp_path))
+    args = ["physgnn.generate", "data=tiny", "data.dir=${paths.outputs}", "overwrite=true"]
+    monkeypatch.setattr(sys, "argv", [*args, f"hydra.run.dir={tmp_path}/logs"])
+    with pytest.raises(SystemExit) as exit_info:
+        generate_command.main()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exit_info.value.code == 2 and len(err) == 1
+    assert err[0].startswith(f"error: data.dir {tmp_path} is a folder with files that physgnn")
+    assert (tmp_path / "runs" / "baseline").is_dir()
+
+
+@pytest.mark.parametrize("leftover", ["tiny.partial", "tiny.old"])
+def test_a_foreign_folder_where_staging_goes_is_left_alone(tmp_path, leftover):
+    (tmp_path / "data" / leftover).mkdir(parents=True)
+    (tmp_path / "data" / leftover / "notes.txt").write_text("mine")
+    with pytest.raises(FileExistsError, match=f"{leftover} is in the way and physgnn did not"):
+        gen.generate(generate_cfg(tmp_path))
+    assert (tmp_path / "data" / leftover / "notes.txt").read_text() == "mine"
+    assert not (tmp_path / "data" / "tiny").exists()
+
+
+def test_an_empty_folder_is_filled_and_a_marked_leftover_removed(tiny_dataset, tmp_path):
+    (tmp_path / "data" / "tiny").mkdir(parents=True)
+    copy = shutil.copytree(tiny_dataset, tmp_path / "data" / "tiny.partial")  # a killed run's
+    assert (copy / DATASET_MARKER).is_file()
+    out = gen.generate(generate_cfg(tmp_path, "workers=1"))
+    assert sorted(p.name for p in out.parent.iterdir()) == ["tiny"]
+    assert json.loads((out / DATASET_MARKER).read_text())["preset"] == "tiny"
+
+
+def test_export_scene_replaces_no_file(tmp_path):
+    (tmp_path / "train_traj_00000.yaml").write_text("mine")
+    with pytest.raises(FileExistsError, match="already holds train_traj_00000.yaml"):
+        gen.generate(generate_cfg(tmp_path, f"export_scene={tmp_path}"))
+    assert (tmp_path / "train_traj_00000.yaml").read_text() == "mine"
+
+
+# --- Ctrl-C and SIGTERM during training -----------------------------------------------------
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_mid_epoch_stops_saves_and_resumes(tiny_dataset, tmp_path, signum):
+    budget = [*SHORT, "trainer.max_epochs=2", "datamodule.pairs_per_epoch=16"]  # 4 steps/epoch
+    run_dir = tmp_path / "runs" / "stopped"
+    handler = signal.getsignal(signum)
+    with pytest.raises(TrainingInterrupted, match=f"stopped by {signum.name} at step 2") as stop:
+        train(config(tiny_dataset, run_dir, *budget, *signal_at(signum, 2)))
+    assert stop.value.exit_code == 128 + signum and signal.getsignal(signum) == handler
+    info = read_run_json(run_dir)
+    assert info["status"] == "interrupted" and info["error"] == f"stopped by {signum.name}"
+    assert info["global_step"] == 2 and info["pairs_seen"] == 8 and info["epochs"] == 0
+    last = run_dir / "checkpoints" / "last.ckpt"
+    assert info["checkpoints"]["last"] == str(last)
+    assert torch.load(last, weights_only=True)["global_step"] == 2  # mid-epoch
+    note = f"`runs/stopped`: status interrupted (stopped by {signum.name})"
+    assert load_runs(compose_eval(tmp_path), tmp_path) == ([], [note])  # eval lists it
+    with pytest.raises(ConfigError, match="model.M must be a whole number"):  # a typo on restart
+        train(config(tiny_dataset, run_dir, *budget, "model.M=abc"))
+    resumed = train(config(tiny_dataset, run_dir, *budget))  # the same folder: resumes
+    assert resumed["status"] == "finished" and resumed["resumed_from"] == str(last)
+    assert resumed["global_step"] == 8 and resumed["pairs_seen"] == 32
+    assert resumed["sessions"] == 2 and resumed["train_time_s"] > info["train_time_s"]
+
+
+def test_a_second_ctrl_c_stops_at_once(tiny_dataset, tmp_path):
+    cfg = config(tiny_dataset, tmp_path, *SHORT, *signal_at(signal.SIGINT, 1, times=2))
+    with pytest.raises(TrainingInterrupted, match="stopped at once") as stop:
+        train(cfg)
+    assert stop.value.exit_code == 130
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert read_run_json(tmp_path)["status"] == "interrupted"
+
+
+# --- one failing job in a sweep ---------------------------------------------------------------
+
+
+def test_failing_jobs_never_stop_a_sweep(tiny_dataset, tmp_path, monkeypatch, capsys):
+    outputs = outputs_of(tiny_dataset)
+    sweep = tmp_path / "sweep"
+    args = ["-m", "lit.noise_std=abc,1e30,0.01", "data=tiny", f"paths.outputs={outputs}"]
+    monkeypatch.setattr(sys, "argv", ["physgnn.train", *args, f"hydra.sweep.dir={sweep}",
+                                      *SHORT])  # fmt: skip
+    with pytest.raises(SystemExit) as exit_info:
+        train_command.main()
+    assert exit_info.value.code == 1
+    summary = json.loads((sweep / "sweep.json").read_text())
+    assert [j["status"] for j in summary["jobs"]] == ["failed", "diverged", "finished"]
+    assert summary["jobs"][0]["error"] == "ConfigError: lit.noise_std must be a number, got 'abc'"
+    err = capsys.readouterr().err
+    assert "error: lit.noise_std must be a number, got 'abc' (this job failed;" in err
+    assert err.strip().splitlines()[-1].startswith("error: 2 job(s) of the sweep did not finish")
+
+
+# --- debug=fast ---------------------------------------------------------------------------------
+
+
+def test_debug_fast_leaves_nothing_eval_takes_for_a_model(tiny_dataset, tmp_path):
+    run_dir = tmp_path / "runs" / "smoke"
+    train(config(tiny_dataset, run_dir, "debug=fast", "model.hidden=16"))
+    assert read_run_json(run_dir)["status"] == "debug" and not list(run_dir.rglob("*.ckpt"))
+    assert find_runs(None, tmp_path) == []
+    eval_cfg = compose_eval(tmp_path)
+    assert load_runs(eval_cfg, tmp_path) == ([], ["`runs/smoke`: status debug"])
+
+
+def compose_eval(outputs):
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        return compose("eval", overrides=[f"paths.outputs={outputs}"])
+
+
+# --- data-report honours PHYSGNN_OUTPUTS --------------------------------------------------------
+
+
+def test_data_report_follows_physgnn_outputs_with_the_right_hint(tmp_path, monkeypatch):
+    monkeypatch.setenv("PHYSGNN_OUTPUTS", str(tmp_path))
+    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+        cfg = compose("data_report", overrides=["preset=tiny"])
+    assert cfg.dataset == f"{tmp_path}/data/tiny"
+    hint = "run `make data PRESET=tiny` or `python -m physgnn.generate data=tiny`"
+    with pytest.raises(DataReportError, match=f"{tmp_path}/data/tiny not found: {hint}"):
+        data_report(cfg)
+    make = subprocess.run(["make", "-n", "data-report", "PRESET=tiny"], cwd=ROOT,
+                          capture_output=True, text=True, check=True)  # fmt: skip
+    assert "-m physgnn.data_report preset=tiny" in make.stdout and "outputs/" not in make.stdout
+
+
+# --- one line naming the key or the file --------------------------------------------------------
+
+
+def hydra_args(tiny_dataset, run_dir) -> list[str]:
+    return ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"hydra.run.dir={run_dir}"]
+
+
+def test_resuming_a_missing_or_foreign_checkpoint_is_one_line(tiny_dataset, tmp_path,
+                                                              monkeypatch, capsys):  # fmt: skip
+    monkeypatch.setattr(sys, "argv", ["physgnn.train", *hydra_args(tiny_dataset, tmp_path / "m1"),
+                                      *SHORT, "model.M=1"])  # fmt: skip
+    train_command.main()  # a run with its .hydra/config.yaml
+    missing = tmp_path / "none.ckpt"
+    code, line = run_main(monkeypatch, capsys, *hydra_args(tiny_dataset, tmp_path / "a"),
+                          *SHORT, f"ckpt_path={missing}")  # fmt: skip
+    assert code == 2 and line.startswith(f"error: ckpt_path={missing}: no such file")
+    last = tmp_path / "m1" / "checkpoints" / "last.ckpt"
+    code, line = run_main(monkeypatch, capsys, *hydra_args(tiny_dataset, tmp_path / "b"),
+                          *SHORT, "model.M=2", f"ckpt_path={last}")  # fmt: skip
+    assert code == 2 and line.startswith(f"error: ckpt_path={last} does not fit this model")
+    assert "model.M is 1 there, 2 here" in line
+    assert read_run_json(tmp_path / "b")["status"] == "failed"
+
+
+@pytest.mark.parametrize("status", ["finished", "truncated", "diverged", "debug"])
+def test_a_run_folder_is_never_trained_over(tiny_dataset, tmp_path, status):
+    (tmp_path / "checkpoints").mkdir()
+    (tmp_path / "checkpoints" / "best-epoch001.ckpt").write_bytes(b"weights")
+    (tmp_path / "run.json").write_text(json.dumps({"status": status}))
+    with pytest.raises(ConfigError, match=f"run_dir {tmp_path} already holds a {status} run"):
+        train(config(tiny_dataset, tmp_path, *SHORT))
+    assert read_run_json(tmp_path) == {"status": status}
+    assert (tmp_path / "checkpoints" / "best-epoch001.ckpt").read_bytes() == b"weights"
+
+
+def test_any_command_stopped_by_ctrl_c_is_one_line(capsys):
+    def stopped(cfg):
+        raise KeyboardInterrupt
+
+    with pytest.raises(SystemExit) as exit_info:
+        command("eval", stopped).__wrapped__(OmegaConf.create())
+    assert exit_info.value.code == 130
+    assert capsys.readouterr().err == "error: eval interrupted (exit code 130)\n"
+
+
+@pytest.mark.parametrize(
+    "override,message",
+    [
+        ("workers=abc", "workers must be a whole number >= 1 (processes), got 'abc'"),
+        ("workers=-1", "workers must be a whole number >= 1 (processes), got -1"),
+    ],
+)
+def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, override, message):
+    argv = ["physgnn.generate", "data=tiny", f"paths.outputs={tmp_path}", override]
+    monkeypatch.setattr(sys, "argv", [*argv, f"hydra.run.dir={tmp_path}/logs"])
+    with pytest.raises(SystemExit) as exit_info:
+        generate_command.main()
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines() == [f"error: {message}"]
+
+
+@pytest.mark.parametrize(
+    "override,message",
+    [
+        ("model.M=abc", "model.M must be a whole number, got 'abc'"),
+        ("datamodule.batch_size=1.5", "datamodule.batch_size must be a whole number, got 1.5"),
+        ("+model.Mx=3", "model.Mx is not an argument of LearnedSimulator (known: H, M, "),
+        ("trainer.max_epochs=0", "trainer.max_epochs=0 trains nothing: give at least 1"),
+    ],
+)
+def test_config_mistakes_name_the_key_and_are_recorded(tiny_dataset, tmp_path, monkeypatch,
+                                                       capsys, override, message):  # fmt: skip
+    code, line = run_main(monkeypatch, capsys, *hydra_args(tiny_dataset, tmp_path), override)
+    assert code == 2 and line.startswith(f"error: {message}")
+    info = read_run_json(tmp_path)  # the run folder says what went wrong ...
+    assert info["status"] == "failed" and message in info["error"]
+    assert message in (tmp_path / "train.log").read_text()  # ... and so does its log
+
+
+def test_zero_std_in_stats_names_the_file_and_key(tiny_dataset, tmp_path, monkeypatch, capsys):
+    outputs = tmp_path / "outputs"
+    data = copy_dataset(tiny_dataset, outputs)
+    stats = json.loads((data / "stats.json").read_text())
+    stats["vel"]["std"][0] = 0.0
+    (data / "stats.json").write_text(json.dumps(stats))
+    args = ["data=tiny", f"paths.outputs={outputs}", f"hydra.run.dir={tmp_path / 'run'}"]
+    code, line = run_main(monkeypatch, capsys, *args, *SHORT)
+    assert code == 2
+    assert line.startswith(f"error: {data / 'stats.json'}: vel.std must be positive and finite")
+    assert line.endswith("python -m physgnn.generate data=tiny` overwrite=true)")
+
+
+def test_an_exploding_model_names_no_checkpoint_folder_that_is_not_there(tiny_dataset, tmp_path):
+    with pytest.raises(Exception, match="the model exploded.*; no checkpoint was saved$"):
+        train(config(tiny_dataset, tmp_path, *SHORT, "lit.noise_std=1e30"))
+    assert not (tmp_path / "checkpoints").exists()
+
+
+def test_a_resume_with_nothing_left_to_train_says_so(tiny_dataset, tmp_path):
+    first = train(config(tiny_dataset, tmp_path / "a", *SHORT))
+    last = first["checkpoints"]["last"]
+    with pytest.raises(ConfigError, match="nothing to train: .* trainer.max_epochs=1 \\(step 2\\)"):
+        train(config(tiny_dataset, tmp_path / "b", *SHORT, f"ckpt_path={last}"))
+
+
+# --- killed in a subprocess ----------------------------------------------------------------------
+
+
+def start(args: list[str]) -> subprocess.Popen:
+    """A ``python -m physgnn.X`` child in its own process group, taking Ctrl-C like a
+    terminal's command (SIGINT not ignored, as it is for a background job)."""
+    return subprocess.Popen(
+        [sys.executable, "-m", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE, text=True, start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )  # fmt: skip
+
+
+def interrupt(proc: subprocess.Popen, signum: int) -> None:
+    """Ctrl-C reaches the whole process group (workers too); ``kill`` one process."""
+    if signum == signal.SIGINT:
+        os.killpg(proc.pid, signum)
+    else:
+        proc.send_signal(signum)
+
+
+def wait_for(path: Path, proc: subprocess.Popen, timeout: float = 120) -> None:
+    end = time.monotonic() + timeout
+    while not path.exists():
+        assert proc.poll() is None, proc.communicate()[1][-3000:]
+        assert time.monotonic() < end, f"{path} never appeared"
+        time.sleep(0.05)
+
+
+def children(pid: int) -> list[int]:
+    found = subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True)
+    return [int(p) for p in found.stdout.split()]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_killing_generate_is_one_line_and_leaves_the_dataset(tiny_dataset, tmp_path, signum):
+    data = copy_dataset(tiny_dataset, tmp_path)
+    before = {p.name: p.read_bytes() for p in data.iterdir()}
+    proc = start(["physgnn.generate", "data=tiny", f"paths.outputs={tmp_path}", "workers=2",
+                  "overwrite=true", "data.splits.train=400", "progress=false",
+                  f"hydra.run.dir={tmp_path}/logs"])  # fmt: skip
+    wait_for(data.with_name("tiny.partial") / DATASET_MARKER, proc)
+    time.sleep(1.0)  # the workers are simulating
+    workers = children(proc.pid)
+    assert len(workers) >= 2
+    interrupt(proc, signum)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signum
+    assert err.strip().splitlines() == [
+        f"error: generation stopped by {signum.name}: {data} was left as it was"
+    ]
+    assert {p.name: p.read_bytes() for p in data.iterdir()} == before
+    assert sorted(p.name for p in data.parent.iterdir()) == ["tiny"]  # no staging left
+    assert not any(Path(f"/proc/{pid}").exists() for pid in workers)
+
+
+def test_killing_training_saves_it_and_it_resumes(tiny_dataset, tmp_path):
+    run_dir = tmp_path / "run"
+    budget = ["trainer.max_epochs=1", "datamodule.pairs_per_epoch=4000"]
+    proc = start(["physgnn.train", "data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}",
+                  f"hydra.run.dir={run_dir}", *SHORT, *budget])  # fmt: skip
+    wait_for(run_dir / "run.json", proc)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143
+    line = err.strip().splitlines()[-1]
+    assert line.startswith("error: training stopped by SIGTERM at step")
+    assert line.endswith(f"Resume: python -m physgnn.train run_dir={run_dir} (same overrides)")
+    info = read_run_json(run_dir)
+    assert info["status"] == "interrupted" and 1 <= info["global_step"] < 1000
+    ckpt = torch.load(info["checkpoints"]["last"], weights_only=True)
+    assert ckpt["global_step"] == info["global_step"]
+    steps = info["global_step"] + 2
+    resumed = train(config(tiny_dataset, run_dir, *SHORT, *budget, f"+trainer.max_steps={steps}"))
+    assert resumed["status"] == "finished" and resumed["sessions"] == 2
+    assert resumed["global_step"] == steps and resumed["pairs_seen"] == 4 * steps
+
+
+# --- signals owned by a job scheduler -----------------------------------------------------------
+
+
+def test_a_schedulers_handlers_are_kept_and_its_preemption_signal_chained(monkeypatch):
+    """Under submitit, SIGTERM stays submitit's (it ignores it) and SIGUSR2 stops training
+    cleanly, then goes on to submitit's handler (which requeues the job)."""
+    monkeypatch.setenv("SUBMITIT_EXECUTOR", "slurm")
+    calls = []
+
+    def bypass(signum, frame):
+        calls.append(("bypass", signum))
+
+    def requeue(signum, frame):
+        calls.append(("requeue", signum))
+
+    before = {s: signal.signal(s, h) for s, h in ((signal.SIGTERM, bypass),
+                                                  (signal.SIGUSR2, requeue))}  # fmt: skip
+    try:
+        stop = StopOnSignal()
+        stop.install()
+        assert signal.getsignal(signal.SIGTERM) is bypass
+        with sigterm_interrupts():  # the CLI's: it leaves a scheduler's SIGTERM alone too
+            assert signal.getsignal(signal.SIGTERM) is bypass
+        os.kill(os.getpid(), signal.SIGUSR2)
+        assert stop.signum == signal.SIGUSR2 and calls == []
+        stop.restore()
+        assert signal.getsignal(signal.SIGUSR2) is requeue
+        stop.chain()
+        assert calls == [("requeue", signal.SIGUSR2)]
+    finally:
+        for signum, handler in before.items():
+            signal.signal(signum, handler)
+
+
+def test_sigterm_is_an_interrupt_where_nobody_handles_it():
+    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+    with pytest.raises(KeyboardInterrupt) as stopped, sigterm_interrupts():
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(1)  # the handler runs before this returns
+    assert interrupt_signal(stopped.value) == signal.SIGTERM
+    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
