@@ -8,6 +8,9 @@ TORCH_PIN ?= torch==2.13.0
 PRESET ?= small
 ARGS ?=
 EXPERIMENT ?= ablation_M
+# OpenMP threads spin briefly, then sleep: the default 300 000 spins made 2-thread steps about
+# 8x slower when other processes kept the cores busy (physgnn/__init__.py, docs/PERFORMANCE.md).
+export GOMP_SPINCOUNT ?= 1000
 
 help: ## List the targets
 	@grep -hE '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-12s\033[0m %s\n", $$1, $$2}'
@@ -48,8 +51,6 @@ sweep: ## Run a whole ablation sweep (EXPERIMENT=ablation_H|ablation_M|ablation_
 eval: ## Evaluate every finished run under outputs/ and write outputs/report/ (ARGS: runs=PATH ...)
 	$(PY) -m physgnn.eval $(ARGS)
 
-# On a busy machine (load > cores) run `OMP_WAIT_POLICY=PASSIVE make bench`: spinning OpenMP
-# threads made 2-thread steps up to 6x slower there; on an idle machine PASSIVE is 2x slower.
 bench: ## Accuracy versus time: outputs/bench/bench.{json,md} (ARGS: e.g. quick=true threads=1)
 	$(PY) -m physgnn.bench $(ARGS)
 

@@ -13,6 +13,10 @@ In a sweep (``-m``, ``hydra.mode=MULTIRUN``) a failing job does not end the swee
 is printed (one line, or the traceback of a bug) and the job returns None; the run records the
 failure (``run.json``) and the sweep's summary counts it. An interruption still stops it.
 
+Before the work, torch gets as many threads as the cores other processes leave free
+(:func:`free_threads`): on a busy machine a second thread only waits for a core, and steps
+ran several times slower than on one thread. ``OMP_NUM_THREADS``, when set, wins.
+
 A command whose arguments Hydra cannot read (``simulate``: ``scene=FILE`` names a file, where
 Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instead: its
 ``main(argv=None)`` parses ``sys.argv[1:]`` (or ``argv``) itself, with the same errors.
@@ -20,12 +24,15 @@ Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instea
 
 from __future__ import annotations
 
+import math
+import os
 import sys
 import traceback
 from collections.abc import Callable
 from typing import NoReturn
 
 import hydra
+import torch
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import HydraException
 from hydra.types import RunMode
@@ -56,6 +63,20 @@ def fail(err: BaseException) -> NoReturn:
     sys.exit(getattr(err, "exit_code", 2))
 
 
+def free_threads() -> int | None:
+    """Set torch's threads to the cores the 1-minute load average leaves free (at least 1) and
+    return that count; None (threads untouched) when ``OMP_NUM_THREADS`` is set."""
+    if os.environ.get("OMP_NUM_THREADS"):
+        return None
+    cores = os.cpu_count() or 1
+    load = os.getloadavg()[0]
+    threads = max(1, min(cores, cores - math.floor(load + 0.5)))
+    if threads < torch.get_num_threads():
+        print(f"threads: {threads} of {cores} cores (load average {load:.1f}; OMP_NUM_THREADS=N)")
+    torch.set_num_threads(threads)
+    return threads
+
+
 def command(
     name: str,
     run: Callable[[DictConfig], object],
@@ -67,6 +88,7 @@ def command(
     without Hydra (for tests). With ``parse`` there is no Hydra (module doc)."""
 
     def main(cfg: DictConfig):
+        free_threads()
         try:
             with sigterm_interrupts():
                 result = run(cfg)

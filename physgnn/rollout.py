@@ -11,6 +11,7 @@ A scene stops when a frame turns non-finite or runs away (a speed above the boun
 coordinate beyond ``max_pos``); ``diverged_at`` is the index of that first bad frame and the
 scene's arrays keep only the frames before it. The other scenes of the batch continue. Each
 result is a :class:`~physgnn.physics.trajectory.Trajectory`, the container the truth uses.
+The frames are recorded on the rollout's device and reach the host once, at the end.
 """
 
 from __future__ import annotations
@@ -123,11 +124,8 @@ def _warn_unseen_effects(trained, trajectories: list[Trajectory]) -> None:
         n for n, seen in zip(EFFECT_NAMES, trained.tolist(), strict=True) if n in asked and not seen
     ]
     if unseen:
-        warnings.warn(
-            f"rollout asks for effect(s) {unseen} that the model never saw in training",
-            UserWarning,
-            stacklevel=3,
-        )
+        message = f"rollout asks for effect(s) {unseen} that the model never saw in training"
+        warnings.warn(message, UserWarning, stacklevel=3)
 
 
 def _speed_bound(frames: TrajectoryFrames, bounds: dict) -> float:
@@ -204,35 +202,40 @@ class _Batch:
 
 def _start_state(frames: TrajectoryFrames, h: int) -> SceneState:
     s = frames.state(h, h)
-    for key in ("target_vel", "target_angvel"):  # a simulator must not see the answer
-        if key in s:
-            del s[key]
+    s.target_vel = s.target_angvel = None  # a simulator must not see the answer
     return s
 
 
 class _Record:
-    """The frames of every scene of a batch, ``[T, N_total, ·]`` float32 per key."""
+    """The frames of every scene of a batch, ``[T, N_total, ·]`` float32 per key, kept on the
+    rollout's device: a frame is written there, and the frames reach the host once, when the
+    rollout ends (no copy to the host per frame)."""
 
-    def __init__(self, frames: list[TrajectoryFrames], t_max: int, h: int):
+    def __init__(self, frames: list[TrajectoryFrames], t_max: int, h: int, device):
         counts = [f.pos.shape[1] for f in frames]
         self.offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        n = int(self.offsets[-1])
-        self.arrays = {k: np.zeros((t_max, n, w), np.float32) for k, w in _RECORDED.items()}
+        n, self.device = int(self.offsets[-1]), device
+        zeros = lambda w: torch.zeros(t_max, n, w, dtype=torch.float32, device=device)  # noqa: E731
+        self.arrays = {k: zeros(w) for k, w in _RECORDED.items()}
         for f, lo, hi in zip(frames, self.offsets[:-1], self.offsets[1:], strict=True):
             for key, array in self.arrays.items():
-                array[: h + 1, lo:hi] = getattr(f, key)[: h + 1].numpy()
+                array[: h + 1, lo:hi] = getattr(f, key)[: h + 1].to(device)
 
-    def nodes(self, active: list[int]) -> np.ndarray:
-        """Columns of the records of the active scenes' spheres."""
-        if not active:
-            return np.zeros(0, dtype=np.int64)
-        return np.concatenate([np.arange(self.offsets[i], self.offsets[i + 1]) for i in active])
+    def nodes(self, active: list[int]) -> torch.Tensor:
+        """Columns of the records of the active scenes' spheres, ``[N]`` on the device."""
+        spans = [np.arange(self.offsets[i], self.offsets[i + 1]) for i in active]
+        columns = np.concatenate(spans) if spans else np.zeros(0, dtype=np.int64)
+        return torch.as_tensor(columns, device=self.device)
 
-    def write(self, t: int, nodes: np.ndarray, state: _Batch) -> None:
-        self.arrays["pos"][t, nodes] = state.pos.float().cpu().numpy()
-        self.arrays["quat"][t, nodes] = state.quat.float().cpu().numpy()
-        self.arrays["vel"][t, nodes] = state.vel[:, 0].float().cpu().numpy()
-        self.arrays["angvel"][t, nodes] = state.angvel[:, 0].float().cpu().numpy()
+    def write(self, t: int, nodes: torch.Tensor, state: _Batch) -> None:
+        self.arrays["pos"][t, nodes] = state.pos.float()
+        self.arrays["quat"][t, nodes] = state.quat.float()
+        self.arrays["vel"][t, nodes] = state.vel[:, 0].float()
+        self.arrays["angvel"][t, nodes] = state.angvel[:, 0].float()
+
+    def host(self) -> None:
+        """Bring the records to the host as numpy arrays (once, at the end)."""
+        self.arrays = {k: a.cpu().numpy() for k, a in self.arrays.items()}
 
     def frames_of(self, i: int, end: int) -> dict:
         lo, hi = self.offsets[i], self.offsets[i + 1]
@@ -241,7 +244,7 @@ class _Record:
 
 def _rollout_batch(simulator, trajs, lengths, *, h, bounds, max_pos, device, dtype, timer):
     frames = [TrajectoryFrames(t) for t in trajs]
-    record = _Record(frames, max(lengths), h)
+    record = _Record(frames, max(lengths), h, device)
     speed_bound = torch.tensor([_speed_bound(f, bounds) for f in frames], dtype=torch.float64)
     state = _Batch([_start_state(f, h) for f in frames], speed_bound, device, dtype)
     diverged: list[int | None] = [None] * len(trajs)
@@ -269,6 +272,7 @@ def _rollout_batch(simulator, trajs, lengths, *, h, bounds, max_pos, device, dty
             state.keep(keep)
             nodes = record.nodes(state.active)
     total = StepTimer.clock(device) - start_time
+    record.host()
     if timer is not None:
         timer.timings["total"] += total
     fps = steps / total if total > 0 else float("inf")

@@ -36,7 +36,8 @@ ALLOWED = {
         "physics", "base",
     },
     "benchmark": {
-        "report", "rollout", "metrics", "models", "groundtruth", "data", "physics", "base",
+        "training", "report", "rollout", "metrics", "models", "groundtruth", "data", "physics",
+        "base",
     },
     "commands": {"cli", "training", "groundtruth", "evaluation", "benchmark"},
 }  # fmt: skip

@@ -313,3 +313,15 @@ def test_pareto_figures_written(tmp_path):
     paths = pareto.pareto_figures(rows, tmp_path / "bench", tmp_path / "fig", metrics=metrics)
     assert [p.name for p in paths] == ["pareto_chamfer.png", "pareto_energy_gain.png"]
     assert all(p.stat().st_size > 1000 for p in paths)
+
+
+def test_training_profile_splits_one_step_into_its_parts(quick):
+    out, _ = quick
+    p = json.loads((out / "bench_extra.json").read_text())["profile"]
+    parts = ("data", "noise", "push_forward", "graph", "forward", "backward", "optimiser")
+    assert all(p[f"{k}_ms"] > 0 for k in parts)  # quick: one push-forward step, noise on
+    assert sum(p[f"{k}_ms"] for k in parts) == pytest.approx(p["step_ms"])
+    assert sum(p[f"{k}_share"] for k in parts) == pytest.approx(1.0)
+    assert p["pairs_per_s"] == pytest.approx(p["batch_size"] / (p["step_ms"] / 1000))
+    text = (out / "bench.md").read_text()
+    assert "Where a training step's time goes" in text and "| push-forward |" in text

@@ -99,3 +99,18 @@ def test_sampler_is_seeded_by_epoch():
     assert list(sampler) == second  # epoch 1 is the same with or without set_epoch
     sampler.set_epoch(0)
     assert list(sampler) == first
+
+
+def test_sampler_leaves_out_the_batches_a_resumed_epoch_gave():
+    from physgnn.data.pairs import EpochSampler
+
+    plain = EpochSampler(50, 20, seed=7)
+    epochs = [list(plain), list(plain), list(plain)]
+    done = {"batches": 0}
+    sampler = EpochSampler(50, 20, seed=7, batch_size=6, batches_done=lambda: done["batches"])
+    assert list(sampler) == epochs[0]  # a fresh run
+    done["batches"] = 4 + 1  # 4 batches per epoch (20 pairs by 6): epoch 1 gave one batch
+    sampler.set_epoch(1)
+    assert list(sampler) == epochs[1][6:]
+    done["batches"] = 8  # epoch 2 starts: nothing is left out
+    assert list(sampler) == epochs[2]

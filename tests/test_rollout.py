@@ -216,3 +216,32 @@ def test_unseen_effect_warns_once_and_seen_effects_are_silent():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         rollout(sim, still)
+
+
+def test_no_frame_reaches_the_host_before_the_rollout_ends(monkeypatch):
+    """The device path (graph building by the torch backend, as on a GPU): the number of
+    ``.cpu()`` / ``.numpy()`` calls of a rollout does not grow with its frames."""
+    from simdata import STATS, trajectory
+
+    from physgnn.models.learned import LearnedSimulator
+
+    torch.manual_seed(0)
+    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8, neighbor_backend="torch").eval()
+    sim.effects_trained.fill_(True)
+    traj = trajectory(4, frames=30, seed=3)
+    calls = {"cpu": 0, "numpy": 0}
+    for name in calls:
+        original = getattr(torch.Tensor, name)
+
+        def counted(self, *args, _name=name, _original=original, **kwargs):
+            calls[_name] += 1
+            return _original(self, *args, **kwargs)
+
+        monkeypatch.setattr(torch.Tensor, name, counted)
+    counts = []
+    for frames in (6, 26):
+        calls.update(cpu=0, numpy=0)
+        (out,) = rollout(sim, [traj], n_frames=frames, device="cpu")
+        assert out.n_frames == frames and out.diverged_at is None
+        counts.append(dict(calls))
+    assert counts[0] == counts[1], counts

@@ -6,15 +6,12 @@ from __future__ import annotations
 import time
 
 import lightning as L
-import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
-from torch.utils.data import RandomSampler
-from torch_geometric.loader import DataLoader
 
 from physgnn.benchmark.learned import frame_states, make_simulator, time_cases
 from physgnn.benchmark.scenes import bench_run, resting_scene, with_effects, without_walls
-from physgnn.data.pairs import PairDataset
+from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 from physgnn.groundtruth.engine import simulate
 from physgnn.models.profiling import StepTimer
 from physgnn.models.sleeping import SleepingSimulator
@@ -48,13 +45,8 @@ def training_throughput(cfg: DictConfig, trajectories: list, stats: dict) -> dic
     simulator = instantiate(cfg.model, stats=stats)
     lit = instantiate(c.lit, simulator=simulator)
     data = PairDataset(trajectories, simulator.H)
-    sampler = RandomSampler(
-        data,
-        replacement=True,
-        num_samples=c.steps * c.batch_size,
-        generator=torch.Generator().manual_seed(int(cfg.seed)),
-    )
-    loader = DataLoader(data, batch_size=c.batch_size, sampler=sampler)
+    sampler = EpochSampler(len(data), c.steps * c.batch_size, int(cfg.seed))
+    loader = pair_loader(data, c.batch_size, sampler)
     timer = ThroughputTimer(min(c.warmup_steps, c.steps - 1))
     trainer = L.Trainer(
         accelerator="cpu",

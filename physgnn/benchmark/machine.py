@@ -54,4 +54,5 @@ def machine_info(threads: int, shapes, repeats: int) -> dict:
         "python": platform.python_version(),
         "loadavg_start": os.getloadavg()[0],
         "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY", "unset (spin, then sleep)"),
+        "gomp_spincount": os.environ.get("GOMP_SPINCOUNT", "unset (300000)"),
     }

@@ -29,6 +29,10 @@ def machine_table(extra: dict) -> str:
         ["same, first shape on 1 thread (GFLOP/s)", f"{m.get('matmul_gflops_1_thread', 0):.1f}"],
         ["1-min load average (other processes compete for the cores)", load],
         ["OMP_WAIT_POLICY", m.get("omp_wait_policy", "?")],
+        [
+            "GOMP_SPINCOUNT (spins before an idle OpenMP thread sleeps)",
+            m.get("gomp_spincount", "?"),
+        ],
     ]
     table = md_table(["machine", ""], body)
     if m["threads"] > 1 and start > os.cpu_count():
@@ -145,6 +149,17 @@ def training_table(extra: dict) -> str:
     )
 
 
+def profile_table(extra: dict) -> str:
+    """One training step, part by part (``benchmark.profile``)."""
+    p = extra.get("profile")
+    if not p:
+        return "–"
+    parts = ("data", "noise", "push_forward", "graph", "forward", "backward", "optimiser")
+    body = [[k.replace("_", "-"), f"{p[f'{k}_ms']:.2f}", f"{p[f'{k}_share']:.0%}"] for k in parts]
+    body.append(["whole step", f"{p['step_ms']:.2f}", f"{p['pairs_per_s']:.0f} pairs/s"])
+    return md_table(["part", "ms per step", "share"], body)
+
+
 def activity_table(extra: dict) -> str:
     body = [
         [
@@ -184,12 +199,12 @@ def rollout_table(extra: dict) -> str:
             f"{r['graph_ms']:.2f}",
             f"{r['network_ms']:.2f}",
             f"{r['integration_ms']:.2f}",
+            f"{r['total_ms'] - r['graph_ms'] - r['network_ms'] - r['integration_ms']:.2f}",
         ]
         for r in extra.get("rollout", [])
     ]
-    return md_table(
-        ["spheres", "frames", "FPS", "ms/frame", "graph ms", "network ms", "integration ms"], body
-    )
+    head = ["spheres", "frames", "FPS", "ms/frame", "graph ms", "network ms", "integration ms"]
+    return md_table([*head, "other ms (recording, scene bookkeeping)"], body)
 
 
 def batched_table(extra: dict) -> str:
@@ -236,7 +251,8 @@ def write_markdown(result: dict, extra: dict) -> str:
         "ms/frame = graph + network (incl. normalisation) + integration; share of matmul = "
         "network FLOP rate / best measured matmul rate.",
         learned_table(extra),
-        "### The same baseline through `physgnn.rollout` (random weights: the spheres drift)",
+        "### The same baseline through `physgnn.rollout`: where a rollout frame's time goes "
+        "(random weights: the spheres drift)",
         rollout_table(extra),
         "### Batching scenes (baseline, copies of the same scene in one graph)",
         batched_table(extra),
@@ -249,6 +265,13 @@ def write_markdown(result: dict, extra: dict) -> str:
         accuracy_table(extra),
         "## Training throughput (baseline, Lightning, noise on)",
         training_table(extra),
+        "### Where a training step's time goes (baseline, "
+        f"{extra.get('profile', {}).get('batch_size', '?')} pairs, noise, "
+        f"{extra.get('profile', {}).get('pushforward_steps', '?')} push-forward step)",
+        "Graph building counts every graph of the step (push-forward and loss); forward and "
+        "push-forward are the network and its normalisation without it; optimiser = gradient "
+        "clipping and the Adam step. A rollout frame's parts are in the rollout table above.",
+        profile_table(extra),
         "## Cost follows activity",
         activity_table(extra),
         "## Speed work in the measured code",

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.benchmark import activity, machine, scenes
+from physgnn.benchmark import activity, machine, profile, scenes
 from physgnn.benchmark.learned import batched_rows, learned_rows
 from physgnn.benchmark.markdown import write_markdown
 from physgnn.benchmark.pybullet import accuracy_sweep, pybullet_rows, pybullet_runs
@@ -87,6 +87,7 @@ def measure(cfg: DictConfig, rng: np.random.Generator, matmul: float, phases: di
     start = runs[cfg.accuracy.n_spheres]["start"]
     m["pybullet_accuracy"] = timed("pybullet substeps", accuracy_sweep, cfg, start)
     m["training"] = timed("training", activity.training_throughput, cfg, train_trajs, stats)
+    m["profile"] = timed("profile", profile.training_profile, cfg, train_trajs, stats)
     m["activity"] = timed("activity", activity.activity_rows, cfg, runs, stats, rng)
     m["rollout"] = timed("rollout", activity.rollout_rows, cfg, runs, stats)
     m["batched"] = timed("batched", batched_rows, cfg, runs, stats)

@@ -5,8 +5,9 @@ with ``H + 1`` velocities of history, and the finite-difference velocities of fr
 as targets (:class:`physgnn.data.state.TrajectoryFrames`). An epoch is ``pairs_per_epoch`` pairs
 drawn uniformly with replacement by a sampler seeded by (seed, epoch), shared out between DDP
 processes; validation is a fixed seeded subset of the validation split (each process
-validates all of it). Input noise is added by the Lightning module, not
-here, so the data stream is the same with or without noise.
+validates all of it). Input noise is added by the Lightning module, not here, so the data
+stream is the same with or without noise. Batches are assembled by index gathers into the
+split's stacked tables (:class:`physgnn.data.pairs.PairDataset`).
 """
 
 from __future__ import annotations
@@ -15,11 +16,9 @@ from pathlib import Path
 
 import lightning as L
 import torch
-from torch_geometric.loader import DataLoader
 
 from physgnn.data.dataset import DatasetError, read_split, read_stats
-from physgnn.data.pairs import EpochSampler, PairDataset
-from physgnn.physics.scene import EFFECT_NAMES
+from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 
 
 class StatePairDataModule(L.LightningDataModule):
@@ -89,34 +88,34 @@ class StatePairDataModule(L.LightningDataModule):
     def effects_trained(self) -> torch.Tensor:
         """``[5]`` bool: effects present in at least one training scene."""
         self.setup()
-        effects = torch.zeros(len(EFFECT_NAMES), dtype=torch.bool)
-        for f in self.train_set.frames:
-            effects |= f.static["effects"][0]
-        return effects
+        return self.train_set.effects.any(0)
 
-    def _loader(self, dataset, **kwargs) -> DataLoader:
-        return DataLoader(
-            dataset,
-            batch_size=self.batch_size,
-            num_workers=self.num_workers,
-            persistent_workers=self.num_workers > 0,
-            **kwargs,
-        )
-
-    def train_dataloader(self) -> DataLoader:
+    def train_dataloader(self) -> torch.utils.data.DataLoader:
         self.setup()
         # Under DDP each process draws its share itself (the trainer is built with
         # use_distributed_sampler=False: Lightning's sampler would reshuffle the step's pairs)
         rank, world = (
             (self.trainer.global_rank, self.trainer.world_size) if self.trainer else (0, 1)
         )
-        sampler = EpochSampler(len(self.train_set), self.pairs_per_epoch, self.seed, rank, world)
-        return self._loader(self.train_set, sampler=sampler)
+        sampler = EpochSampler(
+            len(self.train_set), self.pairs_per_epoch, self.seed, rank, world,
+            self.batch_size, self._batches_done,
+        )  # fmt: skip
+        return pair_loader(self.train_set, self.batch_size, sampler, self.num_workers)
 
-    def val_dataloader(self) -> DataLoader:
+    def _batches_done(self) -> int:
+        """Batches this process has trained on so far (the trainer's step count; 0 without a
+        trainer): a run resumed mid-epoch goes on with the pairs its epoch had not reached (so
+        Lightning's warning of a loader that cannot resume does not apply)."""
+        trainer = self.trainer
+        if trainer is None:
+            return 0
+        return trainer.global_step * trainer.accumulate_grad_batches
+
+    def val_dataloader(self) -> torch.utils.data.DataLoader:
         self.setup()
         generator = torch.Generator().manual_seed(self.seed + 1)
         n = min(self.val_pairs, len(self.val_set))
         index = torch.randperm(len(self.val_set), generator=generator)[:n].sort().values
         subset = torch.utils.data.Subset(self.val_set, index.tolist())
-        return self._loader(subset, shuffle=False)
+        return pair_loader(subset, self.batch_size, num_workers=self.num_workers)
