@@ -53,6 +53,7 @@ def test_fast_dev_run(tiny_dataset, tmp_path):
     assert info["pairs_per_s"] > 0 and info["nodes_per_s"] >= info["pairs_per_s"]
     saved = json.loads((tmp_path / "run.json").read_text())
     assert saved["status"] == "debug" and saved["seed"] == 0
+    assert saved["threads"] == torch.get_num_threads()  # results depend on it: recorded
     assert info["checkpoints"] == {"best": None, "last": None}
     assert not list(tmp_path.rglob("*.ckpt"))  # nothing eval could take for a trained model
 

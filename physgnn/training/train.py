@@ -18,6 +18,7 @@ from datetime import datetime
 from pathlib import Path
 
 import lightning as L
+import torch
 from hydra.core.hydra_config import HydraConfig
 from hydra.utils import instantiate
 from lightning.pytorch.callbacks import Timer
@@ -123,6 +124,8 @@ def _start(cfg: DictConfig, run_dir: Path) -> dict:
         "started": datetime.now().isoformat(timespec="seconds"),
         "host": socket.gethostname(),
         "pid": os.getpid(),
+        # CPU results are reproducible for a seed *and* a thread count: record it.
+        "threads": torch.get_num_threads(),
     }
 
 
