@@ -23,9 +23,10 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.utils import instantiate
 from lightning.pytorch.callbacks import Timer
 from lightning.pytorch.utilities.rank_zero import rank_zero_only
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError, Interrupted, one_line, signal_name
+from physgnn.files import write_text
 from physgnn.training.checks import (
     check_arguments,
     check_budget,
@@ -112,6 +113,14 @@ def _log_to_run_file() -> None:
             logger.propagate = True
 
 
+def _keep_config(cfg: DictConfig, run_dir: Path) -> None:
+    """``run_dir/.hydra/config.yaml``, what :func:`physgnn.training.runs.load_run` reads, when
+    Hydra wrote it elsewhere (``run_dir=`` apart from Hydra's output folder, or no Hydra)."""
+    path = run_dir / ".hydra" / "config.yaml"
+    if not path.exists():
+        write_text(path, OmegaConf.to_yaml(cfg))
+
+
 def _start(cfg: DictConfig, run_dir: Path) -> dict:
     """run.json of a run that starts (``resumed_from`` is filled in once known)."""
     return {
@@ -136,6 +145,7 @@ def train(cfg: DictConfig) -> dict:
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     check_run_dir(cfg, run_dir)  # before run.json is written: the folder may be another run's
+    _keep_config(cfg, run_dir)
     info = _start(cfg, run_dir)
     progress, stop, trainer = RunProgress(), StopOnSignal(), None
     stop.install()
