@@ -81,8 +81,6 @@ def test_trained_model_on_the_resting_pile_reports_a_finite_drift(
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
         cfg = compose("train", [*TRAIN, f"paths.outputs={outputs}", f"run_dir={run_dir}"])
     assert train(cfg)["status"] == "finished"
-    (run_dir / ".hydra").mkdir()
-    (run_dir / ".hydra" / "config.yaml").write_text(OmegaConf.to_yaml(cfg))
     simulator, _, _ = load_run(run_dir)
     (pile,) = hard.hard_split(tmp_path / "hard", {"resting_pile": scene_cfg("resting_pile")})
     assert pile.n_frames == 2000 and pile.n_spheres == 41
