@@ -8,13 +8,15 @@ import subprocess
 import sys
 from pathlib import Path
 
+import lightning as L
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
 
 from physgnn import train as train_command
+from physgnn.training.progress import RunProgress
 from physgnn.training.runs import load_run
-from physgnn.training.train import train
+from physgnn.training.train import build, train
 
 CONF = str(Path(__file__).resolve().parents[1] / "conf")
 SHORT = [
@@ -182,3 +184,21 @@ def test_last_checkpoint_holds_the_final_weights_after_a_mid_epoch_stop(tiny_dat
     )
     assert info["global_step"] == 3 and info["status"] == "finished"
     assert torch.load(info["checkpoints"]["last"], weights_only=True)["global_step"] == 3
+
+
+def test_last_checkpoint_follows_every_epoch_not_only_the_best(tiny_dataset, tmp_path):
+    # The rollout score is computed once (every 100 epochs), so no later epoch is a new best.
+    once = ["callbacks.rollout.every_n_epochs=100", "callbacks.rollout.n_val_trajectories=1"]
+    cfg = config(tiny_dataset, tmp_path, *SHORT, "trainer.max_epochs=3", *once)
+    seen = []
+
+    class Probe(L.Callback):
+        def on_train_epoch_start(self, trainer, pl_module):
+            last = tmp_path / "checkpoints" / "last.ckpt"
+            if last.exists():
+                seen.append(torch.load(last, map_location="cpu", weights_only=False)["epoch"])
+
+    datamodule, lit, trainer = build(cfg, [RunProgress(), Probe()])
+    trainer.fit(lit, datamodule=datamodule)
+    assert seen == [0, 1]
+    assert [p.name for p in (tmp_path / "checkpoints").glob("best-*")] == ["best-epoch000.ckpt"]

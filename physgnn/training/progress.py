@@ -42,7 +42,8 @@ def save_last(trainer: L.Trainer, always: bool = False) -> Path | None:
 
 
 class RunProgress(L.Callback):
-    """Pairs and spheres trained on, training seconds and fit sessions of the whole run."""
+    """Pairs and spheres trained on, training seconds and fit sessions of the whole run; keeps
+    ``last.ckpt`` at the end of every epoch."""
 
     def __init__(self):
         self.pairs_seen = 0
@@ -63,6 +64,11 @@ class RunProgress(L.Callback):
 
     def on_fit_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         self._start = time.perf_counter()
+
+    def on_train_epoch_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        # Lightning refreshes last.ckpt only with a new best; a killed run (no signal to
+        # catch) would restart from that epoch. Runs before ModelCheckpoint's own hook.
+        save_last(trainer)
 
     def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx) -> None:
         counts = torch.tensor([batch.num_graphs, batch.num_nodes], device=pl_module.device)
@@ -147,6 +153,11 @@ class StopOnSignal(L.Callback):
 
     def on_train_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         self.install()  # again: Lightning set its own SIGTERM handler when fit started
+
+    def on_train_epoch_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
+        # Lightning refreshes last.ckpt only with a new best; a killed run (no signal to
+        # catch) would restart from that epoch. Runs before ModelCheckpoint's own hook.
+        save_last(trainer)
 
     def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx) -> None:
         if not trainer.strategy.reduce_boolean_decision(self.signum is not None, all=False):
