@@ -15,11 +15,10 @@ import math
 
 import numpy as np
 
+from physgnn.physics.energy import G
 from physgnn.physics.scene import Effects, ground_plane
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
-
-G = 9.81
 
 
 def free_fall(height: float, seconds: float, dt: float, radius: float = 0.5) -> Trajectory:

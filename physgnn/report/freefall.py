@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from physgnn.files import read_rows, write_rows
+from physgnn.physics.energy import G
 from physgnn.report.format import fmt, md_table
 
 COLUMNS = [
@@ -54,7 +55,7 @@ def section(rows: list[dict]) -> str:
     note = (
         "One sphere released at rest, rolled out from the analytic seed frames for T seconds "
         "(shorter where it would come near the ground) and compared with z(T) = h − ½gT². "
-        f"In free flight the first step's Δv_z is −g·dt ({fmt(-9.81 * dt)} m/s at "
+        f"In free flight the first step's Δv_z is −g·dt ({fmt(-G * dt)} m/s at "
         f"dt = {fmt(dt)} s); it must not depend on the height."
     )
     return note + "\n\n" + md_table(header, body)
