@@ -79,6 +79,16 @@ def test_validation_is_a_fixed_subset(data_dir):
     assert sum(b.num_graphs for b in everything.val_dataloader()) == 9 - 1 - 2
 
 
+def test_every_seed_validates_on_the_same_subset(data_dir):
+    def val_states(**kw):
+        return [b.pos for b in make(data_dir, val_pairs=3, **kw).val_dataloader()]
+
+    for a, b in zip(val_states(seed=0), val_states(seed=5), strict=True):
+        assert torch.equal(a, b)
+    other = val_states(seed=0, val_seed=4)
+    assert any(not torch.equal(a, b) for a, b in zip(val_states(seed=0), other, strict=True))
+
+
 def test_effects_trained_is_the_union(data_dir):
     effects = make(data_dir).effects_trained()
     assert effects.tolist() == [True] * len(EFFECT_NAMES)

@@ -93,7 +93,7 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
         "m1": {"model.M": 1},
         "epsilon": {"model.connectivity": "epsilon"},
         "h0": {"model.H": 0},
-        "energy": {"lit.lambda_energy": 0.01},
+        "energy": {"lit.lambda_energy": 10.0},
         "no_noise": {"lit.noise_std": 0.0},
         "no_third_law": {"model.third_law": False},
         "gns": {"model.third_law": False, "model.use_surfaces": False},

@@ -81,6 +81,8 @@ def test_energy_term_enters_the_loss_with_lambda():
     assert_close(a["loss"], a["loss_mse"])
     assert_close(b["loss"], b["loss_mse"] + 0.5 * b["loss_energy"])
     assert_close(a["loss_energy"], b["loss_energy"])
+    assert_close(a["energy_share"], torch.tensor(0.0))
+    assert_close(b["energy_share"], 0.5 * b["loss_energy"] / b["loss"])
 
 
 def test_noise_only_in_training_shaped_like_a_rollout_with_correcting_targets():

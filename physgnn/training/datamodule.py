@@ -4,8 +4,9 @@ A *pair* is a frame ``t`` of a training trajectory with ``t ∈ [H, T − 2]``: 
 with ``H + 1`` velocities of history, and the finite-difference velocities of frame ``t + 1``
 as targets (:class:`physgnn.data.state.TrajectoryFrames`). An epoch is ``pairs_per_epoch`` pairs
 drawn uniformly with replacement by a sampler seeded by (seed, epoch), shared out between DDP
-processes; validation is a fixed seeded subset of the validation split (each process
-validates all of it). Input noise is added by the Lightning module, not here, so the data
+processes; validation is a fixed subset of the validation split drawn with ``val_seed``, not the run's seed,
+so that every seed of a study is validated, and its checkpoint chosen, on the same pairs (each
+process validates all of it). Input noise is added by the Lightning module, not here, so the data
 stream is the same with or without noise. Batches are assembled by index gathers into the
 split's stacked tables (:class:`physgnn.data.pairs.PairDataset`).
 """
@@ -40,6 +41,7 @@ class StatePairDataModule(L.LightningDataModule):
         num_workers: int = 0,
         seed: int = 0,
         pushforward_steps: int = 0,
+        val_seed: int = 0,
     ):
         super().__init__()
         if batch_size < 1 or pairs_per_epoch < 1 or val_pairs < 1:
@@ -52,6 +54,7 @@ class StatePairDataModule(L.LightningDataModule):
         self.val_pairs = int(val_pairs)
         self.num_workers = int(num_workers)
         self.seed = int(seed)
+        self.val_seed = int(val_seed)
         if pushforward_steps < 0:
             raise ValueError(f"pushforward_steps must be >= 0 (got {pushforward_steps})")
         self.pushforward_steps = int(pushforward_steps)
@@ -114,7 +117,7 @@ class StatePairDataModule(L.LightningDataModule):
 
     def val_dataloader(self) -> torch.utils.data.DataLoader:
         self.setup()
-        generator = torch.Generator().manual_seed(self.seed + 1)
+        generator = torch.Generator().manual_seed(self.val_seed + 1)
         n = min(self.val_pairs, len(self.val_set))
         index = torch.randperm(len(self.val_set), generator=generator)[:n].sort().values
         subset = torch.utils.data.Subset(self.val_set, index.tolist())

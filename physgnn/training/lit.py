@@ -153,13 +153,18 @@ class LitSimulator(L.LightningModule):
         self.nodes_seen = 0
 
     def losses(self, state) -> dict[str, torch.Tensor]:
-        """``{"loss", "loss_mse", "loss_energy"}`` of a batch (no noise added here)."""
+        """``{"loss", "loss_mse", "loss_energy", "energy_share"}`` of a batch (no noise added
+        here); ``energy_share`` = ``λ·energy / loss``, the part of the loss the energy term is
+        (logged, so that a λ sweep shows whether the term mattered at all)."""
         pred, _ = self.simulator.normalized_prediction(state)
         target = self.simulator.normalized_target(state)
         mse = masked_mse(pred, target, self.simulator.rotating(state))
         vel_next, _ = self.simulator.to_physical(state, pred)
         energy = energy_increase(state, vel_next).mean()
-        return {"loss": mse + self.lambda_energy * energy, "loss_mse": mse, "loss_energy": energy}
+        weighted = self.lambda_energy * energy
+        loss = mse + weighted
+        share = (weighted / loss).detach() if loss > 0 else torch.zeros_like(loss)
+        return {"loss": loss, "loss_mse": mse, "loss_energy": energy, "energy_share": share}
 
     def _log_all(self, prefix: str, losses: dict, batch_size: int) -> None:
         """Epoch means under the exact names ``{prefix}/loss`` etc. (weighted by scene count;
