@@ -4,11 +4,11 @@ A *pair* is a frame ``t`` of a training trajectory with ``t ∈ [H, T − 2]``: 
 with ``H + 1`` velocities of history, and the finite-difference velocities of frame ``t + 1``
 as targets (:class:`physgnn.data.state.TrajectoryFrames`). An epoch is ``pairs_per_epoch`` pairs
 drawn uniformly with replacement by a sampler seeded by (seed, epoch), shared out between DDP
-processes; validation is a fixed subset of the validation split drawn with ``val_seed``, not the run's seed,
-so that every seed of a study is validated, and its checkpoint chosen, on the same pairs (each
-process validates all of it). Input noise is added by the Lightning module, not here, so the data
-stream is the same with or without noise. Batches are assembled by index gathers into the
-split's stacked tables (:class:`physgnn.data.pairs.PairDataset`).
+processes; validation is a fixed subset of the validation split drawn with ``val_seed``, not
+the run's seed, so that every seed of a study is validated, and its checkpoint chosen, on the
+same pairs (each process validates all of it). Input noise is added by the Lightning module,
+not here, so the data stream is the same with or without noise. Batches are assembled by index
+gathers into the split's stacked tables (:class:`physgnn.data.pairs.PairDataset`).
 """
 
 from __future__ import annotations
