@@ -96,7 +96,11 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
         "energy": {"lit.lambda_energy": 10.0},
         "no_noise": {"lit.noise_std": 0.0},
         "no_third_law": {"model.third_law": False},
-        "gns": {"model.third_law": False, "model.use_surfaces": False},
+        "gns": {
+            "model.third_law": False,
+            "model.use_surfaces": False,
+            "model.boundary_features": True,
+        },
     }
     stats = build(baseline)[0].stats()
     for variant, changes in expected.items():

@@ -12,6 +12,11 @@ same function is learned, but the regression target has unit scale whatever the 
 "nothing changes" is the output ``−μ/σ`` rather than a copy of the input. With input noise the
 target ``v_{t+1}`` stays the clean one while ``v_t`` is the noisy input, so the network also
 learns to undo the noise.
+
+**Boundary features** (``boundary_features=True``, the GNS-style baseline that has no ps edges):
+as in GNS (Sanchez-Gonzalez et al. 2020), every sphere also sees how far the boundaries are,
+``clip(h / R, 0, 1)`` for each of the 6 axis directions, so the network can see the ground and
+the walls without surface edges.
 """
 
 from __future__ import annotations
@@ -28,6 +33,10 @@ from physgnn.physics.scene import EFFECT_NAMES
 ROTATION = EFFECT_NAMES.index("rotation")
 VECTOR_STATS = ("vel", "angvel", "delta_vel", "delta_angvel")
 SCALAR_STATS = ("radius", "mass")
+# The 6 axis directions of the boundary features, in order +x, −x, +y, −y, +z, −z.
+DIRECTIONS = torch.tensor(
+    [[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]]
+)
 
 
 class StatsError(PhysgnnError, ValueError):
@@ -54,7 +63,8 @@ class LearnedSimulator(nn.Module):
     of the edge features (``None``: the mean sphere diameter of the training set); velocities
     in edge features are divided by the velocity std. Node input per sphere:
     ``[(v − μ_v)/σ_v for the H+1 latest v, (ω − μ_ω)/σ_ω likewise, radius, mass (standardised)]``
-    = ``6·(H+1) + 2`` numbers; absolute position and orientation are masked.
+    = ``6·(H+1) + 2`` numbers, plus 6 with ``boundary_features`` (:meth:`boundary_features`,
+    ``boundary_radius`` R in metres); absolute position and orientation are masked.
     """
 
     def __init__(
@@ -73,11 +83,17 @@ class LearnedSimulator(nn.Module):
         neighbor_backend: str = "auto",
         length_scale: float | None = None,
         clip_margin: float = 0.0,
+        boundary_features: bool = False,
+        boundary_radius: float = 2.0,
     ):
         super().__init__()
         if H < 0 or M < 1:
             raise ValueError(f"need H >= 0 and M >= 1 (got H={H}, M={M})")
+        if not boundary_radius > 0:
+            raise ValueError(f"boundary_radius must be > 0 (got {boundary_radius})")
         self.H, self.M = int(H), int(M)
+        self.use_boundary = bool(boundary_features)
+        self.boundary_radius = float(boundary_radius)
         for key in VECTOR_STATS:
             self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", 3))
             self.register_buffer(f"{key}_std", _stat(stats, key, "std", 3))
@@ -109,7 +125,7 @@ class LearnedSimulator(nn.Module):
 
     @property
     def node_in(self) -> int:
-        return 6 * (self.H + 1) + 2
+        return 6 * (self.H + 1) + 2 + (6 if self.use_boundary else 0)
 
     @staticmethod
     def stats_from_state_dict(state_dict: dict, prefix: str = "") -> dict:
@@ -123,7 +139,9 @@ class LearnedSimulator(nn.Module):
 
     # ----- features ---------------------------------------------------------------------------
     def node_features(self, state) -> torch.Tensor:
-        """``[N, 6·(H+1) + 2]``; a state with a longer history uses its H+1 latest velocities."""
+        """``[N, node_in]``: ``[N, 6·(H+1) + 2]`` then, with ``boundary_features``, the
+        ``[N, 6]`` of :meth:`boundary_features`; a state with a longer history uses its H+1
+        latest velocities."""
         vel = state.vel[:, : self.H + 1]
         angvel = state.angvel[:, : self.H + 1]
         if vel.shape[1] != self.H + 1:
@@ -134,7 +152,28 @@ class LearnedSimulator(nn.Module):
         angvel = (angvel - self.angvel_mean) / self.angvel_std
         radius = (state.radius - self.radius_mean) / self.radius_std
         mass = (state.mass - self.mass_mean) / self.mass_std
-        return torch.cat([vel.flatten(1), angvel.flatten(1), radius[:, None], mass[:, None]], 1)
+        parts = [vel.flatten(1), angvel.flatten(1), radius[:, None], mass[:, None]]
+        if self.use_boundary:
+            parts.append(self.boundary_features(state))
+        return torch.cat(parts, 1)
+
+    def boundary_features(self, state) -> torch.Tensor:
+        """``[N, 6]``: for each direction d of ``DIRECTIONS`` (+x, −x, +y, −y, +z, −z), the
+        height ``h = n·(p − p_0) − r`` of the sphere's surface above the nearest plane of its
+        scene whose inward normal n is closest to d (``argmax_d n·d``, the first on a tie: the
+        ground, +z; a wall facing −x, −x; a ramp tilted 30°, +z), as ``clip(h, 0, R) / R`` with
+        R = ``boundary_radius``. Planes are infinite, a sphere behind one gives 0, and 1 means
+        no such plane within R."""
+        planes = state.planes.to(state.pos.dtype)
+        normal = planes[:, 3:6]
+        slot = (normal @ DIRECTIONS.to(normal).T).argmax(1)  # [S]
+        offset = state.pos[:, None, :] - planes[None, :, 0:3]  # [N, S, 3]
+        height = (offset * normal).sum(-1) - state.radius[:, None]  # [N, S]
+        height = height.clamp(0.0, self.boundary_radius) / self.boundary_radius
+        same = scene_of_sphere(state)[:, None] == state.plane_batch.long()[None, :]
+        height = torch.where(same, height, torch.ones_like(height))
+        out = height.new_ones(height.shape[0], len(DIRECTIONS))
+        return out.scatter_reduce(1, slot.expand_as(height), height, "amin")
 
     def edge_features(self, graph) -> tuple[torch.Tensor, torch.Tensor]:
         """pp ``[E, 4]`` (lengths / length_scale); ps ``[F, 10]`` (velocity / σ_v, normal

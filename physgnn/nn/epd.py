@@ -62,7 +62,8 @@ class EncodeProcessDecode(nn.Module):
       ``third_law`` the messages of a pair are exactly opposite (see :class:`InteractionBlock`).
     - ``E == 0`` runs neither the pp encoder nor any pp MLP; ``F == 0`` or
       ``use_surfaces=False`` runs no ps MLP (ps inputs are then ignored). The GNS-style
-      baseline is ``third_law=False, use_surfaces=False``.
+      baseline is ``third_law=False, use_surfaces=False`` (its boundary distances are part
+      of ``x``).
     - With ``num_materials > 0``, a learned ``material_dim`` embedding of ``material`` is
       concatenated to ``x``; without, ``material`` is ignored.
     - ``concat_trick`` ("auto", "always", "never") picks how the pp MLP's first layer is
