@@ -1,0 +1,115 @@
+"""One job of the study, start to end: train (``python -m physgnn.train`` in a subprocess, in
+the job's own folder, so a job that was cut short resumes there), measure
+(:func:`physgnn.ablation.measure.measure_run`) and return the registry record. Runs alike in a
+local worker process and in a SLURM job (:mod:`physgnn.ablation.launch`)."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+import torch
+
+from physgnn.ablation.measure import measure_run
+from physgnn.benchmark.machine import cpu_name
+from physgnn.errors import one_line
+from physgnn.training.runs import read_run_json
+
+TRAINED = ("finished", "truncated")
+
+
+def train_command(spec: dict) -> list[str]:
+    """``python -m physgnn.train`` with the job's folder, seed, budget and configuration."""
+    return [
+        sys.executable, "-m", "physgnn.train",
+        f"hydra.run.dir={spec['run_dir']}",
+        "experiment_name=study",
+        f"seed={spec['seed']}",
+        "trainer.enable_progress_bar=false",
+        "trainer.enable_model_summary=false",
+        *spec["common"],
+        *spec["overrides"],
+    ]  # fmt: skip
+
+
+def _status(run_dir: Path) -> dict:
+    try:
+        return read_run_json(run_dir)
+    except (FileNotFoundError, ValueError):
+        return {}
+
+
+def _train(spec: dict, run_dir: Path) -> tuple[dict, str]:
+    """Train unless the folder already holds a trained run; ``(run.json, output tail)``."""
+    info = _status(run_dir)
+    if info.get("status") in TRAINED + ("diverged",):
+        return info, ""
+    env = os.environ | {"OMP_NUM_THREADS": str(spec["threads"])}
+    proc = subprocess.run(train_command(spec), env=env, capture_output=True, text=True)
+    tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-3:])
+    return _status(run_dir), tail
+
+
+def _finite(value):
+    """JSON has no inf/NaN: a non-finite figure is stored as None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite(v) for v in value]
+    return value
+
+
+def machine() -> dict:
+    gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else None
+    return {"cpu": cpu_name(), "gpu": gpu, "torch": torch.__version__}
+
+
+def run_job(spec: dict) -> dict:
+    """Train and measure one job (``spec``: key, overrides, seed, run_dir, common overrides,
+    budget, threads, horizon, speed_factor, commit); returns its registry record."""
+    torch.set_num_threads(int(spec["threads"]))
+    run_dir = Path(spec["run_dir"])
+    start = time.perf_counter()
+    info, tail = _train(spec, run_dir)
+    status = info.get("status", "failed")
+    record = {
+        "key": spec["key"],
+        "overrides": spec["overrides"],
+        "seed": spec["seed"],
+        "budget": spec["budget"],
+        "status": status if status in TRAINED + ("diverged",) else "failed",
+        "reason": info.get("error") or (tail if status not in TRAINED else None),
+        "steps": info.get("global_step"),
+        "train_s": info.get("train_time_s"),
+        "threads": spec["threads"],
+        "machine": machine(),
+        "commit": spec.get("commit"),
+        "date": datetime.now(UTC).strftime("%Y-%m-%d %H:%M"),
+        "horizon": spec["horizon"],
+        "run_dir": str(run_dir),
+    }
+    if status in TRAINED:
+        t0 = time.perf_counter()
+        try:
+            record["splits"] = measure_run(run_dir, spec["horizon"], spec["speed_factor"])
+        except Exception as err:  # recorded, and the study goes on with the next job
+            record.update(status="failed", reason=f"measuring failed: {one_line(err)}")
+        record["eval_s"] = time.perf_counter() - t0
+    record["wall_s"] = time.perf_counter() - start
+    return _finite(record)
+
+
+def lost_job(spec: dict, err: BaseException) -> dict:
+    """The record of a job whose process died before it could return one."""
+    return {
+        "key": spec["key"], "overrides": spec["overrides"], "seed": spec["seed"],
+        "budget": spec["budget"], "status": "failed", "reason": f"job lost: {one_line(err)}",
+        "run_dir": spec["run_dir"], "commit": spec.get("commit"),
+    }  # fmt: skip
