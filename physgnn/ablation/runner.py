@@ -5,8 +5,11 @@ local worker process and in a SLURM job (:mod:`physgnn.ablation.launch`)."""
 
 from __future__ import annotations
 
+import csv
+import json
 import math
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -66,6 +69,20 @@ def _finite(value):
     return value
 
 
+LOGGED = ("train/loss", "train/loss_mse", "train/loss_energy", "train/energy_share", "val/loss")
+
+
+def last_logged(run_dir: Path) -> dict:
+    """The last epoch's value of each :data:`LOGGED` metric in the run's CSV log (the energy
+    term's share of the loss shows whether a λ mattered)."""
+    out = {}
+    for path in sorted(run_dir.glob("csv/version_*/metrics.csv")):
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                out |= {k: float(row[k]) for k in LOGGED if row.get(k) not in (None, "")}
+    return out
+
+
 def machine() -> dict:
     gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else None
     return {"cpu": cpu_name(), "gpu": gpu, "torch": torch.__version__}
@@ -96,6 +113,7 @@ def run_job(spec: dict) -> dict:
         "run_dir": str(run_dir),
     }
     if status in TRAINED:
+        record["logged"] = last_logged(run_dir)
         t0 = time.perf_counter()
         try:
             record["splits"] = measure_run(run_dir, spec["horizon"], spec["speed_factor"])
@@ -113,3 +131,20 @@ def lost_job(spec: dict, err: BaseException) -> dict:
         "budget": spec["budget"], "status": "failed", "reason": f"job lost: {one_line(err)}",
         "run_dir": spec["run_dir"], "commit": spec.get("commit"),
     }  # fmt: skip
+
+
+def main(argv: list[str]) -> None:
+    """``python -m physgnn.ablation.runner SPEC.json RECORD.json`` (the local launcher's job
+    process). SIGINT is left to the training, which saves and stops; the job then still
+    writes its record (``failed``: interrupted, so the next study resumes it)."""
+    # A handler, not SIG_IGN: an ignored signal would stay ignored in the training it starts.
+    signal.signal(signal.SIGINT, lambda *_: None)
+    spec = json.loads(Path(argv[0]).read_text())
+    record = run_job(spec)
+    tmp = Path(argv[1]).with_suffix(".tmp")
+    tmp.write_text(json.dumps(record, allow_nan=False))
+    tmp.replace(argv[1])
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -162,11 +162,11 @@ def _run(console, pending, records, cfg, n_jobs) -> list[str]:
             pace = (time.perf_counter() - start) / max(1e-9, sum(estimates.values()) - left)
             eta = max(0.0, left) * pace / max(1, min(n_jobs, len(pending)))
             progress.console.print(_line(record, name))
-            status = (
+            summary = (
                 f"{counts['finished']} done · {counts['diverged']} diverged · "
                 f"{counts['failed']} failed · {running} running · ~{_minutes(eta)} left"
             )
-            progress.update(task, advance=1, status=status)
+            progress.update(task, advance=1, status=summary)
     return failed
 
 
