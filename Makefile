@@ -48,6 +48,9 @@ train: ## Train the baseline on data=small (ARGS: Hydra overrides, e.g. ARGS="mo
 sweep: ## Run a whole ablation sweep (EXPERIMENT=ablation_H|ablation_M|ablation_connectivity|ablation_lambda|ablation_components)
 	$(PY) -m physgnn.train +experiment=$(EXPERIMENT) $(ARGS)
 
+study: ## The ablation study: every unique sweep configuration x 3 seeds, results in docs/results/ (ARGS: --dry-run, launcher.n_jobs=N, budget.steps=N)
+	$(PY) -m physgnn.study $(ARGS)
+
 eval: ## Evaluate every finished run under outputs/ and write outputs/report/ (ARGS: runs=PATH ...)
 	$(PY) -m physgnn.eval $(ARGS)
 
@@ -61,4 +64,4 @@ clean: ## Remove caches (keeps outputs/)
 	rm -rf .pytest_cache .ruff_cache .hypothesis
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +
 
-.PHONY: help install test test-slow lint format data data-report train sweep eval bench sleep-study clean
+.PHONY: help install test test-slow lint format data data-report train sweep study eval bench sleep-study clean

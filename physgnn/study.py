@@ -9,7 +9,8 @@ import sys
 from physgnn.ablation.study import run_study
 from physgnn.cli import command
 
-_main = command("study", run_study, done=lambda path: f"study report written to {path}")
+_main = command("study", run_study, done=lambda path: f"study report written to {path}"
+                if path is not None else "dry run: nothing trained")  # fmt: skip
 
 
 def main():

@@ -78,9 +78,9 @@ def _minutes(seconds: float) -> str:
     return f"{seconds / 60:.0f} min" if seconds >= 90 else f"{seconds:.0f} s"
 
 
-def run_study(cfg: DictConfig) -> Path:
-    """Run what is left of the study; returns the report's path (module doc)."""
-    console = Console()
+def run_study(cfg: DictConfig) -> Path | None:
+    """Run what is left of the study; returns the report's path (None for a dry run)."""
+    console = Console(soft_wrap=True)
     configs = study_configs(list(cfg.sweeps))
     jobs = study_jobs(configs, list(cfg.seeds))
     common = budget_overrides(cfg.budget) + [f"data={cfg.preset}",
@@ -99,7 +99,7 @@ def run_study(cfg: DictConfig) -> Path:
     )
     if cfg.dry_run:
         _print_plan(console, specs, pending, records, cfg)
-        return Path(cfg.results_dir)
+        return None
     if pending:
         _ensure_dataset(cfg, console)
     failed = _run(console, pending, records, cfg, n_jobs)

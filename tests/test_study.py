@@ -1,0 +1,200 @@
+"""The ablation study (physgnn.ablation): its jobs, registry, measures, verdicts and command."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+from simdata import trajectory
+from torch import nn
+
+from physgnn import CONF_DIR
+from physgnn.ablation import aggregate, verdicts
+from physgnn.ablation.jobs import StudyError, budget_overrides, study_configs, study_jobs
+from physgnn.ablation.measure import FIGURES, measure_trajectory
+from physgnn.ablation.registry import append_record, done_ids, read_registry
+from physgnn.ablation.study import run_study
+from physgnn.metrics import trajectory_metrics
+from physgnn.models.baselines import GravityOnlySimulator
+
+SWEEPS = ["ablation_components", "ablation_H", "ablation_M", "ablation_connectivity",
+          "ablation_lambda"]  # fmt: skip
+
+
+def study_cfg(tmp_path, *overrides):
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        return compose("study", overrides=[
+            f"paths.outputs={tmp_path}", f"registry={tmp_path}/registry.jsonl",
+            f"results_dir={tmp_path}/results", *overrides])  # fmt: skip
+
+
+def test_the_five_sweeps_are_17_configurations_the_baseline_shared():
+    configs = study_configs(SWEEPS)
+    keys = [c.key for c in configs]
+    assert len(keys) == len(set(keys)) == 17
+    base = configs[0]
+    assert base.key == "baseline" and base.overrides == []
+    assert base.points == {"ablation_components": "baseline", "ablation_H": "2",
+                           "ablation_M": "5", "ablation_connectivity": "vi",
+                           "ablation_lambda": "0"}  # fmt: skip
+    by_key = {c.key: c for c in configs}
+    # the variant m1 and the sweep's M = 1 are one configuration, trained once
+    assert by_key["model.M=1"].points == {"ablation_components": "m1", "ablation_M": "1"}
+    assert by_key["lit.lambda_energy=10"].points == {"ablation_components": "energy",
+                                                     "ablation_lambda": "10"}  # fmt: skip
+    assert by_key["model.H=0"].overrides == ["+variant=h0"]  # datamodule.H follows, not a key
+    gns = [k for k in keys if "use_surfaces=False" in k]
+    assert gns == ["model.boundary_features=True model.third_law=False model.use_surfaces=False"]
+    jobs = study_jobs(configs, [0, 1, 2])
+    assert len(jobs) == 51 and [j.seed for j in jobs[:17]] == [0] * 17
+    assert {j.config.key for j in jobs[:17]} == set(keys)
+
+
+def test_budget_is_steps_in_whole_epochs():
+    cfg = study_cfg("/tmp/unused")
+    overrides = budget_overrides(cfg.budget)
+    assert "datamodule.pairs_per_epoch=6400" in overrides  # 25 steps of 256 pairs
+    assert f"trainer.max_epochs={cfg.budget.steps // 25}" in overrides
+    bad = study_cfg("/tmp/unused", "budget.steps=310")
+    with pytest.raises(StudyError, match="multiple of budget.steps_per_epoch"):
+        budget_overrides(bad.budget)
+
+
+def test_registry_keeps_the_latest_line_and_retries_failed_runs(tmp_path):
+    path = tmp_path / "r.jsonl"
+    budget = {"steps": 3}
+    append_record(path, {"key": "a", "seed": 0, "budget": budget, "status": "failed"})
+    append_record(path, {"key": "b", "seed": 0, "budget": budget, "status": "diverged"})
+    assert done_ids(read_registry(path)) == {("b", 0, '{"steps": 3}')}
+    append_record(path, {"key": "a", "seed": 0, "budget": budget, "status": "finished"})
+    records = read_registry(path)
+    assert [(r["key"], r["status"]) for r in records] == [("a", "finished"), ("b", "diverged")]
+    assert len(done_ids(records)) == 2
+    assert not done_ids(read_registry(tmp_path / "none.jsonl"))
+
+
+def rec(key, seed, ood, test=None, share=None):
+    """A registry record; ``ood`` = [(mse, diverged_at)] per trajectory."""
+
+    def rows(items):
+        return [{"mse": None if d is not None else m, "chamfer": None if d is not None else m,
+                 "energy_gain": None if d is not None else 0.1 * m, "diverged_at": d,
+                 "energy_gain_truth": 0.05, "fps": 10.0} for m, d in items]  # fmt: skip
+
+    logged = {"train/energy_share": share} if share is not None else {}
+    return {"key": key, "seed": seed, "status": "finished", "budget": {},
+            "splits": {"ood": rows(ood), "test": rows(test or ood)}, "logged": logged}  # fmt: skip
+
+
+def test_a_diverged_rollout_makes_its_seed_infinite_never_a_prefix_average():
+    records = [rec("x", 0, [(1.0, None), (3.0, None)]), rec("x", 1, [(0.5, 12), (5.0, None)]),
+               rec("x", 2, [(4.0, None), (6.0, None)])]  # fmt: skip
+    assert aggregate.seed_value(records[1], "ood", "mse") == math.inf
+    stat = aggregate.over_seeds(records, "ood", "mse")
+    assert (stat.seeds, stat.diverged, stat.finite) == (3, 1, False)
+    assert stat.mean == pytest.approx(3.5) and stat.std == pytest.approx(math.sqrt(4.5))
+    assert aggregate.divergence(records, "ood") == (1, 6, 12.0)
+    assert aggregate.truth_floor(records, "ood") == pytest.approx(0.05)
+
+
+def test_verdicts_follow_their_stated_rules():
+    base = [rec("baseline", s, [(2.0, None), (2.0, None)]) for s in range(3)]
+    diverging = [rec("m", s, [(1.0, 5 if s == 0 else None), (1.0, None)]) for s in range(3)]
+    stable = [rec("m", s, [(9.0, None), (9.0, None)]) for s in range(3)]
+    assert verdicts.diverges(diverging, base) == "reproduced"
+    assert verdicts.diverges(stable, base).startswith("not reproduced: no OOD rollout")
+    assert verdicts.diverges(diverging, diverging).startswith("not reproduced: diverged no more")
+    assert verdicts.worse(stable, base) == "reproduced"
+    assert verdicts.worse(base, stable) == "not reproduced: both lower"
+    assert verdicts.worse(diverging, base).startswith("not comparable")
+    groups = {"baseline": base, "m": stable, "d": diverging}
+    assert verdicts.best(groups, {"baseline": "baseline", "m1": "m", "h0": "d"}) == "reproduced"
+    lower = [rec("l", s, [(1.0, None), (1.0, None)]) for s in range(3)]
+    groups["l"] = lower
+    assert verdicts.best(groups, {"baseline": "baseline", "no_noise": "l"}).endswith("no_noise")
+
+
+class Runaway(nn.Module):
+    """Doubles every speed each step: a rollout that must diverge."""
+
+    H = history = 0
+
+    def forward(self, state):
+        return 2.0 * state.vel[:, 0] + torch.tensor([0.0, 0.0, 1.0]), state.angvel[:, 0]
+
+
+def test_measures_are_the_same_for_truth_and_rollout_and_none_after_divergence():
+    traj = trajectory(3, frames=40, seed=1)
+    fine = measure_trajectory(GravityOnlySimulator(), traj, speed_factor=10.0)
+    truth = trajectory_metrics(traj.with_finite_velocities(), traj)
+    assert fine["diverged_at"] is None and fine["energy_gain_truth"] == truth["energy_gain"]
+    assert all(fine[k] is not None for k in FIGURES) and fine["frames"] == 40
+    gone = measure_trajectory(Runaway(), traj, speed_factor=10.0)
+    assert 0 < gone["diverged_at"] < 39
+    assert all(gone[k] is None for k in FIGURES)  # no figures of the prefix
+
+
+def test_dry_run_lists_every_job_and_trains_nothing(tmp_path, capsys):
+    cfg = study_cfg(tmp_path, "dry_run=true", "sweeps=[ablation_connectivity]", "seeds=[0,1]")
+    run_study(cfg)
+    out = capsys.readouterr().out
+    assert "3 configurations × 2 seeds = 6 runs" in out and "6 to run" in out
+    assert out.count("to run (~") == 6 and "model.connectivity=vmax" in out
+    assert not (tmp_path / "study").exists() and not (tmp_path / "registry.jsonl").exists()
+
+
+@pytest.mark.slow
+def test_a_tiny_study_runs_resumes_from_the_registry_and_survives_failures(
+    tiny_dataset, tmp_path, capsys
+):
+    import shutil
+
+    shutil.copytree(tiny_dataset, tmp_path / "data" / "tiny")
+    tiny = ["sweeps=[ablation_connectivity]", "seeds=[0]", "preset=tiny", "budget.steps=2",
+            "budget.steps_per_epoch=1", "budget.batch_size=4", "horizon=12"]  # fmt: skip
+    broken = study_cfg(tmp_path, *tiny, "budget.extra=['model.M=0']")
+    with pytest.raises(Exception, match="3 of 3 runs failed"):
+        run_study(broken)
+    failed = read_registry(tmp_path / "registry.jsonl")
+    assert [r["status"] for r in failed] == ["failed"] * 3 and all(r["reason"] for r in failed)
+
+    cfg = study_cfg(tmp_path, *tiny)
+    budget = OmegaConf.to_container(cfg.budget, resolve=True)
+    append_record(tmp_path / "registry.jsonl", failed[0] | {"budget": budget})  # a failed run
+    report = run_study(cfg)  # of this budget: tried again, like the two never run
+    records = [r for r in read_registry(tmp_path / "registry.jsonl") if r["budget"] == budget]
+    assert sorted(r["key"] for r in records) == [
+        "baseline", "model.connectivity=epsilon", "model.connectivity=vmax"]  # fmt: skip
+    assert {r["status"] for r in records} == {"finished"}
+    assert all(len(r["splits"]["ood"]) == 4 and r["steps"] == 2 for r in records)
+    text = report.read_text()
+    assert "3 done" in text and "(report Fig. 17)" in text
+    assert (report.parent / "sweep_connectivity.png").stat().st_size > 0
+
+    lines = (tmp_path / "registry.jsonl").read_text().splitlines()
+    shutil.rmtree(tmp_path / "study")  # outputs gone: the registry alone decides
+    capsys.readouterr()
+    run_study(cfg)
+    assert "0 to run" in capsys.readouterr().out
+    assert (tmp_path / "registry.jsonl").read_text().splitlines() == lines
+    assert json.loads(lines[-1])["budget"]["steps"] == 2
+
+
+@pytest.mark.slow
+def test_the_slurm_launcher_runs_the_same_jobs(tiny_dataset, tmp_path):
+    """submitit's in-process ``debug`` cluster stands in for SLURM."""
+    import shutil
+
+    shutil.copytree(tiny_dataset, tmp_path / "data" / "tiny")
+    cfg = study_cfg(tmp_path, "sweeps=[ablation_connectivity]", "seeds=[1]", "preset=tiny",
+                    "budget.steps=1", "budget.steps_per_epoch=1", "budget.batch_size=4",
+                    "horizon=8", "launcher.name=slurm", "launcher.cluster=debug",
+                    "launcher.poll_s=0.1")  # fmt: skip
+    run_study(cfg)
+    records = read_registry(tmp_path / "registry.jsonl")
+    assert len(records) == 3 and {r["status"] for r in records} == {"finished"}
+    assert {r["seed"] for r in records} == {1}
