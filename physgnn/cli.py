@@ -33,6 +33,7 @@ from typing import NoReturn
 
 import hydra
 import torch
+from hydra.core.global_hydra import GlobalHydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import HydraException
 from hydra.types import RunMode
@@ -111,6 +112,15 @@ def command(
     if parse is not None:
         return _parsed(main, parse)
     return hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main)
+
+
+def compose_config(name: str, overrides: list[str] | None = None) -> DictConfig:
+    """``conf/<name>.yaml`` composed with ``overrides``, inside a running Hydra app (its own
+    search path) or outside one (a fresh one)."""
+    if GlobalHydra.instance().is_initialized():
+        return hydra.compose(name, overrides=overrides or [])
+    with hydra.initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        return hydra.compose(name, overrides=overrides or [])
 
 
 def _in_sweep() -> bool:

@@ -15,7 +15,8 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "physgnn"
-COMMANDS = {"train", "generate", "eval", "bench", "data_report", "sleep_study", "simulate"}
+COMMANDS = {"train", "generate", "eval", "bench", "data_report", "sleep_study", "simulate",
+            "study"}  # fmt: skip
 
 # part -> the parts it may import (besides itself). "base" is physgnn/__init__, errors, files.
 ALLOWED = {
@@ -39,7 +40,11 @@ ALLOWED = {
         "training", "report", "rollout", "metrics", "models", "groundtruth", "data", "physics",
         "base",
     },
-    "commands": {"cli", "training", "groundtruth", "evaluation", "benchmark"},
+    "ablation": {
+        "cli", "evaluation", "training", "report", "rollout", "metrics", "models",
+        "groundtruth", "data", "physics", "benchmark", "base",
+    },
+    "commands": {"cli", "training", "groundtruth", "evaluation", "benchmark", "ablation"},
 }  # fmt: skip
 # Outside libraries a part must not import (prefixes of module names).
 FORBIDDEN = {

@@ -11,15 +11,13 @@ name it. :class:`Config` keeps, per sweep, the value the sweep plots it at.
 from __future__ import annotations
 
 import itertools
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn import CONF_DIR
+from physgnn.cli import compose_config
 from physgnn.errors import PhysgnnError
 
 BASELINE = "baseline"
@@ -54,16 +52,6 @@ class Job:
     @property
     def name(self) -> str:
         return f"{self.config.key} seed={self.seed}"
-
-
-@contextmanager
-def _hydra():
-    """Compose from ``conf/``: inside a Hydra app its own search path, else a fresh one."""
-    if GlobalHydra.instance().is_initialized():
-        yield
-        return
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        yield
 
 
 def sweep_points(name: str) -> list[list[str]]:
@@ -110,17 +98,16 @@ def config_key(changes: dict[str, object]) -> str:
 
 def study_configs(sweeps: list[str]) -> list[Config]:
     """The unique configurations of ``sweeps``, baseline first, then in sweep order."""
-    with _hydra():
-        base = _flat(compose("train"))
-        configs: dict[str, Config] = {}
-        for sweep in sweeps:
-            for overrides in sweep_points(sweep):
-                flat = _flat(compose("train", overrides=overrides))
-                changes = {k: v for k, v in flat.items() if base.get(k) != v}
-                changes |= {k: None for k in base if k not in flat}
-                key = config_key(changes)
-                config = configs.setdefault(key, Config(key, [] if not changes else overrides))
-                config.points[sweep] = " ".join(o.split("=", 1)[1] for o in overrides)
+    base = _flat(compose_config("train"))
+    configs: dict[str, Config] = {}
+    for sweep in sweeps:
+        for overrides in sweep_points(sweep):
+            flat = _flat(compose_config("train", overrides))
+            changes = {k: v for k, v in flat.items() if base.get(k) != v}
+            changes |= {k: None for k in base if k not in flat}
+            key = config_key(changes)
+            config = configs.setdefault(key, Config(key, [] if not changes else overrides))
+            config.points[sweep] = " ".join(o.split("=", 1)[1] for o in overrides)
     ordered = sorted(configs.values(), key=lambda c: c.key != BASELINE)
     return ordered
 

@@ -14,6 +14,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import submitit
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.ablation.jobs import StudyError
@@ -75,8 +76,6 @@ def _result(proc: subprocess.Popen, spec: dict, out: Path) -> dict:
 
 
 def _slurm(specs: list[dict], launcher: DictConfig, log_dir: Path) -> Iterator[dict]:
-    import submitit
-
     executor = submitit.AutoExecutor(folder=str(log_dir / "%j"), cluster=launcher.get("cluster"))
     executor.update_parameters(**OmegaConf.to_container(launcher.slurm, resolve=True))
     pending = [(executor.submit(run_job, spec), spec) for spec in specs]

@@ -8,6 +8,8 @@ from __future__ import annotations
 from datetime import datetime, timedelta
 from pathlib import Path
 
+from omegaconf import OmegaConf
+
 from physgnn.ablation.aggregate import by_config, divergence, mean_fps, over_seeds, truth_floor
 from physgnn.ablation.figures import plot_study_fps, plot_study_sweep
 from physgnn.ablation.jobs import Config
@@ -64,8 +66,6 @@ def write_study_report(records: list[dict], configs: list[Config], cfg) -> Path:
 
 
 def _plain(node) -> dict:
-    from omegaconf import OmegaConf
-
     return OmegaConf.to_container(node, resolve=True)
 
 

@@ -14,7 +14,11 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 from physgnn.ablation.jobs import Job, budget_overrides, study_configs, study_jobs
 from physgnn.ablation.launch import launch
 from physgnn.ablation.registry import append_record, budget_id, done_ids, read_registry
+from physgnn.ablation.report import write_study_report
+from physgnn.cli import compose_config
+from physgnn.data.dataset import is_dataset
 from physgnn.errors import PhysgnnError
+from physgnn.groundtruth.generate import generate
 
 
 class StudyFailed(PhysgnnError, RuntimeError):
@@ -103,8 +107,6 @@ def run_study(cfg: DictConfig) -> Path | None:
     if pending:
         _ensure_dataset(cfg, console)
     failed = _run(console, pending, records, cfg, n_jobs)
-    from physgnn.ablation.report import write_study_report  # the newest, after a long study
-
     report = write_study_report(read_registry(cfg.registry), configs, cfg)
     if failed:
         raise StudyFailed(
@@ -124,15 +126,7 @@ def _print_plan(console, specs, pending, records, cfg) -> None:
 
 def _ensure_dataset(cfg: DictConfig, console) -> None:
     """Generate the training preset when its folder holds no physgnn dataset."""
-    from hydra import compose
-
-    from physgnn.ablation.jobs import _hydra
-    from physgnn.data.dataset import is_dataset
-    from physgnn.groundtruth.generate import generate
-
-    with _hydra():
-        gen = compose("generate", overrides=[f"data={cfg.preset}",
-                                             f"paths.outputs={cfg.paths.outputs}"])  # fmt: skip
+    gen = compose_config("generate", [f"data={cfg.preset}", f"paths.outputs={cfg.paths.outputs}"])
     if not is_dataset(gen.data.dir):
         console.print(f"study: generating the '{cfg.preset}' dataset in {gen.data.dir} first")
         generate(gen)

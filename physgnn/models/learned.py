@@ -94,12 +94,7 @@ class LearnedSimulator(nn.Module):
         self.H, self.M = int(H), int(M)
         self.use_boundary = bool(boundary_features)
         self.boundary_radius = float(boundary_radius)
-        for key in VECTOR_STATS:
-            self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", 3))
-            self.register_buffer(f"{key}_std", _stat(stats, key, "std", 3))
-        for key in SCALAR_STATS:
-            self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", None).reshape(()))
-            self.register_buffer(f"{key}_std", _stat(stats, key, "std", None).reshape(()))
+        self._register_stats(stats)
         scale = 2.0 * float(self.radius_mean) if length_scale is None else float(length_scale)
         if not scale > 0:
             raise ValueError(f"length_scale must be > 0 (got {scale})")
@@ -122,6 +117,15 @@ class LearnedSimulator(nn.Module):
             num_materials=num_materials,
             material_dim=material_dim,
         )
+
+    def _register_stats(self, stats: dict) -> None:
+        """The training set's normalisation as buffers (saved in checkpoints)."""
+        for key in VECTOR_STATS:
+            self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", 3))
+            self.register_buffer(f"{key}_std", _stat(stats, key, "std", 3))
+        for key in SCALAR_STATS:
+            self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", None).reshape(()))
+            self.register_buffer(f"{key}_std", _stat(stats, key, "std", None).reshape(()))
 
     @property
     def node_in(self) -> int:
