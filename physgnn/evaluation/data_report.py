@@ -3,9 +3,9 @@
 The report's Table 1 measures the physics of the ground truth itself: normalised cumulative
 energy gain and penetration (depth and percentage of spheres; sphere–sphere, sphere–ground,
 sphere–other surfaces), mean ± std over the trajectories of the test and OOD splits (std with
-ddof = 0). The energy uses the engine's velocities (the physics of the data), as the
-``ground_truth`` rows of ``make eval`` do; the gain with finite-difference velocities (what a
-rollout records, so what a perfect model would show) is printed below the table. Prints the
+ddof = 0). The energy uses the engine's velocities (the physics of the data); the gain with
+finite-difference velocities (what a rollout records, so what a perfect model would show, and
+what the ``ground_truth`` rows of ``make eval`` measure) is printed below the table. Prints the
 table beside the report's Blender figures and writes ``<dataset>/report.json``:
 ``{"test": {"energy_gain": {"mean": .., "std": ..}, "depth_sphere": {..}, …}, "ood": {..}}``.
 """

@@ -30,9 +30,11 @@ def rollout_settings(cfg: DictConfig) -> dict:
 
 
 def predict(job: RunInfo, traj: Trajectory, settings: dict | None = None) -> Trajectory:
-    """``traj`` itself for the ground truth, else the job's rollout of it (finite prefix)."""
+    """For the ground truth, ``traj`` with finite-difference velocities (measured as a rollout
+    is: with the engine's velocities its energy gain would be lower than any rollout's could
+    be); else the job's rollout of it (finite prefix)."""
     if job.simulator is None:
-        return traj
+        return traj.with_finite_velocities()
     return rollout(job.simulator, [traj], **(settings or {}))[0]
 
 
