@@ -17,6 +17,7 @@ from physgnn.ablation import aggregate, verdicts
 from physgnn.ablation.jobs import StudyError, budget_overrides, study_configs, study_jobs
 from physgnn.ablation.measure import FIGURES, measure_trajectory
 from physgnn.ablation.registry import append_record, done_ids, read_registry
+from physgnn.ablation.report import write_study_report
 from physgnn.ablation.study import run_study
 from physgnn.metrics import trajectory_metrics
 from physgnn.models.baselines import GravityOnlySimulator
@@ -198,3 +199,30 @@ def test_the_slurm_launcher_runs_the_same_jobs(tiny_dataset, tmp_path):
     records = read_registry(tmp_path / "registry.jsonl")
     assert len(records) == 3 and {r["status"] for r in records} == {"finished"}
     assert {r["seed"] for r in records} == {1}
+
+
+def test_the_report_is_rebuilt_from_the_registry_alone(tmp_path):
+    cfg = study_cfg(tmp_path, "budget.extra=[]")
+    configs = study_configs(SWEEPS)
+    budget = OmegaConf.to_container(cfg.budget, resolve=True)
+    records = []
+    for seed in range(3):
+        for config in configs:
+            gone = 7 if config.key == "model.M=1" and seed == 1 else None
+            mse = 4.0 if config.key == "baseline" else 5.0 + seed
+            share = 0.05 if config.key == "lit.lambda_energy=10" else 0.0
+            r = rec(config.key, seed, [(mse, gone), (mse, None)], share=share)
+            r |= {"budget": budget, "overrides": config.overrides, "threads": 1,
+                  "machine": {"cpu": "test cpu", "gpu": None}, "commit": "abc",
+                  "date": "2026-01-01 10:00", "wall_s": 60.0}  # fmt: skip
+            records.append(r)
+    text = write_study_report(records, configs, cfg).read_text()
+    assert "**51 done**, 0 failed, 0 left" in text and "test cpu" in text
+    row = next(line for line in text.splitlines() if line.startswith("| M = 1 |"))
+    assert "**∞ (1/3 seeds diverged)**; others 6 ± 1.41" in row
+    assert row.endswith("| 1/6 (median step 7) | diverges | reproduced |")
+    base = next(line for line in text.splitlines() if line.startswith("| Baseline |"))
+    assert "| 4 ± 0 |" in base and base.endswith("| best of the table | reproduced |")
+    assert "λ = 10: 5 %" in text and "λ = 0: 0 %" in text
+    for name in ("sweep_H", "sweep_M", "sweep_connectivity", "sweep_lambda", "fps"):
+        assert f"({name}.png)" in text and (tmp_path / "results" / f"{name}.png").exists()

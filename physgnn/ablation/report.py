@@ -10,7 +10,14 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from physgnn.ablation.aggregate import by_config, divergence, mean_fps, over_seeds, truth_floor
+from physgnn.ablation.aggregate import (
+    by_config,
+    divergence,
+    mean_fps,
+    mean_logged,
+    over_seeds,
+    truth_floor,
+)
 from physgnn.ablation.figures import plot_study_fps, plot_study_sweep
 from physgnn.ablation.jobs import Config
 from physgnn.ablation.registry import DONE, budget_id
@@ -151,9 +158,8 @@ def _all_configs(groups, configs) -> str:
             if not recs:
                 continue
             stats = [cell(over_seeds(recs, split, m)) for m in COLUMNS]
-            loss = [r["logged"].get("train/loss_mse") for r in recs if r.get("logged")]
-            body.append([f"`{config.key}`", str(len(recs)), *stats, div_cell(recs, split),
-                         fmt(sum(loss) / len(loss)) if loss else "–"])  # fmt: skip
+            loss = fmt(mean_logged(recs, "train/loss_mse"))
+            body.append([f"`{config.key}`", str(len(recs)), *stats, div_cell(recs, split), loss])
         out += [f"### {split} (ground truth's energy gain: {fmt(floor[split])})", "",
                 md_table(header, body), ""]  # fmt: skip
     return "\n".join(out)
@@ -170,6 +176,8 @@ def _figures(out: Path, groups, configs) -> str:
         plot_study_sweep(out / name, title, [x for x, _ in points],
                          [groups.get(c.key, []) for _, c in points], metrics)  # fmt: skip
         lines += [f"![{title}]({name})", ""]
+        if sweep == "ablation_lambda":
+            lines += [_energy_shares(points, groups), ""]
     fps = [(f"{s.removeprefix('ablation_')}={c.points[s]}", mean_fps(groups.get(c.key, [])))
            for s in FPS_SWEEPS for c in configs if s in c.points]  # fmt: skip
     if any(stat.mean is not None for _, stat in fps):
@@ -177,6 +185,16 @@ def _figures(out: Path, groups, configs) -> str:
         plot_study_fps(out / "fps.png", [k for k, _ in fps], [s for _, s in fps], note)
         lines += ["![Rollout FPS per configuration](fps.png)", ""]
     return "\n".join(lines)
+
+
+def _energy_shares(points, groups) -> str:
+    """How much of the loss the energy term was, per λ (the last epoch, mean over seeds)."""
+    parts = []
+    for x, config in points:
+        share = mean_logged(groups.get(config.key, []), "train/energy_share")
+        if share is not None:
+            parts.append(f"λ = {x}: {100 * share:.2g} %")
+    return "Energy term's share of the last epoch's loss: " + (", ".join(parts) or "–") + "."
 
 
 def _num(x: str):
