@@ -136,17 +136,6 @@ def test_gns_style_model_runs_forward_and_backward():
     assert torch.isfinite(state.pos.grad).all()
 
 
-def test_horizontal_translation_invariance():
-    sim = make(H=2)
-    state = batch([trajectory(4, seed=6)])
-    moved = state.clone()
-    shift = torch.tensor([3.5, -2.0, 0.0])
-    moved.pos = state.pos + shift
-    moved.planes = state.planes.clone()
-    moved.planes[:, :3] += shift
-    assert_close(sim.boundary_features(moved), sim.boundary_features(state))
-
-
 def test_bad_boundary_radius():
     with pytest.raises(ValueError, match="boundary_radius must be > 0"):
         make(boundary_radius=0.0)

@@ -84,8 +84,10 @@ def test_rotation_off_keeps_angular_velocity():
     assert not torch.equal(angvel[:2], state.angvel[:2, 0])
 
 
-def test_horizontal_translation_invariance():
-    sim = make()
+@pytest.mark.parametrize("gns_style", [False, True])
+def test_horizontal_translation_invariance(gns_style):
+    """Also for the GNS-style model, whose boundary distances move with the planes."""
+    sim = make(boundary_features=True, use_surfaces=False) if gns_style else make()
     state = batch([trajectory(4, seed=6)])
     moved = state.clone()
     shift = torch.tensor([3.5, -2.0, 0.0])
