@@ -77,7 +77,8 @@ def _result(proc: subprocess.Popen, spec: dict, out: Path) -> dict:
 
 def _slurm(specs: list[dict], launcher: DictConfig, log_dir: Path) -> Iterator[dict]:
     executor = submitit.AutoExecutor(folder=str(log_dir / "%j"), cluster=launcher.get("cluster"))
-    executor.update_parameters(**OmegaConf.to_container(launcher.slurm, resolve=True))
+    params = OmegaConf.to_container(launcher.slurm, resolve=True)
+    executor.update_parameters(**{k: v for k, v in params.items() if v is not None})
     pending = [(executor.submit(run_job, spec), spec) for spec in specs]
     while pending:
         for job, spec in [p for p in pending if p[0].done()]:
