@@ -14,8 +14,9 @@ is printed (one line, or the traceback of a bug) and the job returns None; the r
 failure (``run.json``) and the sweep's summary counts it. An interruption still stops it.
 
 Before the work, torch gets as many threads as the cores other processes leave free
-(:func:`free_threads`): on a busy machine a second thread only waits for a core, and steps
-ran several times slower than on one thread. ``OMP_NUM_THREADS``, when set, wins.
+(:func:`free_threads`, measured over a fifth of a second): on a busy machine a second thread
+only waits for a core, and steps ran several times slower than on one thread.
+``OMP_NUM_THREADS``, when set, wins.
 
 A command whose arguments Hydra cannot read (``simulate``: ``scene=FILE`` names a file, where
 Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instead: its
@@ -27,6 +28,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import time
 import traceback
 from collections.abc import Callable
 from typing import NoReturn
@@ -65,17 +67,46 @@ def fail(err: BaseException) -> NoReturn:
 
 
 def free_threads() -> int | None:
-    """Set torch's threads to the cores the 1-minute load average leaves free (at least 1) and
+    """Set torch's threads to the cores other processes leave free now (at least 1) and
     return that count; None (threads untouched) when ``OMP_NUM_THREADS`` is set."""
     if os.environ.get("OMP_NUM_THREADS"):
         return None
     cores = os.cpu_count() or 1
-    load = os.getloadavg()[0]
-    threads = max(1, min(cores, cores - math.floor(load + 0.5)))
+    busy = busy_cores()
+    threads = max(1, min(cores, cores - math.floor(busy + 0.5)))
     if threads < torch.get_num_threads():
-        print(f"threads: {threads} of {cores} cores (load average {load:.1f}; OMP_NUM_THREADS=N)")
+        print(f"threads: {threads} of {cores} cores ({busy:.1f} busy; OMP_NUM_THREADS=N)")
     torch.set_num_threads(threads)
     return threads
+
+
+def busy_cores(window_s: float = 0.2, stat: str = "/proc/stat") -> float:
+    """Cores that other processes keep busy now: the busy share of every core's time over
+    ``window_s`` seconds (Linux ``/proc/stat``) × the cores; where there is no ``/proc/stat``,
+    the 1-minute load average. Not the load average everywhere: it still counts, for about a
+    minute, a process that has ended (``make data`` just before ``make train`` left an idle
+    2-core machine training on one thread)."""
+    first = cpu_times(stat)
+    if first is None:
+        return os.getloadavg()[0]
+    time.sleep(window_s)
+    second = cpu_times(stat)
+    busy, total = (b - a for a, b in zip(first, second, strict=True))
+    return (os.cpu_count() or 1) * busy / total if total > 0 else 0.0
+
+
+def cpu_times(stat: str = "/proc/stat") -> tuple[int, int] | None:
+    """``(busy, total)`` clock ticks of all cores since boot from the ``cpu`` line of
+    ``stat`` (user nice system idle iowait irq softirq steal); None if it cannot be read."""
+    try:
+        with open(stat) as f:
+            ticks = [int(v) for v in f.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return None
+    if len(ticks) < 5:
+        return None
+    total = sum(ticks)
+    return total - ticks[3] - ticks[4], total
 
 
 def command(

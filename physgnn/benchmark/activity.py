@@ -10,6 +10,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.benchmark.learned import frame_states, make_simulator, time_cases
+from physgnn.benchmark.profile import step_flops
 from physgnn.benchmark.scenes import bench_run, resting_scene, with_effects, without_walls
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 from physgnn.groundtruth.engine import simulate
@@ -19,16 +20,19 @@ from physgnn.rollout import rollout
 
 
 class ThroughputTimer(L.Callback):
-    """State pairs and nodes per second over the training batches after ``warmup``."""
+    """State pairs and nodes per second over the training batches after ``warmup``;
+    ``first_graph``: how many graphs ``graphs`` (a watching StepTimer's) held when the timed
+    batches began."""
 
-    def __init__(self, warmup: int):
-        self.warmup = warmup
+    def __init__(self, warmup: int, graphs: StepTimer):
+        self.warmup, self.graphs = warmup, graphs
         self.t0 = self.t1 = None
-        self.pairs = self.nodes = self.steps = 0
+        self.pairs = self.nodes = self.steps = self.first_graph = 0
 
     def on_train_batch_start(self, trainer, pl_module, batch, batch_idx):
         if batch_idx == self.warmup:
             self.t0 = time.perf_counter()
+            self.first_graph = len(self.graphs.sizes)
 
     def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx):
         if batch_idx >= self.warmup:
@@ -38,16 +42,19 @@ class ThroughputTimer(L.Callback):
             self.steps += 1
 
 
-def training_throughput(cfg: DictConfig, trajectories: list, stats: dict) -> dict:
-    """Baseline training (Lightning, Adam, noise) for ``training.steps`` batches; pairs/s and
-    nodes/s after ``warmup_steps`` (data loading included)."""
+def training_throughput(cfg: DictConfig, trajectories: list, stats: dict, matmul: float) -> dict:
+    """Baseline training (Lightning, Adam, noise) for ``training.steps`` batches; pairs/s,
+    nodes/s and the FLOP rate (GFLOP/s, share of the ``matmul`` rate; FLOPs as
+    :func:`physgnn.benchmark.profile.step_flops` counts them) after ``warmup_steps`` (data
+    loading included)."""
     c = cfg.training
     simulator = instantiate(cfg.model, stats=stats)
     lit = instantiate(c.lit, simulator=simulator)
     data = PairDataset(trajectories, simulator.H)
     sampler = EpochSampler(len(data), c.steps * c.batch_size, int(cfg.seed))
     loader = pair_loader(data, c.batch_size, sampler)
-    timer = ThroughputTimer(min(c.warmup_steps, c.steps - 1))
+    graphs = StepTimer()
+    timer = ThroughputTimer(min(c.warmup_steps, c.steps - 1), graphs)
     trainer = L.Trainer(
         accelerator="cpu",
         devices=1,
@@ -61,8 +68,10 @@ def training_throughput(cfg: DictConfig, trajectories: list, stats: dict) -> dic
         limit_val_batches=0,
         callbacks=[timer],
     )
-    trainer.fit(lit, train_dataloaders=loader)
+    with graphs.watch(simulator):
+        trainer.fit(lit, train_dataloaders=loader)
     secs = max(timer.t1 - timer.t0, 1e-9)
+    gflops = step_flops(simulator, [], graphs.sizes[timer.first_graph :]) / secs / 1e9
     out = {
         "pairs_per_s": timer.pairs / secs,
         "nodes_per_s": timer.nodes / secs,
@@ -70,9 +79,13 @@ def training_throughput(cfg: DictConfig, trajectories: list, stats: dict) -> dic
         "batch_size": int(c.batch_size),
         "mean_nodes_per_pair": timer.nodes / max(timer.pairs, 1),
         "seconds": secs,
+        "gflops": gflops,
+        "share_of_matmul": gflops / matmul,
     }
     print(
-        f"training: {out['pairs_per_s']:.0f} pairs/s, {out['nodes_per_s']:.0f} nodes/s", flush=True
+        f"training: {out['pairs_per_s']:.0f} pairs/s, {out['nodes_per_s']:.0f} nodes/s, "
+        f"{gflops:.1f} GFLOP/s ({out['share_of_matmul']:.0%} of matmul)",
+        flush=True,
     )
     return out
 

@@ -6,6 +6,7 @@ import math
 import os
 
 from physgnn.benchmark.targets import targets
+from physgnn.benchmark.training_tables import training_sections
 from physgnn.report.format import fmt, md_table
 
 
@@ -133,33 +134,6 @@ def accuracy_table(extra: dict) -> str:
     )
 
 
-def training_table(extra: dict) -> str:
-    t = extra["training"]
-    return md_table(
-        ["pairs/s", "nodes/s", "batch", "nodes per pair", "steps timed"],
-        [
-            [
-                f"{t['pairs_per_s']:.1f}",
-                f"{t['nodes_per_s']:.0f}",
-                str(t["batch_size"]),
-                f"{t['mean_nodes_per_pair']:.1f}",
-                str(t["steps_timed"]),
-            ]
-        ],
-    )
-
-
-def profile_table(extra: dict) -> str:
-    """One training step, part by part (``benchmark.profile``)."""
-    p = extra.get("profile")
-    if not p:
-        return "–"
-    parts = ("data", "noise", "push_forward", "graph", "forward", "backward", "optimiser")
-    body = [[k.replace("_", "-"), f"{p[f'{k}_ms']:.2f}", f"{p[f'{k}_share']:.0%}"] for k in parts]
-    body.append(["whole step", f"{p['step_ms']:.2f}", f"{p['pairs_per_s']:.0f} pairs/s"])
-    return md_table(["part", "ms per step", "share"], body)
-
-
 def activity_table(extra: dict) -> str:
     body = [
         [
@@ -263,15 +237,7 @@ def write_markdown(result: dict, extra: dict) -> str:
         "reference: the most substeps. Physics metrics are of each run itself; free-fall error: "
         "|z − (z0 − ½gt²)| of one sphere after 4 s (semi-implicit Euler lags by g·h·t/2).",
         accuracy_table(extra),
-        "## Training throughput (baseline, Lightning, noise on)",
-        training_table(extra),
-        "### Where a training step's time goes (baseline, "
-        f"{extra.get('profile', {}).get('batch_size', '?')} pairs, noise, "
-        f"{extra.get('profile', {}).get('pushforward_steps', '?')} push-forward step)",
-        "Graph building counts every graph of the step (push-forward and loss); forward and "
-        "push-forward are the network and its normalisation without it; optimiser = gradient "
-        "clipping and the Adam step. A rollout frame's parts are in the rollout table above.",
-        profile_table(extra),
+        *training_sections(extra),
         "## Cost follows activity",
         activity_table(extra),
         "## Speed work in the measured code",

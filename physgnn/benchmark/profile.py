@@ -21,9 +21,20 @@ from physgnn.training.lit import add_noise, push_forward
 PARTS = ("data", "noise", "push_forward", "graph", "forward", "backward", "optimiser")
 
 
-def training_profile(cfg: DictConfig, trajectories: list, stats: dict) -> dict:
+def forward_flops(simulator, sizes: list[tuple[int, int, int]]) -> int:
+    """FLOPs of one network call on each graph of ``sizes`` ``(nodes, pp edges, ps edges)``."""
+    return sum(simulator.network.flops_per_step(*size) for size in sizes)
+
+
+def step_flops(simulator, pushed: list, loss: list) -> int:
+    """FLOPs of a training step: push-forward graphs once, loss graphs 3 times (module doc)."""
+    return forward_flops(simulator, pushed) + 3 * forward_flops(simulator, loss)
+
+
+def training_profile(cfg: DictConfig, trajectories: list, stats: dict, matmul: float) -> dict:
     """ms per part of a training step (mean over ``profile.steps`` after the warm-up), their
-    shares of the step, and pairs and nodes per second of the whole step."""
+    shares of the step, pairs and nodes per second, and the step's FLOP rate (GFLOP/s and
+    share of the ``matmul`` rate in GFLOP/s)."""
     c = cfg.profile
     simulator = instantiate(cfg.model, stats=stats)
     lit = instantiate(cfg.training.lit, simulator=simulator)
@@ -32,37 +43,41 @@ def training_profile(cfg: DictConfig, trajectories: list, stats: dict) -> dict:
     total_steps = int(c.warmup_steps + c.steps)
     sampler = EpochSampler(len(data), total_steps * int(c.batch_size), int(cfg.seed))
     batches = iter(pair_loader(data, int(c.batch_size), sampler))
-    seconds, pairs, nodes = dict.fromkeys(PARTS, 0.0), 0, 0
+    seconds, pairs, nodes, flops = dict.fromkeys(PARTS, 0.0), 0, 0, 0
     timer = StepTimer()
     with timer.watch(simulator):
         for step in range(total_steps):
-            parts, batch = _one_step(lit, optimizer, batches, timer, step, c)
+            parts, batch, step_flop = _one_step(lit, optimizer, batches, timer, step, c)
             if step >= c.warmup_steps:
                 seconds = {k: seconds[k] + parts[k] for k in PARTS}
                 pairs, nodes = pairs + batch.num_graphs, nodes + batch.num_nodes
+                flops += step_flop
     total = max(sum(seconds.values()), 1e-12)
     out = {f"{k}_ms": 1000 * seconds[k] / c.steps for k in PARTS}
     out |= {f"{k}_share": seconds[k] / total for k in PARTS}
     out |= {"step_ms": 1000 * total / c.steps, "pairs_per_s": pairs / total}
     out |= {"nodes_per_s": nodes / total, "steps": int(c.steps), "batch_size": int(c.batch_size)}
     out["pushforward_steps"] = int(c.pushforward)
+    out |= {"gflop_per_step": flops / c.steps / 1e9, "gflops": flops / total / 1e9}
+    out["share_of_matmul"] = out["gflops"] / matmul
     print(
         f"profile: {out['step_ms']:.1f} ms per training step: "
-        + ", ".join(f"{k} {out[f'{k}_ms']:.1f}" for k in PARTS),
+        + ", ".join(f"{k} {out[f'{k}_ms']:.1f}" for k in PARTS)
+        + f"; {out['gflops']:.1f} GFLOP/s ({out['share_of_matmul']:.0%} of matmul)",
         flush=True,
     )
     return out
 
 
-def _one_step(lit, optimizer, batches, timer: StepTimer, step: int, c) -> tuple[dict, object]:
-    """One training step, seconds per part (see the module doc)."""
+def _one_step(lit, optimizer, batches, timer: StepTimer, step: int, c) -> tuple[dict, object, int]:
+    """One training step: seconds per part, the batch and the step's FLOPs (module doc)."""
     simulator = lit.simulator
     device = next(simulator.parameters()).device
     generator = torch.Generator(device=device).manual_seed(step)
-    marks = [(timer.clock(device), timer.graph)]
+    marks = [(timer.clock(device), timer.graph, len(timer.sizes))]
 
     def mark():
-        marks.append((timer.clock(device), timer.graph))
+        marks.append((timer.clock(device), timer.graph, len(timer.sizes)))
 
     batch = next(batches).to(device)
     mark()
@@ -83,4 +98,5 @@ def _one_step(lit, optimizer, batches, timer: StepTimer, step: int, c) -> tuple[
     parts = {"data": data, "noise": noise, "push_forward": pushed - pushed_graph}
     parts |= {"graph": pushed_graph + forward_graph, "forward": forward - forward_graph}
     parts |= {"backward": spans[4][0], "optimiser": spans[5][0]}
-    return parts, batch
+    graphs = [timer.sizes[a[2] : b[2]] for a, b in zip(marks[2:4], marks[3:5], strict=True)]
+    return parts, batch, step_flops(simulator, *graphs)

@@ -55,7 +55,9 @@ def bench(cfg: DictConfig) -> dict:
         "machine": {k: info[k] for k in ("cpu", "threads", "matmul_gflops")},
         "learned": [{k: r[k] for k in LEARNED_KEYS} for r in m["learned"]],
         "pybullet": pybullet_rows(cfg, m["runs"], m["pybullet_accuracy"]),
-        "training": {k: m["training"][k] for k in ("pairs_per_s", "nodes_per_s")},
+        "training": {
+            k: m["training"][k] for k in ("pairs_per_s", "nodes_per_s", "share_of_matmul")
+        },
     }
     extra = {
         "machine": info,
@@ -86,8 +88,8 @@ def measure(cfg: DictConfig, rng: np.random.Generator, matmul: float, phases: di
     m["learned"] = timed("learned", learned_rows, cfg, runs, stats, matmul)
     start = runs[cfg.accuracy.n_spheres]["start"]
     m["pybullet_accuracy"] = timed("pybullet substeps", accuracy_sweep, cfg, start)
-    m["training"] = timed("training", activity.training_throughput, cfg, train_trajs, stats)
-    m["profile"] = timed("profile", profile.training_profile, cfg, train_trajs, stats)
+    m["training"] = timed("training", activity.training_throughput, cfg, train_trajs, stats, matmul)
+    m["profile"] = timed("profile", profile.training_profile, cfg, train_trajs, stats, matmul)
     m["activity"] = timed("activity", activity.activity_rows, cfg, runs, stats, rng)
     m["rollout"] = timed("rollout", activity.rollout_rows, cfg, runs, stats)
     m["batched"] = timed("batched", batched_rows, cfg, runs, stats)

@@ -34,13 +34,17 @@ class _WatchedBuilder:
         graph = self.builder(state)
         self.timer.graph += self.timer.clock(state.pos.device) - t0
         self.timer.last_graph = (state.pos.shape[0], graph)
+        self.timer.sizes.append(
+            (state.pos.shape[0], graph.pp_index.shape[1], graph.ps_index.shape[1])
+        )
         return graph
 
 
 class StepTimer:
     """Seconds per part of the steps timed (``timings``: graph, network, integration, total
     and the count of steps). ``graph`` is the running total of graph-building seconds;
-    ``last_graph`` is ``(nodes, graph)`` of the last graph built while watched."""
+    ``last_graph`` is ``(nodes, graph)`` of the last graph built while watched and ``sizes``
+    the ``(nodes, pp edges, ps edges)`` of every graph built while watched."""
 
     def __init__(self):
         self.reset()
@@ -49,6 +53,7 @@ class StepTimer:
         self.timings = {"graph": 0.0, "network": 0.0, "integration": 0.0, "total": 0.0, "steps": 0}
         self.graph = 0.0
         self.last_graph = None
+        self.sizes: list[tuple[int, int, int]] = []
 
     @staticmethod
     def clock(device: torch.device) -> float:
