@@ -195,3 +195,29 @@ def test_noise_is_reproducible_from_a_seeded_generator():
     ]
     assert torch.equal(draw[0].pos, draw[1].pos) and torch.equal(draw[0].vel, draw[1].vel)
     assert not torch.equal(draw[0].pos, draw[2].pos)
+
+
+def test_compile_keeps_the_weights_and_checkpoint_keys():
+    """``compile=True`` compiles the network in place (lazily, on its first call): same
+    parameters, same state_dict keys, so checkpoints load either way."""
+    eager, compiled = make_lit(), make_lit(compile=True)
+    assert compiled.simulator.network._compiled_call_impl is not None
+    assert eager.simulator.network._compiled_call_impl is None
+    assert list(compiled.state_dict()) == list(eager.state_dict())
+    for a, b in zip(eager.state_dict().values(), compiled.state_dict().values(), strict=True):
+        assert torch.equal(a, b)
+
+
+@pytest.mark.slow
+def test_compiled_network_gives_the_eager_losses_and_gradients():
+    state = batch([trajectory(3, seed=0), trajectory(4, seed=1)])
+    results = []
+    for lit in (make_lit(), make_lit(compile=True)):
+        loss = lit.losses(state)["loss"]
+        loss.backward()
+        grads = [p.grad.clone() for p in lit.parameters()]
+        results.append((loss.detach(), grads))
+    (loss_e, grads_e), (loss_c, grads_c) = results
+    assert_close(loss_c, loss_e, rtol=1e-5, atol=1e-6)
+    for g_c, g_e in zip(grads_c, grads_e, strict=True):
+        assert_close(g_c, g_e, rtol=1e-4, atol=1e-6)

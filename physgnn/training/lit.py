@@ -122,6 +122,9 @@ class LitSimulator(L.LightningModule):
     optional partial taking the optimizer, stepped once per epoch. ``seed`` seeds the noise and
     the push-forward length of each step together with the step number.
     ``pushforward_steps`` = K (0: one-step training only) starts at step ``pushforward_after``.
+    ``compile``: the network is compiled in place (``torch.compile``, dynamic shapes) for
+    every call, training, validation and rollouts alike; the weights and checkpoints are
+    the same as without (docs/PERFORMANCE.md has what it gains and costs).
     """
 
     def __init__(
@@ -134,6 +137,7 @@ class LitSimulator(L.LightningModule):
         seed: int = 0,
         pushforward_steps: int = 0,
         pushforward_after: int = 0,
+        compile: bool = False,
     ):
         super().__init__()
         if min(lambda_energy, noise_std, pushforward_steps, pushforward_after) < 0:
@@ -149,6 +153,8 @@ class LitSimulator(L.LightningModule):
         self.seed = int(seed)
         self.pushforward_steps = int(pushforward_steps)
         self.pushforward_after = int(pushforward_after)
+        if compile:
+            simulator.network.compile(dynamic=True)
         self.pairs_seen = 0
         self.nodes_seen = 0
 
