@@ -142,6 +142,14 @@ def test_bench_rejects_bad_threads(tmp_path):
 
 
 # ---------------------------------------------------------------------------------- FLOPs
+def _paired_graph(n: int, pairs: int, f: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """pp edges ``[2, 2·pairs]`` in the paired layout and ps edges ``[2, f]`` from plane 0."""
+    src = torch.arange(pairs) % n
+    dst = (src + 1 + torch.arange(pairs) % (n - 1)) % n
+    pp = torch.cat([torch.stack([src, dst]), torch.stack([dst, src])], 1)
+    return pp, torch.stack([torch.zeros(f, dtype=torch.long), torch.arange(f) % n])
+
+
 @pytest.mark.parametrize(
     "third_law,surfaces,concat",
     [(True, True, "auto"), (False, False, "never"), (True, True, "always")],
@@ -152,10 +160,7 @@ def test_flops_per_step_equals_counted_matmuls(third_law, surfaces, concat):
         node_in=20, hidden=16, M=2, third_law=third_law, use_surfaces=surfaces, concat_trick=concat
     )
     n, pairs, f = 7, 5, 6
-    src = torch.arange(pairs) % n
-    dst = (src + 1 + torch.arange(pairs) % (n - 1)) % n
-    pp = torch.cat([torch.stack([src, dst]), torch.stack([dst, src])], 1)
-    ps = torch.stack([torch.zeros(f, dtype=torch.long), torch.arange(f) % n])
+    pp, ps = _paired_graph(n, pairs, f)
     with FlopCounterMode(display=False) as counter:
         net(torch.randn(n, 20), pp, torch.randn(2 * pairs, 4), ps, torch.randn(f, 10))
     assert counter.get_total_flops() == net.flops_per_step(n, 2 * pairs, f)
@@ -168,10 +173,7 @@ def test_training_flops_count_forward_and_backward():
     torch.manual_seed(0)
     net = EncodeProcessDecode(node_in=20, hidden=128, M=5)
     n, pairs, f = 40, 30, 45
-    src = torch.arange(pairs) % n
-    dst = (src + 1 + torch.arange(pairs) % (n - 1)) % n
-    pp = torch.cat([torch.stack([src, dst]), torch.stack([dst, src])], 1)
-    ps = torch.stack([torch.zeros(f, dtype=torch.long), torch.arange(f) % n])
+    pp, ps = _paired_graph(n, pairs, f)
     with FlopCounterMode(display=False) as counter:
         net(
             torch.randn(n, 20), pp, torch.randn(2 * pairs, 4), ps, torch.randn(f, 10)

@@ -98,5 +98,7 @@ def _one_step(lit, optimizer, batches, timer: StepTimer, step: int, c) -> tuple[
     parts = {"data": data, "noise": noise, "push_forward": pushed - pushed_graph}
     parts |= {"graph": pushed_graph + forward_graph, "forward": forward - forward_graph}
     parts |= {"backward": spans[4][0], "optimiser": spans[5][0]}
-    graphs = [timer.sizes[a[2] : b[2]] for a, b in zip(marks[2:4], marks[3:5], strict=True)]
-    return parts, batch, step_flops(simulator, *graphs)
+    graph_counts = [m[2] for m in marks]  # after: data, noise, push-forward, forward, ...
+    pushed = timer.sizes[graph_counts[2] : graph_counts[3]]
+    loss = timer.sizes[graph_counts[3] : graph_counts[4]]
+    return parts, batch, step_flops(simulator, pushed, loss)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from physgnn.benchmark.profile import PARTS
 from physgnn.report.format import md_table
 
 
@@ -38,8 +39,7 @@ def profile_table(extra: dict) -> str:
     p = extra.get("profile")
     if not p:
         return "–"
-    parts = ("data", "noise", "push_forward", "graph", "forward", "backward", "optimiser")
-    body = [[k.replace("_", "-"), f"{p[f'{k}_ms']:.2f}", f"{p[f'{k}_share']:.0%}"] for k in parts]
+    body = [[k.replace("_", "-"), f"{p[f'{k}_ms']:.2f}", f"{p[f'{k}_share']:.0%}"] for k in PARTS]
     body.append(["whole step", f"{p['step_ms']:.2f}", f"{p['pairs_per_s']:.0f} pairs/s"])
     if "gflops" in p:
         rate = f"{p['gflops']:.1f} GFLOP/s, {p['share_of_matmul']:.0%} of matmul"
