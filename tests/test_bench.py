@@ -260,6 +260,8 @@ def test_targets_table_met_and_not_met():
     rows = targets(result, extra)
     assert rows[3][2] == "met"
     assert rows[2][2] == "not met (needs ×1.1)"  # 45 % at 1000 spheres
+    extra["training"]["share_of_matmul"] = 0.59
+    assert targets(result, extra)[6][2] == "not met (needs ×1.02)"  # close calls show 2 decimals
     del extra["training"]
     assert len(targets(result, extra)) == 6  # no training rows without a training run
 

@@ -18,7 +18,9 @@ def _row(extra: dict, n: int) -> dict | None:
 
 def _short(factor: float) -> str:
     """ " (needs ×k)" when a measured value is ``factor`` short of its target (> 1)."""
-    return f" (needs ×{factor:.1f})" if factor > 1 else ""
+    if factor <= 1:
+        return ""
+    return f" (needs ×{factor:.2f})" if factor < 1.1 else f" (needs ×{factor:.1f})"
 
 
 def _ok(met: bool) -> str:
