@@ -40,8 +40,8 @@ def frame_states(traj, H: int, copies: int = 1) -> list:
 @torch.inference_mode()
 def step_once(sim, state) -> tuple[dict, tuple | None]:
     """One learned step on ``state`` (prediction, then
-    :func:`physgnn.physics.integrator.step`): seconds of each part and ``(nodes, graph)``
-    the network ran on (None when it did not run)."""
+    :func:`physgnn.physics.integrator.step`): seconds of each part and ``(nodes, pp edges,
+    ps edges)`` of the graph the network ran on (None when it did not run)."""
     timer = StepTimer()
     t0 = time.perf_counter()
     with timer.watch(sim):
@@ -51,7 +51,7 @@ def step_once(sim, state) -> tuple[dict, tuple | None]:
                     state.scene_dt, rotate, hold)  # fmt: skip
     t = timer.timings
     secs = {"graph": t["graph"], "network": t["network"], "integrate": t["integration"]}
-    return secs | {"total": time.perf_counter() - t0}, timer.last_graph
+    return secs | {"total": time.perf_counter() - t0}, (timer.sizes[-1] if timer.sizes else None)
 
 
 def time_cases(cases: list[tuple], repeats: int) -> list[dict]:
@@ -81,8 +81,7 @@ def time_cases(cases: list[tuple], repeats: int) -> list[dict]:
             for key in ("graph", "network", "integrate", "total"):
                 log[key].append(step[key])
             if ran is not None:
-                n, graph = ran
-                e, f = graph.pp_index.shape[1], graph.ps_index.shape[1]
+                n, e, f = ran
                 log["flop"] += sim.network.flops_per_step(n, e, f)
                 log["nodes"], log["pp"], log["ps"] = log["nodes"] + n, log["pp"] + e, log["ps"] + f
     return [_summary(log, repeats) for log in logs]

@@ -19,7 +19,8 @@ PARTS = ("graph", "network", "integration")
 
 
 class _WatchedBuilder:
-    """A graph builder that adds its seconds to ``timer.graph`` and keeps its last graph."""
+    """A graph builder that adds its seconds to ``timer.graph`` and its graph's size to
+    ``timer.sizes``."""
 
     def __init__(self, builder, timer: StepTimer):
         self.builder, self.timer = builder, timer
@@ -33,7 +34,6 @@ class _WatchedBuilder:
         t0 = self.timer.clock(state.pos.device)
         graph = self.builder(state)
         self.timer.graph += self.timer.clock(state.pos.device) - t0
-        self.timer.last_graph = (state.pos.shape[0], graph)
         self.timer.sizes.append(
             (state.pos.shape[0], graph.pp_index.shape[1], graph.ps_index.shape[1])
         )
@@ -42,9 +42,8 @@ class _WatchedBuilder:
 
 class StepTimer:
     """Seconds per part of the steps timed (``timings``: graph, network, integration, total
-    and the count of steps). ``graph`` is the running total of graph-building seconds;
-    ``last_graph`` is ``(nodes, graph)`` of the last graph built while watched and ``sizes``
-    the ``(nodes, pp edges, ps edges)`` of every graph built while watched."""
+    and the count of steps). ``graph`` is the running total of graph-building seconds and
+    ``sizes`` the ``(nodes, pp edges, ps edges)`` of every graph built while watched."""
 
     def __init__(self):
         self.reset()
@@ -52,7 +51,6 @@ class StepTimer:
     def reset(self) -> None:
         self.timings = {"graph": 0.0, "network": 0.0, "integration": 0.0, "total": 0.0, "steps": 0}
         self.graph = 0.0
-        self.last_graph = None
         self.sizes: list[tuple[int, int, int]] = []
 
     @staticmethod
