@@ -67,46 +67,60 @@ def fail(err: BaseException) -> NoReturn:
 
 
 def free_threads() -> int | None:
-    """Set torch's threads to the cores other processes leave free now (at least 1) and
-    return that count; None (threads untouched) when ``OMP_NUM_THREADS`` is set."""
+    """Set torch's threads to the cores this process may run on that other processes leave
+    free now (at least 1) and return that count; None (threads untouched) when
+    ``OMP_NUM_THREADS`` is set."""
     if os.environ.get("OMP_NUM_THREADS"):
         return None
-    cores = os.cpu_count() or 1
-    busy = busy_cores()
-    threads = max(1, min(cores, cores - math.floor(busy + 0.5)))
+    cpus = own_cpus()
+    busy = busy_cores(cpus)
+    threads = max(1, min(len(cpus), len(cpus) - math.floor(busy + 0.5)))
     if threads < torch.get_num_threads():
-        print(f"threads: {threads} of {cores} cores ({busy:.1f} busy; OMP_NUM_THREADS=N)")
+        print(f"threads: {threads} of {len(cpus)} cores ({busy:.1f} busy; OMP_NUM_THREADS=N)")
     torch.set_num_threads(threads)
     return threads
 
 
-def busy_cores(window_s: float = 0.2, stat: str = "/proc/stat") -> float:
-    """Cores that other processes keep busy now: the busy share of every core's time over
-    ``window_s`` seconds (Linux ``/proc/stat``) × the cores; where there is no ``/proc/stat``,
-    the 1-minute load average. Not the load average everywhere: it still counts, for about a
-    minute, a process that has ended (``make data`` just before ``make train`` left an idle
-    2-core machine training on one thread)."""
-    first = cpu_times(stat)
+def own_cpus() -> list[int]:
+    """The cores this process may run on (its CPU affinity: ``taskset``, a SLURM job's cpuset),
+    or every core where the system does not say."""
+    if hasattr(os, "sched_getaffinity"):
+        return sorted(os.sched_getaffinity(0))
+    return list(range(os.cpu_count() or 1))
+
+
+def busy_cores(cpus: list[int], window_s: float = 0.2, stat: str = "/proc/stat") -> float:
+    """How many of the cores ``cpus`` other processes keep busy now: their busy share over
+    ``window_s`` seconds (Linux ``/proc/stat``, per core) × their count; where there is no
+    ``/proc/stat``, the 1-minute load average. Not the load average everywhere: it still
+    counts, for about a minute, a process that has ended (``make data`` just before ``make
+    train`` left an idle 2-core machine training on one thread), and it counts every core of
+    the machine, not the ones a cluster job was given."""
+    first = cpu_times(cpus, stat)
     if first is None:
         return os.getloadavg()[0]
     time.sleep(window_s)
-    second = cpu_times(stat)
+    second = cpu_times(cpus, stat)
     busy, total = (b - a for a, b in zip(first, second, strict=True))
-    return (os.cpu_count() or 1) * busy / total if total > 0 else 0.0
+    return len(cpus) * busy / total if total > 0 else 0.0
 
 
-def cpu_times(stat: str = "/proc/stat") -> tuple[int, int] | None:
-    """``(busy, total)`` clock ticks of all cores since boot from the ``cpu`` line of
-    ``stat`` (user nice system idle iowait irq softirq steal); None if it cannot be read."""
+def cpu_times(cpus: list[int], stat: str = "/proc/stat") -> tuple[int, int] | None:
+    """``(busy, total)`` clock ticks since boot summed over the ``cpuN`` lines of ``stat`` for
+    N in ``cpus`` (user nice system idle iowait irq softirq steal; busy = all but idle and
+    iowait); None if it cannot be read or lacks one of them."""
+    wanted, busy, total, found = {f"cpu{n}" for n in cpus}, 0, 0, 0
     try:
         with open(stat) as f:
-            ticks = [int(v) for v in f.readline().split()[1:9]]
-    except (OSError, ValueError):
+            for line in f:
+                fields = line.split()
+                if fields and fields[0] in wanted:
+                    ticks = [int(v) for v in fields[1:9]]
+                    busy, total = busy + sum(ticks) - ticks[3] - ticks[4], total + sum(ticks)
+                    found += 1
+    except (OSError, ValueError, IndexError):
         return None
-    if len(ticks) < 5:
-        return None
-    total = sum(ticks)
-    return total - ticks[3] - ticks[4], total
+    return (busy, total) if found == len(wanted) else None
 
 
 def command(
