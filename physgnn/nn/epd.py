@@ -43,12 +43,20 @@ class ProcessorBlock(nn.Module):
             e_pp = e_pp + m
         if e_ps is not None:
             aggs.append(self.ps(v, ps_index, e_ps))
-        agg = sum(aggs[1:], aggs[0]) if aggs else torch.zeros_like(v)
-        return v + self.node(torch.cat([v, agg], dim=1)), e_pp
+        # MLP_v([v, Agg]) with its first layer split, W_v v + W_a Agg: no [N, 2h] copy, and no
+        # product at all on an Agg that is zero (no edges).
+        w_v, w_a = self.node.first_layer_blocks([v.shape[1], v.shape[1]])
+        pre = torch.addmm(self.node.lin1.bias, v, w_v.t())
+        if aggs:
+            pre = torch.addmm(pre, sum(aggs[1:], aggs[0]), w_a.t())
+        return v + self.node.finish(pre), e_pp
 
     def flops(self, num_nodes: int, num_pp_edges: int, num_ps_edges: int) -> int:
+        has_ps = self.ps is not None and num_ps_edges > 0
         total = self.pp.flops(num_nodes, num_pp_edges) + self.node.flops(num_nodes)
-        return total + (self.ps.flops(num_ps_edges) if self.ps is not None else 0)
+        if num_pp_edges == 0 and not has_ps:  # no Agg: its half of the first layer is skipped
+            total -= 2 * num_nodes * self.node.hidden * (self.node.in_dim // 2)
+        return total + (self.ps.flops(num_nodes, num_ps_edges) if has_ps else 0)
 
 
 class EncodeProcessDecode(nn.Module):

@@ -7,6 +7,7 @@ import torch.nn.functional as F
 from torch import Tensor
 from torch_geometric.nn import MessagePassing
 
+from physgnn.nn.aggregation import IndexSum
 from physgnn.nn.mlp import MLP
 
 CONCAT_MODES = ("auto", "always", "never")
@@ -25,6 +26,8 @@ class InteractionBlock(MessagePassing):
 
     .. math::  m_{ij} = \tfrac12\,[f(v_i, v_j, e_{ij}) - f(v_j, v_i, e_{ji})] = -m_{ji},
 
+    computed as ``m_ij = ½ W_2 (h_ij − h_ji)`` from the hidden units ``h = ReLU(W_1 [·] + b_1)``
+    of both directions (the second layer is linear: it runs once per pair, not per edge),
     so the messages of a pair cancel exactly (``Σ_i Agg_i = 0``) *and* do not depend on which
     sphere of the pair the graph lists first (evaluating ``f`` on one direction only and
     negating it would make the output depend on sphere numbering: no permutation
@@ -36,15 +39,16 @@ class InteractionBlock(MessagePassing):
     computed once per node (``2N`` rows instead of ``E``); ``"auto"``: the concat trick
     when it is cheaper, i.e. when ``N < E``. Both paths give the same numbers up to float rounding.
 
-    The messages are computed once by ``edge_updater`` (they are also the pp edge-latent
-    update ``e_ij += m_ij``, so the caller needs them) and summed by ``propagate``.
+    The hidden units are computed by ``edge_updater``, the messages from them (they are also
+    the pp edge-latent update ``e_ij += m_ij``, so the caller needs them) and summed by
+    ``propagate``.
 
     Shapes: ``x [N, h]``, ``edge_index [2, E]``, ``edge_attr [E, h]`` →
     ``(Agg [N, h], messages [E, h])``.
     """
 
     def __init__(self, hidden: int, third_law: bool = True, concat_trick: str = "auto"):
-        super().__init__(aggr="sum")
+        super().__init__(aggr=IndexSum())
         if concat_trick not in CONCAT_MODES:
             raise ValueError(f"concat_trick must be one of {CONCAT_MODES}, got {concat_trick!r}")
         self.hidden, self.third_law, self.concat_trick = hidden, third_law, concat_trick
@@ -64,20 +68,22 @@ class InteractionBlock(MessagePassing):
             pair = (F.linear(x, w_j), F.linear(x, w_i, self.mlp.lin1.bias))
         else:
             pair = (x, x)
-        m = self.edge_updater(edge_index, x=pair, edge_attr=edge_attr, concat=concat)
+        hidden = self.edge_updater(edge_index, x=pair, edge_attr=edge_attr, concat=concat)
         if self.third_law:
             half = num_msg // 2
-            m_pair = 0.5 * (m[:half] - m[half:])
+            m_pair = self.mlp.lin2(0.5 * (hidden[:half] - hidden[half:]))
             m = torch.cat([m_pair, -m_pair])
+        else:
+            m = self.mlp.lin2(hidden)
         return self.propagate(edge_index, m=m, size=(x.shape[0], x.shape[0])), m
 
     def edge_update(self, x_i: Tensor, x_j: Tensor, edge_attr: Tensor, concat: bool) -> Tensor:
-        """Messages ``[E, h]``; ``x_i``, ``x_j`` are the node latents or, when ``concat``,
-        their projections ``W_i v_i + b`` and ``W_j v_j``."""
+        """Hidden units ``ReLU(W_1 [v_i, v_j, e_ij] + b_1)`` ``[E, h]``; ``x_i``, ``x_j`` are
+        the node latents or, when ``concat``, their projections ``W_i v_i + b`` and ``W_j v_j``."""
         if concat:
             w_e = self.mlp.first_layer_blocks([self.hidden] * 3)[2]
-            return self.mlp.finish(torch.addmm(x_i + x_j, edge_attr, w_e.t()))
-        return self.mlp(torch.cat([x_i, x_j, edge_attr], dim=1))
+            return F.relu(torch.addmm(x_i + x_j, edge_attr, w_e.t()))
+        return F.relu(self.mlp.lin1(torch.cat([x_i, x_j, edge_attr], dim=1)))
 
     def message(self, m: Tensor) -> Tensor:
         return m
@@ -93,6 +99,9 @@ class InteractionBlock(MessagePassing):
         if num_msg == 0:
             return 0
         h = self.hidden
-        if not self.uses_concat(num_nodes, num_msg):
-            return self.mlp.flops(num_msg)
-        return 2 * (2 * num_nodes * h * h + num_msg * (h * h + h * h))
+        if self.uses_concat(num_nodes, num_msg):
+            first = 2 * num_nodes * h * h + num_msg * h * h
+        else:
+            first = num_msg * 3 * h * h
+        second = (num_msg // 2 if self.third_law else num_msg) * h * h
+        return 2 * (first + second)
