@@ -37,6 +37,16 @@ from physgnn.training.train import TrainingInterrupted, train
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.fixture(autouse=True)
+def python_sigint_handler():
+    """Ctrl-C as in a terminal, whatever started the suite: a shell's background job (or
+    nohup) starts Python with SIGINT ignored, and training rightly leaves an ignored signal
+    ignored, so the Ctrl-C tests would see nothing."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 class SignalAt(L.Callback):
     """Sends ``signum`` to this process (``times`` times) when training reaches ``step``."""
 
