@@ -52,7 +52,9 @@ class SurfaceBlock(MessagePassing):
             edge_attr=torch.addmm(self.mlp.lin1.bias, edge_attr, w_e.t()),
             size=(None, x.shape[0]),
         )
-        degree = torch.bincount(edge_index[1], minlength=x.shape[0]).to(x.dtype)
+        # Edge count per sphere by an index_add_ (bincount would read its size back from a GPU).
+        sphere = edge_index[1]
+        degree = x.new_zeros(x.shape[0]).index_add_(0, sphere, x.new_ones(sphere.shape[0]))
         return torch.addmm(degree[:, None] * self.mlp.lin2.bias, hidden, self.mlp.lin2.weight.t())
 
     def message(self, x_i: Tensor, edge_attr: Tensor) -> Tensor:
