@@ -50,6 +50,9 @@ def test_logs_every_key_with_the_oracle_mse():
     assert set(module.logged) == {
         "val/rollout_mse",
         "val/rollout_score",
+        "val/max_depth",
+        "val/tunnelled",
+        "val/rest_drift",
         "val/chamfer",
         "ood/mse",
         "ood/chamfer",
@@ -61,7 +64,11 @@ def test_logs_every_key_with_the_oracle_mse():
     }
     assert module.logged == values
     assert values["val/rollout_mse"] == pytest.approx(np.mean([held_mse(t) for t in val]))
-    assert values["val/rollout_score"] == values["val/rollout_mse"]  # nothing diverged
+    diameter = np.mean(np.concatenate([2 * t.radius for t in val]))
+    physics = 10 * values["val/max_depth"] + 10 * values["val/tunnelled"]
+    physics += values["val/rest_drift"]
+    expected = values["val/rollout_mse"] / diameter**2 + physics  # nothing diverged
+    assert values["val/rollout_score"] == pytest.approx(expected)
     assert values["ood/mse"] == pytest.approx(held_mse(ood[0]))
     assert values["ood/diverged"] == 0.0 and values["rollout/fps"] > 0
 
@@ -70,7 +77,8 @@ def test_ood_off_logs_validation_only():
     module = FakeModule()
     callback_with([trajectory(2, 8)], [trajectory(2, 8)], ood=False).log_rollouts(module, None)
     assert set(module.logged) == {
-        "val/rollout_mse", "val/rollout_score", "val/chamfer", "rollout/fps"
+        "val/rollout_mse", "val/rollout_score", "val/chamfer", "rollout/fps",
+        "val/max_depth", "val/tunnelled", "val/rest_drift",
     }  # fmt: skip
 
 
@@ -107,6 +115,25 @@ def test_a_diverged_validation_rollout_scores_infinity():
     module.simulator = Exploding()
     callback_with([trajectory(2, 10)], [], ood=False).log_rollouts(module, None)
     assert module.logged["val/rollout_score"] == float("inf")
+
+
+def row(mse=2.0, sphere=0.0, ground=0.0, static=0.0, tunnelled=0, rest=None, diverged=None):
+    pen = dict(max_pen_sphere=sphere, max_pen_ground=ground, max_pen_static=static)
+    return dict(mse=mse, tunnelled=tunnelled, n_spheres=4, rest_drift=rest, diverged_at=diverged,
+                **pen)  # fmt: skip
+
+
+def test_the_score_adds_depth_tunnelling_and_rest_drift_to_the_error():
+    cb = RolloutCallback(w_depth=10.0, w_tunnel=10.0, w_rest=1.0)
+    assert cb.score_terms([row()], 2.0)["val/rollout_score"] == pytest.approx(0.5)  # 2 / 2²
+    soft = cb.score_terms([row(sphere=0.5, ground=0.1, static=0.3)], 2.0)
+    assert soft["val/max_depth"] == pytest.approx(0.8)  # sphere + the deeper plane
+    assert soft["val/rollout_score"] == pytest.approx(0.5 + 8.0)
+    through = cb.score_terms([row(tunnelled=1, rest=3.0), row()], 2.0)
+    assert through["val/tunnelled"] == pytest.approx(0.125)  # (1/4 + 0) / 2
+    assert through["val/rest_drift"] == pytest.approx(1.5)
+    assert through["val/rollout_score"] == pytest.approx(0.5 + 1.25 + 1.5)
+    assert cb.score_terms([row(), row(diverged=3)], 2.0)["val/rollout_score"] == float("inf")
 
 
 def test_bad_arguments_are_refused():

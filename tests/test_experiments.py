@@ -100,7 +100,9 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
             "model.third_law": False,
             "model.use_surfaces": False,
             "model.boundary_features": True,
+            **REPORT_INPUTS,
         },
+        "report": REPORT_INPUTS,
     }
     stats = build(baseline)[0].stats()
     for variant, changes in expected.items():
@@ -113,6 +115,12 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
                 assert value == want, (variant, key)
     assert baseline.model.M == 5 and baseline.model.H == 2 and baseline.lit.lambda_energy == 0
     assert baseline.model.connectivity == "vi" and baseline.lit.noise_std == 0.03
+
+
+REPORT_INPUTS = {
+    f"model.{key}": False
+    for key in ("contact_features", "material_features", "gravity_prior", "layer_norm")
+}
 
 
 def test_gns_model_config_is_the_gns_variant(tiny_dataset, tmp_path):

@@ -221,3 +221,40 @@ def test_compiled_network_gives_the_eager_losses_and_gradients():
     assert_close(loss_c, loss_e, rtol=1e-5, atol=1e-6)
     for g_c, g_e in zip(grads_c, grads_e, strict=True):
         assert_close(g_c, g_e, rtol=1e-4, atol=1e-6)
+
+
+class AtStep(LitSimulator):
+    """A LitSimulator whose global step is set by hand (no trainer)."""
+
+    at = 0
+
+    @property
+    def global_step(self) -> int:
+        return self.at
+
+
+def test_push_forward_growth_lengthens_the_unroll_step_by_step():
+    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8)
+    lit = AtStep(sim, ADAM, pushforward_steps=3, pushforward_after=10, pushforward_growth=5)
+    highs = {}
+    for step in (9, 10, 14, 15, 20, 40):
+        lit.at = step
+        draws = {lit._unroll_length(torch.Generator().manual_seed(s)) for s in range(200)}
+        highs[step] = max(draws)
+    assert highs == {9: 0, 10: 1, 14: 1, 15: 2, 20: 3, 40: 3}
+
+
+def test_contact_settings_out_of_range_are_refused():
+    with pytest.raises(ValueError, match="lit.lambda_contact"):
+        make_lit(lambda_contact=-1.0)
+    with pytest.raises(ValueError, match="contact_noise_prob"):
+        make_lit(contact_noise_prob=1.5)
+
+
+def test_losses_with_the_contact_terms_are_finite_and_the_penalty_counts():
+    state = batch([trajectory(3, seed=0), trajectory(2, seed=1)])
+    lit = make_lit(lambda_contact=2.0)
+    losses = lit.losses(state)
+    expected = losses["loss_mse"] + 2.0 * losses["loss_contact"]
+    assert_close(losses["loss"], expected)
+    assert torch.isfinite(losses["loss"])

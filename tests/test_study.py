@@ -49,7 +49,10 @@ def test_the_five_sweeps_are_17_configurations_the_baseline_shared():
                                                      "ablation_lambda": "10"}  # fmt: skip
     assert by_key["model.H=0"].overrides == ["+variant=h0"]  # datamodule.H follows, not a key
     gns = [k for k in keys if "use_surfaces=False" in k]
-    assert gns == ["model.boundary_features=True model.third_law=False model.use_surfaces=False"]
+    assert gns == [
+        "model.boundary_features=True model.contact_features=False model.gravity_prior=False "
+        "model.material_features=False model.third_law=False model.use_surfaces=False"
+    ]  # the GNS-style model has the report's inputs
     jobs = study_jobs(configs, [0, 1, 2])
     assert len(jobs) == 51 and [j.seed for j in jobs[:17]] == [0] * 17
     assert {j.config.key for j in jobs[:17]} == set(keys)

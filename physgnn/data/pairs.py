@@ -25,7 +25,7 @@ from torch_geometric.data import Batch
 from physgnn.data.state import SceneState, TrajectoryFrames
 
 _DYNAMIC = ("pos", "quat", "vel", "angvel")
-_SPHERE = ("radius", "mass", "material")
+_SPHERE = ("radius", "mass", "material", "material_params")
 
 
 class PairDataset(Dataset):

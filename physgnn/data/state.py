@@ -20,9 +20,8 @@ from physgnn.physics.scene import EFFECT_NAMES, Effects
 from physgnn.physics.trajectory import Trajectory
 
 # Per-sphere fields of a SceneState (first dimension N); the rest are per plane or per scene.
-# Per-sphere fields of a SceneState (first dimension N); the rest are per plane or per scene.
 NODE_KEYS = (
-    "pos", "quat", "vel", "angvel", "radius", "mass", "material", "batch",
+    "pos", "quat", "vel", "angvel", "radius", "mass", "material", "material_params", "batch",
     "target_vel", "target_angvel",
 )  # fmt: skip
 SCENE_KEYS = ("planes", "plane_kind", "plane_batch", "dt", "effects", "ptr")
@@ -33,7 +32,8 @@ class SceneState(Data):
 
     - ``pos [N, 3]``, ``quat [N, 4]`` (w, x, y, z)
     - ``vel [N, H+1, 3]``, ``angvel [N, H+1, 3]``: latest first (``vel[:, 0]`` is ``v_t``)
-    - ``radius [N]``, ``mass [N]``, ``material [N]`` (long)
+    - ``radius [N]``, ``mass [N]``, ``material [N]`` (long), ``material_params [N, 4]``: the
+      sphere's material row (restitution, lateral, rolling, spinning friction)
     - ``planes [S, 11]``, ``plane_kind [S]`` (long), ``plane_batch [S]`` (scene of each plane)
     - ``dt [B]``, ``effects [B, 5]`` (bool, order of ``scene.EFFECT_NAMES``)
     - optional targets ``target_vel [N, 3]``, ``target_angvel [N, 3]`` (``v_{t+1}``, ``ω_{t+1}``)
@@ -80,6 +80,7 @@ class TrajectoryFrames:
             radius=f32(traj.radius),
             mass=f32(traj.mass),
             material=torch.as_tensor(np.asarray(traj.material), dtype=torch.long),
+            material_params=f32(np.asarray(traj.materials).reshape(-1, 4)[traj.material]),
             planes=f32(traj.planes),
             plane_kind=torch.as_tensor(np.asarray(traj.plane_kind), dtype=torch.long),
             plane_batch=torch.zeros(len(traj.planes), dtype=torch.long),

@@ -8,7 +8,8 @@ on its finite prefix and carry ``diverged_at``. With ``stability=true`` (default
 run is also rolled out on the hard scenes of ``hard`` and measured with
 :mod:`physgnn.evaluation.stability` (``stability.csv`` and the report's stability section).
 Every learned run also falls freely from ``freefall.heights`` (:mod:`physgnn.evaluation.freefall`,
-``freefall.csv``). Writes metrics.csv, report.md, figures and videos into ``report_dir``; with
+``freefall.csv``) and bounces once per training material (:mod:`physgnn.evaluation.bounce`,
+``bounce.csv``). Writes metrics.csv, report.md, figures and videos into ``report_dir``; with
 ``rerun=true`` also ``videos/<ood scene>.rrd``, the filmed run's rollouts as Rerun recordings.
 """
 
@@ -19,6 +20,7 @@ from pathlib import Path
 from omegaconf import DictConfig
 
 from physgnn.evaluation import rerun_log
+from physgnn.evaluation.bounce import bounce_rows
 from physgnn.evaluation.freefall import freefall_rows
 from physgnn.evaluation.rollouts import (
     Collected,
@@ -38,8 +40,10 @@ from physgnn.evaluation.runs import (
     references,
 )
 from physgnn.evaluation.video3d import render_side_by_side
-from physgnn.report import figures, freefall, stability, table
+from physgnn.report import bounce, figures, freefall, stability, table
 from physgnn.report.document import write_report
+
+MATERIAL_KEYS = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
 
 
 def evaluate(cfg: DictConfig) -> Path:
@@ -68,6 +72,7 @@ def evaluate(cfg: DictConfig) -> Path:
     else:
         (report_dir / "stability.csv").unlink(missing_ok=True)  # no stale section
     freefall.write_csv(report_dir / "freefall.csv", _freefall(runs, cfg.freefall, settings))
+    bounce.write_csv(report_dir / "bounce.csv", _bounce(runs, cfg.get("bounce"), settings))
     if out.energies:
         dts = {name: _dt(data, name) for name in out.energies}
         figures.plot_energy(report_dir / "figures" / "energy_ood.png", out.energies, dts)
@@ -86,6 +91,19 @@ def _freefall(runs: list[RunInfo], cfg: DictConfig, settings: dict) -> list[dict
     rows = []
     for run in runs:
         rows += freefall_rows(run.name, run.simulator, *args, **settings)
+    return rows
+
+
+def _bounce(runs: list[RunInfo], cfg: DictConfig | None, settings: dict) -> list[dict]:
+    """Every learned run bouncing with each of ``cfg.materials``
+    (:mod:`physgnn.evaluation.bounce`); none without a ``bounce`` config."""
+    if cfg is None:
+        return []
+    materials = [[m[k] for k in MATERIAL_KEYS] for m in cfg.materials]
+    args = materials, float(cfg.height), float(cfg.dt), float(cfg.radius)
+    rows = []
+    for run in runs:
+        rows += bounce_rows(run.name, run.simulator, *args, **settings)
     return rows
 
 

@@ -13,6 +13,10 @@ same function is learned, but the regression target has unit scale whatever the 
 target ``v_{t+1}`` stays the clean one while ``v_t`` is the noisy input, so the network also
 learns to undo the noise.
 
+**Contact inputs, material values, gravity prior** (``contact_features``,
+``material_features``, ``gravity_prior``; the default model has all three, ``model=report``
+none): :mod:`physgnn.models.contact_inputs`.
+
 **Boundary features** (``boundary_features=True``, the GNS-style baseline that has no ps edges):
 as in GNS (Sanchez-Gonzalez et al. 2020), every sphere also sees how far the boundaries are,
 ``clip(h / R, 0, 1)`` for each of the 6 axis directions, so the network can see the ground and
@@ -27,10 +31,12 @@ from torch import nn
 from physgnn.data.state import scene_of_sphere
 from physgnn.errors import PhysgnnError
 from physgnn.graph.builder import GraphBuilder
+from physgnn.models import contact_inputs
 from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.physics.scene import EFFECT_NAMES
 
 ROTATION = EFFECT_NAMES.index("rotation")
+
 VECTOR_STATS = ("vel", "angvel", "delta_vel", "delta_angvel")
 SCALAR_STATS = ("radius", "mass")
 # The 6 axis directions of the boundary features, in order +x, −x, +y, −y, +z, −z.
@@ -63,8 +69,10 @@ class LearnedSimulator(nn.Module):
     of the edge features (``None``: the mean sphere diameter of the training set); velocities
     in edge features are divided by the velocity std. Node input per sphere:
     ``[(v − μ_v)/σ_v for the H+1 latest v, (ω − μ_ω)/σ_ω likewise, radius, mass (standardised)]``
-    = ``6·(H+1) + 2`` numbers, plus 6 with ``boundary_features`` (:meth:`boundary_features`,
-    ``boundary_radius`` R in metres); absolute position and orientation are masked.
+    = ``6·(H+1) + 2`` numbers, plus 4 with ``material_features``, plus 6 with
+    ``boundary_features`` (:meth:`boundary_features`, ``boundary_radius`` R in metres);
+    absolute position and orientation are masked. ``contact_features``, ``gravity_prior``: see
+    the module doc; ``layer_norm``: see :class:`~physgnn.nn.epd.EncodeProcessDecode`.
     """
 
     def __init__(
@@ -85,21 +93,20 @@ class LearnedSimulator(nn.Module):
         clip_margin: float = 0.0,
         boundary_features: bool = False,
         boundary_radius: float = 2.0,
+        contact_features: bool = False,
+        material_features: bool = False,
+        gravity_prior: bool = False,
+        layer_norm: bool = False,
     ):
         super().__init__()
-        if H < 0 or M < 1:
-            raise ValueError(f"need H >= 0 and M >= 1 (got H={H}, M={M})")
-        if not boundary_radius > 0:
-            raise ValueError(f"boundary_radius must be > 0 (got {boundary_radius})")
+        _check_sizes(H, M, boundary_radius)
         self.H, self.M = int(H), int(M)
         self.use_boundary = bool(boundary_features)
         self.boundary_radius = float(boundary_radius)
-        self._register_stats(stats)
-        scale = 2.0 * float(self.radius_mean) if length_scale is None else float(length_scale)
-        if not scale > 0:
-            raise ValueError(f"length_scale must be > 0 (got {scale})")
-        self.register_buffer("length_scale", torch.tensor(scale))
-        self.register_buffer("effects_trained", torch.zeros(len(EFFECT_NAMES), dtype=torch.bool))
+        self.contact_features = bool(contact_features)
+        self.material_features = bool(material_features)
+        self.gravity_prior = bool(gravity_prior)
+        self._register_stats(stats, length_scale)
         self.use_surfaces = bool(use_surfaces)
         self.num_materials = int(num_materials)
         self.graph_builder = GraphBuilder(
@@ -107,8 +114,8 @@ class LearnedSimulator(nn.Module):
         )
         self.network = EncodeProcessDecode(
             node_in=self.node_in,
-            pp_in=4,
-            ps_in=10,
+            pp_in=4 + (contact_inputs.PP_CONTACT if self.contact_features else 0),
+            ps_in=10 + (contact_inputs.PS_CONTACT if self.contact_features else 0),
             hidden=hidden,
             M=M,
             out_dim=6,
@@ -116,20 +123,33 @@ class LearnedSimulator(nn.Module):
             use_surfaces=use_surfaces,
             num_materials=num_materials,
             material_dim=material_dim,
+            layer_norm=layer_norm,
         )
 
-    def _register_stats(self, stats: dict) -> None:
-        """The training set's normalisation as buffers (saved in checkpoints)."""
+    def _register_stats(self, stats: dict, length_scale: float | None) -> None:
+        """The training set's normalisation, the length scale and the effects trained on as
+        buffers (saved in checkpoints)."""
         for key in VECTOR_STATS:
             self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", 3))
             self.register_buffer(f"{key}_std", _stat(stats, key, "std", 3))
         for key in SCALAR_STATS:
             self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", None).reshape(()))
             self.register_buffer(f"{key}_std", _stat(stats, key, "std", None).reshape(()))
+        scale = 2.0 * float(self.radius_mean) if length_scale is None else float(length_scale)
+        if not scale > 0:
+            raise ValueError(f"length_scale must be > 0 (got {scale})")
+        self.register_buffer("length_scale", torch.tensor(scale))
+        self.register_buffer("effects_trained", torch.zeros(len(EFFECT_NAMES), dtype=torch.bool))
 
     @property
     def node_in(self) -> int:
-        return 6 * (self.H + 1) + 2 + (6 if self.use_boundary else 0)
+        extra = (4 if self.material_features else 0) + (6 if self.use_boundary else 0)
+        return 6 * (self.H + 1) + 2 + extra
+
+    @property
+    def speed_scale(self) -> torch.Tensor:
+        """σ_v of the contact features: the RMS of the three velocity stds (m/s)."""
+        return self.vel_std.square().mean().sqrt()
 
     @staticmethod
     def stats_from_state_dict(state_dict: dict, prefix: str = "") -> dict:
@@ -157,6 +177,8 @@ class LearnedSimulator(nn.Module):
         radius = (state.radius - self.radius_mean) / self.radius_std
         mass = (state.mass - self.mass_mean) / self.mass_std
         parts = [vel.flatten(1), angvel.flatten(1), radius[:, None], mass[:, None]]
+        if self.material_features:
+            parts.append(contact_inputs.material_features(state))
         if self.use_boundary:
             parts.append(self.boundary_features(state))
         return torch.cat(parts, 1)
@@ -179,15 +201,25 @@ class LearnedSimulator(nn.Module):
         out = height.new_ones(height.shape[0], len(DIRECTIONS))
         return out.scatter_reduce(1, slot.expand_as(height), height, "amin")
 
-    def edge_features(self, graph) -> tuple[torch.Tensor, torch.Tensor]:
+    def edge_features(self, graph, state=None) -> tuple[torch.Tensor, torch.Tensor]:
         """pp ``[E, 4]`` (lengths / length_scale); ps ``[F, 10]`` (velocity / σ_v, normal
-        unchanged, lengths / length_scale)."""
+        unchanged, lengths / length_scale); with ``contact_features`` (needs ``state``) pp
+        ``[E, 6]`` and ps ``[F, 13]``, the contact columns of the module doc appended."""
         pp_attr = graph.pp_attr / self.length_scale
         ps = graph.ps_attr
         ps_attr = torch.cat(
             [ps[:, :3] / self.vel_std, ps[:, 3:6], ps[:, 6:] / self.length_scale], 1
         )
+        if self.contact_features:
+            scales = self.length_scale, self.speed_scale
+            pp_attr = torch.cat([pp_attr, contact_inputs.pp_contact(graph, state, *scales)], 1)
+            ps_attr = torch.cat([ps_attr, contact_inputs.ps_contact(graph, state, *scales)], 1)
         return pp_attr, ps_attr
+
+    def in_reach(self, state, graph) -> torch.Tensor:
+        """``[N]`` bool: spheres that may touch something before the next frame
+        (:func:`~physgnn.models.contact_inputs.in_reach`)."""
+        return contact_inputs.in_reach(state, graph, self.graph_builder)
 
     def rotating(self, state) -> torch.Tensor:
         """``[N]`` bool: spheres whose scene has the rotation effect on."""
@@ -197,7 +229,7 @@ class LearnedSimulator(nn.Module):
     def normalized_prediction(self, state):
         """Network output ``[N, 6]`` (normalised Δv, Δω) and the graph it was computed on."""
         graph = self.graph_builder(state)
-        pp_attr, ps_attr = self.edge_features(graph)
+        pp_attr, ps_attr = self.edge_features(graph, state)
         material = state.material if self.num_materials > 0 else None
         pred = self.network(
             self.node_features(state), graph.pp_index, pp_attr, graph.ps_index, ps_attr, material
@@ -216,17 +248,34 @@ class LearnedSimulator(nn.Module):
         dang = (dang - self.delta_angvel_mean) / self.delta_angvel_std
         return torch.cat([dvel, dang], 1)
 
-    def to_physical(self, state, pred: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def to_physical(
+        self, state, pred: torch.Tensor, graph=None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """Normalised output ``[N, 6]`` → ``(v_{t+1} [N, 3], ω_{t+1} [N, 3])``; spheres of a
-        scene without rotation keep ``ω_t``."""
+        scene without rotation keep ``ω_t``. With ``gravity_prior`` (needs the ``graph`` the
+        prediction was made on) spheres out of reach of any contact fly ballistically."""
         vel_next = state.vel[:, 0] + pred[:, :3] * self.delta_vel_std + self.delta_vel_mean
         angvel_next = (
             state.angvel[:, 0] + pred[:, 3:] * self.delta_angvel_std + self.delta_angvel_mean
         )
+        if self.gravity_prior:
+            if graph is None:
+                raise ValueError("gravity_prior needs the graph of the prediction")
+            reach = self.in_reach(state, graph)[:, None]
+            vel_free, angvel_free = contact_inputs.free_flight(state)
+            vel_next = torch.where(reach, vel_next, vel_free)
+            angvel_next = torch.where(reach, angvel_next, angvel_free)
         angvel_next = torch.where(self.rotating(state)[:, None], angvel_next, state.angvel[:, 0])
         return vel_next, angvel_next
 
     def forward(self, state) -> tuple[torch.Tensor, torch.Tensor]:
         """``(vel_next [N, 3], angvel_next [N, 3])`` in physical units (m/s, rad/s, world frame)."""
-        pred, _ = self.normalized_prediction(state)
-        return self.to_physical(state, pred)
+        pred, graph = self.normalized_prediction(state)
+        return self.to_physical(state, pred, graph)
+
+
+def _check_sizes(H: int, M: int, boundary_radius: float) -> None:
+    if H < 0 or M < 1:
+        raise ValueError(f"need H >= 0 and M >= 1 (got H={H}, M={M})")
+    if not boundary_radius > 0:
+        raise ValueError(f"boundary_radius must be > 0 (got {boundary_radius})")

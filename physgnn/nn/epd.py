@@ -18,15 +18,24 @@ class ProcessorBlock(nn.Module):
                e_{ij} \mathrel{+}= m_{ij}
 
     An interaction with no edge (``E == 0``, ``e_ps is None``) runs no MLP at all.
+    ``layer_norm``: the node update ``MLP_v`` ends in a LayerNorm (messages never do: a
+    norm's bias would break the exact antisymmetry ``m_ji = −m_ij``).
     Shapes: ``v [N, h]``, ``pp_index [2, E]``, ``e_pp [E, h]``, ``ps_index [2, F]``,
     ``e_ps [F, h] | None`` → ``(v [N, h], e_pp [E, h])``.
     """
 
-    def __init__(self, hidden: int, third_law: bool, use_surfaces: bool, concat_trick: str):
+    def __init__(
+        self,
+        hidden: int,
+        third_law: bool,
+        use_surfaces: bool,
+        concat_trick: str,
+        layer_norm: bool = False,
+    ):
         super().__init__()
         self.pp = InteractionBlock(hidden, third_law, concat_trick)
         self.ps = SurfaceBlock(hidden) if use_surfaces else None
-        self.node = MLP(2 * hidden, hidden, hidden)
+        self.node = MLP(2 * hidden, hidden, hidden, layer_norm=layer_norm)
 
     def reset_parameters(self) -> None:
         for module in (self.pp, self.ps, self.node):
@@ -76,6 +85,9 @@ class EncodeProcessDecode(nn.Module):
       concatenated to ``x``; without, ``material`` is ignored.
     - ``concat_trick`` ("auto", "always", "never") picks how the pp MLP's first layer is
       evaluated; all give the same numbers up to float rounding.
+    - ``layer_norm``: the three encoders and every node update end in a LayerNorm (GNS does
+      this on every MLP but the decoder; here the message MLPs have none, see
+      :class:`ProcessorBlock`).
     """
 
     def __init__(
@@ -91,6 +103,7 @@ class EncodeProcessDecode(nn.Module):
         num_materials: int = 0,
         material_dim: int = 0,
         concat_trick: str = "auto",
+        layer_norm: bool = False,
     ):
         super().__init__()
         if min(node_in, pp_in, ps_in, hidden, out_dim) < 1 or M < 0:
@@ -100,11 +113,12 @@ class EncodeProcessDecode(nn.Module):
         self.node_in, self.pp_in, self.ps_in = node_in, pp_in, ps_in
         self.third_law, self.use_surfaces = third_law, use_surfaces
         self.material = nn.Embedding(num_materials, material_dim) if num_materials else None
-        self.node_encoder = MLP(node_in + material_dim, hidden, hidden)
-        self.pp_encoder = MLP(pp_in, hidden, hidden)
-        self.ps_encoder = MLP(ps_in, hidden, hidden) if use_surfaces else None
+        norm = {"layer_norm": bool(layer_norm)}
+        self.node_encoder = MLP(node_in + material_dim, hidden, hidden, **norm)
+        self.pp_encoder = MLP(pp_in, hidden, hidden, **norm)
+        self.ps_encoder = MLP(ps_in, hidden, hidden, **norm) if use_surfaces else None
         self.blocks = nn.ModuleList(
-            ProcessorBlock(hidden, third_law, use_surfaces, concat_trick) for _ in range(M)
+            ProcessorBlock(hidden, third_law, use_surfaces, concat_trick, **norm) for _ in range(M)
         )
         self.decoder = MLP(hidden, hidden, out_dim)
 

@@ -60,3 +60,34 @@ def plane_depth(
     distance = torch.linalg.vector_norm(offset, dim=-1)
     behind = (height < 0) & (height > -r) & (distance <= -height + 1e-12)  # over the footprint
     return r + torch.where(behind, -height, -distance)
+
+
+def pair_depth(pos: torch.Tensor, radius: torch.Tensor, pairs: torch.Tensor) -> torch.Tensor:
+    """``r_i + r_j − |p_i − p_j|`` of sphere pairs, in the dtype of ``pos`` (> 0: overlap).
+
+    pos ``[N, 3]``, radius ``[N]``, pairs ``[2, P]`` → ``[P]``.
+    """
+    i, j = pairs
+    return radius[i] + radius[j] - torch.linalg.vector_norm(pos[i] - pos[j], dim=-1)
+
+
+def edge_plane_depth(
+    pos: torch.Tensor,
+    radius: torch.Tensor,
+    planes: torch.Tensor,
+    plane_kind: torch.Tensor,
+    index: torch.Tensor,
+) -> torch.Tensor:
+    """:func:`plane_depth` of every (plane, sphere) edge at once, in the dtype of ``pos``.
+
+    pos ``[N, 3]``, radius ``[N]``, planes ``[S, 11]``, plane_kind ``[S]``, index ``[2, F]``
+    (row 0 plane, row 1 sphere) → ``[F]``; differentiable in ``pos``.
+    """
+    plane, p, r = planes[index[0]], pos[index[1]], radius[index[1]]
+    offset = rectangle_offset(p, plane).to(pos.dtype)
+    height = (offset * plane[:, 3:6]).sum(-1)
+    ground_height = ((p - plane[:, 0:3]) * plane[:, 3:6]).sum(-1)
+    distance = torch.linalg.vector_norm(offset, dim=-1)
+    behind = (height < 0) & (height > -r) & (distance <= -height + 1e-6)
+    bounded = r + torch.where(behind, -height, -distance)
+    return torch.where(plane_kind[index[0]] == GROUND, r - ground_height, bounded)

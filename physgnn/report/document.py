@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from physgnn.files import write_text
-from physgnn.report import freefall, pareto, stability
+from physgnn.report import bounce, freefall, pareto, stability
 from physgnn.report.sections import (
     baselines_table,
     components_section,
@@ -39,6 +39,12 @@ def freefall_section(root: Path) -> str:
     """The free-fall table from ``root/freefall.csv`` (written by the eval)."""
     path = root / "freefall.csv"
     return freefall.section(freefall.read_csv(path) if path.exists() else [])
+
+
+def bounce_section(root: Path) -> str:
+    """The bounce table from ``root/bounce.csv`` (written by the eval)."""
+    path = root / "bounce.csv"
+    return bounce.section(bounce.read_csv(path) if path.exists() else [])
 
 
 def write_report(
@@ -75,6 +81,8 @@ def write_report(
         stability_section(root),
         "## Free fall against ½gt²",
         freefall_section(root),
+        "## Bounces against restitution",
+        bounce_section(root),
     ]
     parts += _figures(rows, bench_dir, root)
     if skipped:

@@ -3,10 +3,14 @@
 Loss of a batch of state pairs:
 
 ``L = MSE(normalised prediction, normalised target)
-+ λ · mean_scenes max(E_{t+1} − E_t, 0) / Σ m g``
++ λ · mean_scenes max(E_{t+1} − E_t, 0) / Σ m g + λ_c · contact penalty``
 
 - MSE over the 6 normalised outputs of every sphere (:mod:`physgnn.models.learned` explains the
-  target); the 3 angular outputs of spheres whose scene has rotation off are left out.
+  target); the 3 angular outputs of spheres whose scene has rotation off are left out, and
+  with the simulator's gravity prior so is every sphere out of reach of a contact (its next
+  velocity is ballistic, not the network's).
+- The contact penalty and the contact noise: :mod:`physgnn.training.contacts` (lengths in
+  units of the simulator's ``length_scale``, the mean sphere diameter).
 - ``E`` = kinetic + potential energy of a scene (:mod:`physgnn.physics.energy`, potential
   from the ground contact height); ``E_{t+1}`` is the energy after integrating the predicted
   ``v̂_{t+1}`` with :func:`physgnn.physics.integrator.euler_step`. Dividing a scene's energy
@@ -38,6 +42,7 @@ from physgnn.models.learned import LearnedSimulator
 from physgnn.physics import quaternion as Q
 from physgnn.physics.energy import scene_energy, scene_weight
 from physgnn.physics.integrator import euler_step, step
+from physgnn.training.contacts import contact_penalty, perturb_contacts
 
 
 class NonFiniteLossError(PhysgnnError, RuntimeError):
@@ -108,11 +113,19 @@ def energy_increase(state, vel_next: torch.Tensor) -> torch.Tensor:
     return torch.relu(e_next - e_now) / scene_weight(state.mass, batch, n_scenes)
 
 
-def masked_mse(pred: torch.Tensor, target: torch.Tensor, rotating: torch.Tensor) -> torch.Tensor:
-    """Mean squared error of ``[N, 6]`` outputs, angular part only where ``rotating [N]``."""
+def masked_mse(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    rotating: torch.Tensor,
+    counted: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """Mean squared error of ``[N, 6]`` outputs, angular part only where ``rotating [N]``, and
+    only spheres of ``counted [N]`` (bool, default all; 0 when none is)."""
     weight = torch.ones_like(pred)
     weight[:, 3:] = rotating[:, None].to(pred.dtype)
-    return ((pred - target) ** 2 * weight).sum() / weight.sum()
+    if counted is not None:
+        weight = weight * counted[:, None].to(pred.dtype)
+    return ((pred - target) ** 2 * weight).sum() / weight.sum().clamp_min(1.0)
 
 
 class LitSimulator(L.LightningModule):
@@ -121,7 +134,14 @@ class LitSimulator(L.LightningModule):
     ``optimizer``: a partial (``_partial_: true``) taking the parameters; ``scheduler``: an
     optional partial taking the optimizer, stepped once per epoch. ``seed`` seeds the noise and
     the push-forward length of each step together with the step number.
-    ``pushforward_steps`` = K (0: one-step training only) starts at step ``pushforward_after``.
+    ``pushforward_steps`` = K (0: one-step training only) starts at step ``pushforward_after``;
+    with ``pushforward_growth`` = G > 0 the longest unroll grows, 1 from ``pushforward_after``,
+    then one more every G steps up to K (longer unrolls once the model is good enough to make
+    them meaningful).
+    ``lambda_contact`` weighs the contact penalty (tolerance ``contact_tol``); contact noise
+    pushes contacts within ``contact_touch`` in by up to ``contact_noise_depth`` with
+    probability ``contact_noise_prob`` (0: off); all three lengths in units of the simulator's
+    ``length_scale`` (:mod:`physgnn.training.contacts`).
     ``compile``: the network is compiled in place (``torch.compile``, dynamic shapes) for
     every call, training, validation and rollouts alike; the weights and checkpoints are
     the same as without (docs/PERFORMANCE.md has what it gains and costs).
@@ -137,12 +157,27 @@ class LitSimulator(L.LightningModule):
         seed: int = 0,
         pushforward_steps: int = 0,
         pushforward_after: int = 0,
+        pushforward_growth: int = 0,
+        lambda_contact: float = 0.0,
+        contact_tol: float = 0.02,
+        contact_noise_depth: float = 0.0,
+        contact_noise_prob: float = 0.5,
+        contact_touch: float = 0.05,
         compile: bool = False,
     ):
         super().__init__()
-        if min(lambda_energy, noise_std, pushforward_steps, pushforward_after) < 0:
+        values = dict(
+            lambda_energy=lambda_energy, noise_std=noise_std, pushforward_steps=pushforward_steps,
+            pushforward_after=pushforward_after, pushforward_growth=pushforward_growth,
+            lambda_contact=lambda_contact,
+            contact_tol=contact_tol, contact_noise_depth=contact_noise_depth,
+            contact_touch=contact_touch,
+        )  # fmt: skip
+        negative = [name for name, value in values.items() if value < 0]
+        if negative or not 0 <= contact_noise_prob <= 1:
             raise ValueError(
-                "lambda_energy, noise_std, pushforward_steps and pushforward_after must be >= 0"
+                f"lit.{(negative or ['contact_noise_prob'])[0]} out of range: lengths, weights "
+                "and step counts must be >= 0, contact_noise_prob in [0, 1]"
             )
         self.save_hyperparameters(ignore=["simulator", "optimizer", "scheduler"])
         self.simulator = simulator
@@ -153,24 +188,36 @@ class LitSimulator(L.LightningModule):
         self.seed = int(seed)
         self.pushforward_steps = int(pushforward_steps)
         self.pushforward_after = int(pushforward_after)
+        self.pushforward_growth = int(pushforward_growth)
+        self.lambda_contact = float(lambda_contact)
+        self.contact_tol = float(contact_tol)
+        self.contact_noise = (float(contact_noise_depth), float(contact_touch))
+        self.contact_noise_prob = float(contact_noise_prob)
         if compile:
             simulator.network.compile(dynamic=True)
         self.pairs_seen = 0
         self.nodes_seen = 0
 
     def losses(self, state) -> dict[str, torch.Tensor]:
-        """``{"loss", "loss_mse", "loss_energy", "energy_share"}`` of a batch (no noise added
-        here); ``energy_share`` = ``λ·energy / loss``, the part of the loss the energy term is
-        (logged, so that a λ sweep shows whether the term mattered at all)."""
-        pred, _ = self.simulator.normalized_prediction(state)
-        target = self.simulator.normalized_target(state)
-        mse = masked_mse(pred, target, self.simulator.rotating(state))
-        vel_next, _ = self.simulator.to_physical(state, pred)
+        """``{"loss", "loss_mse", "loss_energy", "energy_share", "loss_contact"}`` of a batch
+        (no noise added here); ``energy_share`` = ``λ·energy / loss``, the part of the loss the
+        energy term is (logged, so that a λ sweep shows whether the term mattered at all)."""
+        sim = self.simulator
+        pred, graph = sim.normalized_prediction(state)
+        target = sim.normalized_target(state)
+        counted = sim.in_reach(state, graph) if sim.gravity_prior else None
+        mse = masked_mse(pred, target, sim.rotating(state), counted)
+        vel_next, _ = sim.to_physical(state, pred, graph)
         energy = energy_increase(state, vel_next).mean()
         weighted = self.lambda_energy * energy
-        loss = mse + weighted
-        share = (weighted / loss).detach() if loss > 0 else torch.zeros_like(loss)
-        return {"loss": loss, "loss_mse": mse, "loss_energy": energy, "energy_share": share}
+        contact = contact_penalty(
+            state, vel_next, graph, self.contact_tol * sim.length_scale,
+            sim.delta_vel_std.square().mean().sqrt(),
+        )  # fmt: skip
+        loss = mse + weighted + self.lambda_contact * contact
+        share = (weighted / loss.clamp_min(1e-30)).detach()
+        return {"loss": loss, "loss_mse": mse, "loss_energy": energy, "energy_share": share,
+                "loss_contact": contact}  # fmt: skip
 
     def _log_all(self, prefix: str, losses: dict, batch_size: int) -> None:
         """Epoch means under the exact names ``{prefix}/loss`` etc. (weighted by scene count;
@@ -192,16 +239,25 @@ class LitSimulator(L.LightningModule):
         return generator.manual_seed(self.seed * 1_000_003 + self.global_step)
 
     def _unroll_length(self, generator: torch.Generator) -> int:
-        """Push-forward steps of this batch, ``U{0..K}`` (0 before ``pushforward_after``)."""
+        """Push-forward steps of this batch, ``U{0..K}`` (0 before ``pushforward_after``; K
+        grown as the class doc says)."""
         if self.pushforward_steps == 0 or self.global_step < self.pushforward_after:
             return 0
         high = self.pushforward_steps + 1
+        if self.pushforward_growth > 0:
+            grown = 2 + (self.global_step - self.pushforward_after) // self.pushforward_growth
+            high = min(high, grown)
         return int(torch.randint(high, (1,), generator=generator, device=generator.device))
 
     def training_step(self, batch, batch_idx: int) -> torch.Tensor:
         generator = self._noise_generator()
         if self.noise_std > 0:
             batch = add_noise(batch, self.simulator, self.noise_std, generator)
+        if self.contact_noise[0] > 0 and self.contact_noise_prob > 0:
+            scale = self.simulator.length_scale  # a tensor: no read-back to the host
+            depth, touch = (scale * x for x in self.contact_noise)
+            graph = self.simulator.graph_builder(batch)
+            batch = perturb_contacts(batch, graph, depth, touch, self.contact_noise_prob, generator)
         steps = self._unroll_length(generator)
         if steps > 0:
             batch = push_forward(batch, self.simulator, steps)
