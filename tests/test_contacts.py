@@ -46,6 +46,13 @@ def scene(pos, vel, radius, mass=None, material=None, planes=None, kinds=None, f
     return Batch.from_data_list([TrajectoryFrames(traj).state(frames - 1, 2)])
 
 
+def ballistic(state):
+    """``state`` with velocity histories of free flight ending at its current ``v_t``."""
+    back = torch.arange(state.vel.shape[1], dtype=torch.float32)[None, :, None]
+    state.vel = state.vel[:, :1] + back * torch.tensor([0.0, 0.0, 9.81 * DT])
+    return state
+
+
 def make(**kwargs) -> LearnedSimulator:
     torch.manual_seed(0)
     args = dict(H=2, M=2, hidden=16, contact_features=True, material_features=True)
@@ -93,6 +100,7 @@ def test_gravity_prior_free_flight_is_exact_whatever_the_mass():
     sim = make(gravity_prior=True)
     for mass in (0.01, 1.0, 1000.0):
         state = scene([[0, 0, 20], [5, 0, 30]], [[1, 2, -3], [0, 0, 4]], [0.5, 0.7], [mass] * 2)
+        state = ballistic(state)
         vel, angvel = sim(state)
         assert_close(vel, state.vel[:, 0] + torch.tensor([0.0, 0.0, -9.81 * DT]))
         assert_close(angvel, state.angvel[:, 0])
@@ -107,6 +115,7 @@ def test_gravity_prior_leaves_contacts_to_the_network():
         [[0, 0, 0]] * 3,
         [0.5] * 3,
     )
+    state = ballistic(state)  # at the top of a flight
     pred, graph = sim.normalized_prediction(state)
     assert sim.in_reach(state, graph).tolist() == [True, False, True]
     vel, _ = sim(state)
@@ -177,3 +186,14 @@ def test_each_switch_alone_builds_and_predicts(flag):
     state = scene([[0, 0, 0.5], [1.0, 0, 0.5]], [[0, 0, 0]] * 2, [0.5, 0.5])
     vel, angvel = sim(state)
     assert torch.isfinite(vel).all() and torch.isfinite(angvel).all()
+
+
+def test_a_sphere_that_bounced_in_the_last_frame_is_left_to_the_network():
+    sim = make(gravity_prior=True)
+    # 0.6 m above the ground moving up at 2 m/s after moving down at 13 m/s: the frame before
+    # held an impact, though the ground is now out of reach
+    state = scene([[0, 0, 1.1], [5, 0, 5.0]], [[0, 0, 2.0], [0, 0, 2.0]], [0.5, 0.5])
+    state.vel[0, 1:] = torch.tensor([0.0, 0.0, -13.0])
+    state.vel[1, 1:] = torch.tensor([0.0, 0.0, 2.0 + 9.81 * DT])  # ballistic: free
+    pred, graph = sim.normalized_prediction(state)
+    assert sim.in_reach(state, graph).tolist() == [True, False]

@@ -17,9 +17,13 @@ material no training scene had still means something.
 **Gravity prior** (``gravity_prior=True``): a sphere that cannot touch anything before the
 next frame moves ballistically, ``v_{t+1} = v_t + g·dt`` and ``ω_{t+1} = ω_t`` exactly,
 whatever its mass or size; the network's output is used only for spheres *in reach* of a
-contact: with a pp edge, an edge to a wall or static plane (the graph's own reach rule), or a
+contact: with a pp edge, an edge to a wall or static plane (the graph's own reach rule), a
 ground clearance ``h − r ≤ a_i + ε + g·dt²`` (the reach rule plus the fall that gravity adds
-within the frame). The network so learns contacts only, and free flight is exact.
+within the frame), or a contact during the last frame, seen in the velocity history as
+``|v_t − v_{t−1} − g·dt| > RECENT_TOL`` (needs H ≥ 1). The last one matters: a sphere that
+bounced inside the last frame interval has a finite-difference velocity that is not its
+physical one (the mean over a frame that held the impact), and only the network can tell
+what comes next. The network so learns contacts only, and free flight is exact.
 """
 
 from __future__ import annotations
@@ -33,6 +37,9 @@ from physgnn.physics.scene import EFFECT_NAMES, GROUND
 
 GRAVITY = EFFECT_NAMES.index("gravity")
 PP_CONTACT, PS_CONTACT = 2, 3  # features the contact inputs add per pp / ps edge
+# m/s: a velocity change this far from g·dt within one frame was a contact (ballistic frames
+# of the data and of rollouts agree with g·dt to float rounding, about 1e-4 m/s)
+RECENT_TOL = 0.01
 # Scale of the material parameters (restitution, lateral, rolling, spinning friction) as node
 # inputs: rolling and spinning coefficients are ~0.01, the others ~0.5.
 MATERIAL_SCALE = (1.0, 1.0, 100.0, 100.0)
@@ -67,8 +74,9 @@ def material_features(state) -> torch.Tensor:
 
 
 def in_reach(state, graph, builder) -> torch.Tensor:
-    """``[N]`` bool: spheres that may touch something before the next frame (module doc); a
-    pp edge, a wall / static ps edge, or the ground within ``a_i + ε + g·dt²``. ``builder`` is
+    """``[N]`` bool: spheres that may touch something before the next frame or touched
+    something during the last one (module doc): a pp edge, a wall / static ps edge, the ground
+    within ``a_i + ε + g·dt²``, or :func:`recent_contact`. ``builder`` is
     the :class:`~physgnn.graph.builder.GraphBuilder` that built ``graph``."""
     n = state.pos.shape[0]
     touched = state.pos.new_zeros(n)
@@ -83,7 +91,18 @@ def in_reach(state, graph, builder) -> torch.Tensor:
     )
     near = bounded | (-depth <= limit + G * dt * dt)
     touched.index_add_(0, sphere, near.to(touched.dtype))
-    return touched > 0
+    return (touched > 0) | recent_contact(state)
+
+
+def recent_contact(state) -> torch.Tensor:
+    """``[N]`` bool: spheres whose last frame was not ballistic,
+    ``|v_t − v_{t−1} − g·dt| > RECENT_TOL`` (all False without a velocity history)."""
+    if state.vel.dim() < 3 or state.vel.shape[1] < 2:
+        return torch.zeros(state.pos.shape[0], dtype=torch.bool, device=state.pos.device)
+    gravity = state.effects[scene_of_sphere(state), GRAVITY].to(state.pos.dtype)
+    change = state.vel[:, 0] - state.vel[:, 1]
+    change[:, 2] = change[:, 2] + G * state.scene_dt * gravity
+    return torch.linalg.vector_norm(change, dim=1) > RECENT_TOL
 
 
 def free_flight(state) -> tuple[torch.Tensor, torch.Tensor]:
