@@ -130,6 +130,36 @@ def test_file_errors(tmp_path):
         load_scene(bad)
 
 
+NUMBERS = """
+dt: 1e-1
+frames: 1e1
+spheres:
+  - {radius: .5, density: 1E3, position: [0, 0, 1e+01]}
+  - {radius: 5e-1, mass: 1_000, position: [-2, +1.5E0, 1.0e1], velocity: [1.5E-3, 0, -.5e1]}
+"""
+
+
+def test_numbers_are_read_however_they_are_written(tmp_path):
+    path = tmp_path / "s.yaml"
+    path.write_text(NUMBERS)
+    scene = load_scene(path)
+    assert (scene.dt, scene.n_frames) == (np.float32(0.1), 10)
+    np.testing.assert_array_equal(scene.radius, [0.5, 0.5])
+    np.testing.assert_allclose(scene.mass, [1000 * 4 / 3 * np.pi * 0.125, 1000], rtol=1e-6)
+    np.testing.assert_array_equal(scene.pos, [[0, 0, 10], [-2, 1.5, 10]])
+    np.testing.assert_allclose(scene.vel[1], [1.5e-3, 0, -5], rtol=1e-6)
+
+
+@pytest.mark.parametrize("value", ["1e", "e1", "1e+", "1.5.2", "ten", "'1e1'"])
+def test_what_is_not_a_number_is_still_one_line(value, tmp_path):
+    path = tmp_path / "s.yaml"
+    path.write_text(f"spheres:\n  - {{radius: 0.5, position: [0, 0, {value}]}}\n")
+    with pytest.raises(SceneError) as e:
+        load_scene(path)
+    got = repr(value.strip("'"))
+    assert str(e.value) == f"{path}: spheres[0].position: expected a number, got {got}"
+
+
 def test_committed_schema_is_current():
     committed = json.loads((ROOT / "docs" / "scene.schema.json").read_text())
     assert committed == json.loads(json.dumps(SCHEMA))

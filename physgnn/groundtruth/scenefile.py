@@ -16,12 +16,14 @@ A scene file says everything a :class:`~physgnn.physics.scene.Scene` holds (sche
       - {kind: static, centre: [5, 0, 1], normal: [-0.5, 0, 0.87], reference: [0, 1, 0],
          half_lengths: [2, 3]}
 
+Numbers are YAML 1.2's (``1e1``, ``1e+01`` and ``.5`` are floats, not strings as in YAML 1.1).
 :func:`load_scene` fails with one line naming the file, the place and the problem (unknown
 key, wrong type, overlapping spheres, a zero normal, a sphere inside a plane, ...).
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +44,19 @@ from physgnn.physics.scene import (
 )
 
 DEFAULT_MATERIAL = "default"
+
+
+class _Loader(yaml.SafeLoader):
+    """``yaml.safe_load`` that reads every number a person writes as a number: YAML 1.1 (PyYAML)
+    takes an exponent without a dot or without a sign (``1e+01``, ``1e1``, ``1.0e5``) for a
+    string; YAML 1.2 and JSON read a float, and so does this loader."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
 
 
 def _keys(where: str, d, schema: dict) -> dict:
@@ -209,7 +224,7 @@ def load_scene(path: str | Path) -> Scene:
     if not path.is_file():
         raise SceneError(f"scene file {path} does not exist")
     try:
-        d = yaml.safe_load(path.read_text())
+        d = yaml.load(path.read_text(), Loader=_Loader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         at = f" (line {mark.line + 1})" if mark else ""
