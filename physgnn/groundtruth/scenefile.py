@@ -30,7 +30,7 @@ import numpy as np
 import yaml
 
 from physgnn.files import write_text
-from physgnn.groundtruth.layouts import check_clear_of_planes
+from physgnn.groundtruth.layouts import check_clear_of_planes, check_no_overlap
 from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
 from physgnn.physics.scene import (
     GRAVITY,
@@ -46,10 +46,11 @@ from physgnn.physics.scene import (
 DEFAULT_MATERIAL = "default"
 
 
-class _Loader(yaml.SafeLoader):
-    """``yaml.safe_load`` that reads every number a person writes as a number: YAML 1.1 (PyYAML)
-    takes an exponent without a dot or without a sign (``1e+01``, ``1e1``, ``1.0e5``) for a
-    string; YAML 1.2 and JSON read a float, and so does this loader."""
+class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
+    """``yaml.safe_load`` (libyaml's parser where installed) that reads every number a person
+    writes as a number: YAML 1.1 (PyYAML) takes an exponent without a dot or without a sign
+    (``1e+01``, ``1e1``, ``1.0e5``) for a string; YAML 1.2 and JSON read a float, and so does
+    this loader."""
 
 
 _Loader.add_implicit_resolver(
@@ -153,16 +154,6 @@ def _plane(where: str, d) -> tuple[np.ndarray, int]:
     centre = _vector(f"{where}.centre", d["centre"], 3)
     row = np.concatenate([centre, n, ref / np.linalg.norm(ref), half])
     return row, PLANE_KINDS.index(kind)
-
-
-def check_no_overlap(where: str, pos: np.ndarray, radius: np.ndarray) -> None:
-    """Raise SceneError naming the first two overlapping spheres (pos ``[N, 3]``)."""
-    gap = np.linalg.norm(pos[:, None] - pos[None], axis=-1) - radius[:, None] - radius[None]
-    gap[np.diag_indices(len(pos))] = np.inf
-    if np.any(gap < -1e-9):
-        i, j = np.unravel_index(int(np.argmin(gap)), gap.shape)
-        i, j = sorted((int(i), int(j)))
-        raise SceneError(f"{where}: spheres[{i}] and spheres[{j}] overlap by {-gap[i, j]:.3g} m")
 
 
 def check_above_ground(where: str, pos: np.ndarray, radius: np.ndarray) -> None:
