@@ -2,7 +2,9 @@
 
 Simulates the scene (:mod:`physgnn.groundtruth.scenefile`) with pybullet and, given a trained
 run, rolls the learned simulator out from the same start (its first H+1 ground-truth frames,
-as ``make eval`` does). Writes into ``out`` (default ``outputs/simulate/<scene name>``):
+as ``make eval`` does). Writes into ``out`` (default ``${paths.outputs}/simulate/<scene name>``,
+``paths.outputs`` read as every command reads it: ``paths.outputs=``, else ``PHYSGNN_OUTPUTS``,
+else ``outputs``):
 
 - ``simulate.h5``: the dataset schema (:mod:`physgnn.data.dataset`), group ``truth`` and,
   with a run, group ``prediction`` (its finite prefix if it diverged);
@@ -24,7 +26,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn import metrics
+from physgnn import CONF_DIR, metrics
 from physgnn.data.dataset import write_split
 from physgnn.errors import PhysgnnError
 from physgnn.evaluation import rerun_log
@@ -44,6 +46,7 @@ KEYS = {
     "frames": None,
     "tol": "0",
     "rerun": None,
+    "paths.outputs": None,
 }
 METRIC_KEYS = ("mse", "mse20", "chamfer", "energy_gain", "rotation_error", "diverged_at")
 
@@ -62,7 +65,20 @@ def parse_args(argv: list[str]) -> DictConfig:
         args[key] = value
     if not args["scene"]:
         raise SimulateError("missing scene=FILE (a YAML scene file, e.g. conf/scenes/throw.yaml)")
-    return OmegaConf.create(args)
+    cfg = OmegaConf.create()
+    for key, value in args.items():
+        OmegaConf.update(cfg, key, value)  # paths.outputs -> cfg.paths.outputs
+    return cfg
+
+
+def outputs_root(args: DictConfig | dict) -> Path:
+    """``paths.outputs`` as every command reads it (``conf/paths/default.yaml``): the argument
+    ``paths.outputs=``, else ``$PHYSGNN_OUTPUTS``, else ``outputs``."""
+    paths = OmegaConf.load(Path(CONF_DIR) / "paths" / "default.yaml")
+    given = (args.get("paths") or {}).get("outputs")
+    if given:
+        paths.outputs = given
+    return Path(paths.outputs)
 
 
 def rollout_prediction(simulator, truth: Trajectory) -> Trajectory:
@@ -95,7 +111,7 @@ def simulate(args: DictConfig | dict) -> dict:
         rerun_log.require()  # before the work, not after it
     if args["frames"]:
         scene.n_frames = int(args["frames"])
-    out = Path(args["out"] or Path("outputs") / "simulate" / scene.name)
+    out = Path(args["out"] or outputs_root(args) / "simulate" / scene.name)
     truth = engine_simulate(scene)
     truth.attrs.update(
         group="truth", scene=scene.name, scene_config=Path(args["scene"]).read_text()
