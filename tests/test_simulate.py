@@ -110,5 +110,5 @@ def test_errors_are_one_line(argv, message, capsys):
 
 def test_missing_run_folder(scene_file, tmp_path, capsys):
     with pytest.raises(SystemExit):
-        main([f"scene={scene_file}", f"out={tmp_path}", "run=/no/such/run", "video=false"])
+        main([f"scene={scene_file}", f"out={tmp_path / 'out'}", "run=/no/such/run", "video=false"])
     assert "run folder /no/such/run does not exist" in capsys.readouterr().err

@@ -15,6 +15,9 @@ else ``outputs``):
 - with ``rerun=FILE.rrd``: both as a Rerun recording (:mod:`physgnn.evaluation.rerun_log`,
   the optional ``rerun`` extra).
 
+A folder ``out`` that holds files physgnn did not write is refused unless ``overwrite=true``
+(:func:`physgnn.files.claim_folder`; the folders it makes carry its marker).
+
 Arguments are ``key=value`` over :data:`KEYS` (not Hydra: ``scene=`` names a file here, where
 Hydra would read the ``scene`` config group).
 """
@@ -31,7 +34,7 @@ from physgnn.data.dataset import write_split
 from physgnn.errors import PhysgnnError
 from physgnn.evaluation import rerun_log
 from physgnn.evaluation.video3d import render_side_by_side
-from physgnn.files import write_json
+from physgnn.files import claim_folder, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.groundtruth.scenefile import load_scene
 from physgnn.physics.trajectory import Trajectory
@@ -47,6 +50,7 @@ KEYS = {
     "tol": "0",
     "rerun": None,
     "paths.outputs": None,
+    "overwrite": "false",
 }
 METRIC_KEYS = ("mse", "mse20", "chamfer", "energy_gain", "rotation_error", "diverged_at")
 
@@ -81,6 +85,14 @@ def outputs_root(args: DictConfig | dict) -> Path:
     return Path(paths.outputs)
 
 
+def flag(args: DictConfig | dict, key: str) -> bool:
+    """The argument ``key``, ``true`` or ``false`` (any case)."""
+    value = args.get(key, KEYS[key])
+    if str(value).lower() not in ("true", "false"):
+        raise SimulateError(f"{key} must be true or false, got '{value}'")
+    return str(value).lower() == "true"
+
+
 def rollout_prediction(simulator, truth: Trajectory) -> Trajectory:
     """The simulator's rollout of ``truth`` from its first H+1 frames (finite prefix)."""
     return rollout(simulator, [truth])[0]
@@ -112,6 +124,7 @@ def simulate(args: DictConfig | dict) -> dict:
     if args["frames"]:
         scene.n_frames = int(args["frames"])
     out = Path(args["out"] or outputs_root(args) / "simulate" / scene.name)
+    claim_folder(out, "out", overwrite=flag(args, "overwrite"), ours=not args["out"])
     truth = engine_simulate(scene)
     truth.attrs.update(
         group="truth", scene=scene.name, scene_config=Path(args["scene"]).read_text()
@@ -130,7 +143,7 @@ def simulate(args: DictConfig | dict) -> dict:
         "metrics": scene_metrics(truth, pred, float(args["tol"])),
         "files": {"hdf5": str(h5)},
     }
-    if str(args["video"]).lower() == "true":
+    if flag(args, "video"):
         result["files"].update(write_videos(out, truth, pred, bool(source)))
     if args["rerun"]:
         result["files"]["rerun"] = str(rerun_log.log_rerun(args["rerun"], truth, pred))
