@@ -1,5 +1,6 @@
 """Files written atomically (a ``<name>.tmp`` beside the target, then renamed over it), so an
-interrupted run never leaves a half file under the real name; CSV tables with typed reads."""
+interrupted run never leaves a half file under the real name; CSV tables with typed reads;
+output folders that physgnn may write into (:func:`claim_folder`)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,12 @@ import os
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+from physgnn import __version__
+
+# Written into every output folder physgnn makes (simulate's out, eval's report_dir): the
+# proof that physgnn may write over the files it holds.
+OUTPUT_MARKER = "physgnn-output.json"
 
 
 @contextmanager
@@ -70,3 +77,24 @@ def read_rows(path: str | Path, floats: Iterable[str], ints: Iterable[str]) -> l
         for k in ints:
             row[k] = int(float(row[k])) if row.get(k) not in (None, "") else None
     return rows
+
+
+def claim_folder(folder: str | Path, key: str, overwrite: bool = False, ours: bool = False) -> Path:
+    """Make ``folder`` (if needed) for physgnn to write into, once it may: an absent or empty
+    folder, one marked with :data:`OUTPUT_MARKER` or ``ours`` (the command's default folder
+    under ``paths.outputs``) gets the marker; any other folder is written into only with
+    ``overwrite`` (and stays unmarked), else :class:`FileExistsError`, one line naming ``key``,
+    the folder and the fix."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise FileExistsError(f"{key} {folder} is a file: choose another {key}")
+    mine = ours or not folder.exists() or (folder / OUTPUT_MARKER).is_file()
+    if not mine and any(folder.iterdir()):
+        if overwrite:
+            return folder
+        raise FileExistsError(
+            f"{key} {folder} is a folder with files that physgnn did not write (no "
+            f"{OUTPUT_MARKER}): choose another {key}, or pass overwrite=true to write over them"
+        )
+    write_json(folder / OUTPUT_MARKER, {"physgnn_version": __version__})
+    return folder

@@ -1,5 +1,5 @@
 """``python -m physgnn.simulate scene=FILE [run=RUN_DIR] [out=DIR] [video=true] [frames=N]
-[tol=0] [rerun=FILE.rrd]``.
+[tol=0] [rerun=FILE.rrd] [paths.outputs=DIR] [overwrite=true]``.
 
 The work is :func:`physgnn.evaluation.simulate.simulate`: the truth and, given a run, the
 learned rollout of a YAML scene file, to HDF5, metrics.json, a shaded 3-D video and (optional)

@@ -23,13 +23,17 @@ from omegaconf import OmegaConf
 from test_train import CONF, SHORT, config, outputs_of, run_main
 
 import physgnn.groundtruth.generate as gen
+from physgnn import eval as eval_command
 from physgnn import generate as generate_command
+from physgnn import simulate as simulate_command
 from physgnn import train as train_command
 from physgnn.cli import command
 from physgnn.data.dataset import DATASET_MARKER
 from physgnn.errors import ConfigError, interrupt_signal, sigterm_interrupts
 from physgnn.evaluation.data_report import DataReportError, data_report
-from physgnn.evaluation.runs import find_runs, load_runs
+from physgnn.evaluation.evaluate import evaluate
+from physgnn.evaluation.runs import EvalError, find_runs, load_runs
+from physgnn.files import OUTPUT_MARKER
 from physgnn.training.progress import StopOnSignal
 from physgnn.training.runs import read_run_json
 from physgnn.training.train import TrainingInterrupted, train
@@ -130,6 +134,58 @@ def test_export_scene_replaces_no_file(tmp_path):
     assert (tmp_path / "train_traj_00000.yaml").read_text() == "mine"
 
 
+# --- simulate and eval into an existing folder ----------------------------------------------
+
+
+def folder_of_mine(path: Path) -> Path:
+    path.mkdir(parents=True)
+    (path / "metrics.json").write_text("mine")
+    return path
+
+
+def refusal(key: str, folder: Path) -> str:
+    return (
+        f"error: {key} {folder} is a folder with files that physgnn did not write (no "
+        f"{OUTPUT_MARKER}): choose another {key}, or pass overwrite=true to write over them\n"
+    )
+
+
+def test_simulate_writes_over_no_folder_it_did_not_write(tmp_path, capsys):
+    folder = folder_of_mine(tmp_path / "mine")
+    args = [f"scene={ROOT / 'conf' / 'scenes' / 'head_on.yaml'}", "frames=3", "video=false"]
+    with pytest.raises(SystemExit) as exit_info:
+        simulate_command.main([*args, f"out={folder}"])
+    assert exit_info.value.code == 2 and capsys.readouterr().err == refusal("out", folder)
+    assert [p.name for p in folder.iterdir()] == ["metrics.json"]
+    assert (folder / "metrics.json").read_text() == "mine"
+    simulate_command.main([*args, f"out={folder}", "overwrite=true"])
+    assert json.loads((folder / "metrics.json").read_text())["n_frames"] == 3
+    assert not (folder / OUTPUT_MARKER).exists()  # still the user's: overwrite=true each time
+    simulate_command.main([*args, f"out={tmp_path / 'new'}"])
+    simulate_command.main([*args[:1], "frames=4", "video=false", f"out={tmp_path / 'new'}"])
+    assert json.loads((tmp_path / "new" / "metrics.json").read_text())["n_frames"] == 4
+    old = folder_of_mine(tmp_path / "outputs" / "simulate" / "head_on")  # its default, unmarked
+    simulate_command.main([*args, f"paths.outputs={tmp_path / 'outputs'}"])
+    assert (old / OUTPUT_MARKER).is_file()
+
+
+def test_eval_writes_over_no_report_dir_it_did_not_write(tmp_path, capsys):
+    folder = folder_of_mine(tmp_path / "mine")
+    with pytest.raises(SystemExit) as exit_info:
+        eval_command.main.__wrapped__(compose_eval(tmp_path, f"report_dir={folder}"))
+    assert exit_info.value.code == 2 and capsys.readouterr().err == refusal("report_dir", folder)
+    assert [p.name for p in folder.iterdir()] == ["metrics.json"]
+    for report_dir, overwrite in [(folder, "true"), (tmp_path / "new", "false")] * 2:
+        cfg = compose_eval(tmp_path, f"report_dir={report_dir}", f"overwrite={overwrite}")
+        with pytest.raises(EvalError, match="no finished run"):  # the check passed
+            evaluate(cfg)
+        (report_dir / "report.md").write_text("an earlier report")
+    assert not (folder / OUTPUT_MARKER).exists() and (tmp_path / "new" / OUTPUT_MARKER).is_file()
+    folder_of_mine(tmp_path / "report")  # the default report_dir, unmarked: physgnn's own
+    with pytest.raises(EvalError, match="no finished run"):
+        evaluate(compose_eval(tmp_path))
+
+
 # --- Ctrl-C and SIGTERM during training -----------------------------------------------------
 
 
@@ -198,9 +254,9 @@ def test_debug_fast_leaves_nothing_eval_takes_for_a_model(tiny_dataset, tmp_path
     assert load_runs(eval_cfg, tmp_path) == ([], ["`runs/smoke`: status debug"])
 
 
-def compose_eval(outputs):
+def compose_eval(outputs, *overrides):
     with initialize_config_dir(config_dir=CONF, version_base="1.3"):
-        return compose("eval", overrides=[f"paths.outputs={outputs}"])
+        return compose("eval", overrides=[f"paths.outputs={outputs}", *overrides])
 
 
 # --- data-report honours PHYSGNN_OUTPUTS --------------------------------------------------------

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import yaml
 from conftest import compose_generate
 
 from physgnn.groundtruth.families import build_scene
+from physgnn.groundtruth.layouts import check_no_overlap
 from physgnn.groundtruth.scene_schema import SCHEMA
 from physgnn.groundtruth.scenefile import load_scene, scene_from_dict, scene_to_dict, write_scene
 from physgnn.physics.scene import SceneError
@@ -87,6 +89,33 @@ def test_overlapping_spheres():
     assert "spheres[0] and spheres[1] overlap by 0.1 m" in _error(d)
 
 
+def grid() -> np.ndarray:
+    """Centres ``[2000, 3]`` of touching unit spheres on the ground, ordered by x, y, z."""
+    xyz = np.stack(np.meshgrid(np.arange(20), np.arange(10), np.arange(10), indexing="ij"), -1)
+    return xyz.reshape(-1, 3) + [0, 0, 0.5]
+
+
+def test_thousands_of_touching_spheres_load_and_an_overlap_is_named(tmp_path):
+    spheres = [{"radius": 0.5, "position": p} for p in grid().tolist()]
+    spheres.append({"radius": 2.8, "position": [-3.5, 5, 3.5]})  # a big one beside them
+    path = tmp_path / "many.yaml"
+    path.write_text(yaml.safe_dump({"spheres": spheres}))
+    assert load_scene(path).n_spheres == 2001
+    spheres[-1]["position"][0] = -3.25  # into spheres[53], at [0, 5, 3.5]
+    assert _error({"spheres": spheres}) == "f.yaml: spheres[53] and spheres[2000] overlap by 0.05 m"
+    spheres[-1]["position"][0] = -3.5
+    spheres[1234]["position"][0] -= 0.25  # into spheres[1134], its neighbour along x
+    assert "spheres[1134] and spheres[1234] overlap by 0.25 m" in _error({"spheres": spheres})
+
+
+def test_the_overlap_check_holds_no_n_by_n_array():
+    tracemalloc.start()
+    check_no_overlap("f.yaml", grid(), np.full(2000, 0.5))
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 2000 * 2000  # bytes; an [N, N] float array is 8 times that
+
+
 def test_zero_normal():
     d = base()
     d["planes"] = [{"centre": [0, 0, 5], "normal": [0, 0, 0], "reference": [1, 0, 0],
@@ -128,6 +157,36 @@ def test_file_errors(tmp_path):
     bad.write_text(yaml.safe_dump({"spheres": []}))
     with pytest.raises(SceneError, match="non-empty list"):
         load_scene(bad)
+
+
+NUMBERS = """
+dt: 1e-1
+frames: 1e1
+spheres:
+  - {radius: .5, density: 1E3, position: [0, 0, 1e+01]}
+  - {radius: 5e-1, mass: 1_000, position: [-2, +1.5E0, 1.0e1], velocity: [1.5E-3, 0, -.5e1]}
+"""
+
+
+def test_numbers_are_read_however_they_are_written(tmp_path):
+    path = tmp_path / "s.yaml"
+    path.write_text(NUMBERS)
+    scene = load_scene(path)
+    assert (scene.dt, scene.n_frames) == (np.float32(0.1), 10)
+    np.testing.assert_array_equal(scene.radius, [0.5, 0.5])
+    np.testing.assert_allclose(scene.mass, [1000 * 4 / 3 * np.pi * 0.125, 1000], rtol=1e-6)
+    np.testing.assert_array_equal(scene.pos, [[0, 0, 10], [-2, 1.5, 10]])
+    np.testing.assert_allclose(scene.vel[1], [1.5e-3, 0, -5], rtol=1e-6)
+
+
+@pytest.mark.parametrize("value", ["1e", "e1", "1e+", "1.5.2", "ten", "'1e1'"])
+def test_what_is_not_a_number_is_still_one_line(value, tmp_path):
+    path = tmp_path / "s.yaml"
+    path.write_text(f"spheres:\n  - {{radius: 0.5, position: [0, 0, {value}]}}\n")
+    with pytest.raises(SceneError) as e:
+        load_scene(path)
+    got = repr(value.strip("'"))
+    assert str(e.value) == f"{path}: spheres[0].position: expected a number, got {got}"
 
 
 def test_committed_schema_is_current():

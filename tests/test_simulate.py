@@ -78,6 +78,21 @@ def test_a_trained_run_end_to_end(tiny_run, scene_file, tmp_path, capsys):
         assert Path(result["files"][kind]).stat().st_size > 0
 
 
+def test_default_out_follows_paths_outputs_as_every_command(scene_file, tmp_path, monkeypatch):
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
+    monkeypatch.delenv("PHYSGNN_OUTPUTS", raising=False)
+    main([f"scene={scene_file}", "video=false"])
+    assert (cwd / "outputs" / "simulate" / "tiny" / "metrics.json").is_file()
+    monkeypatch.setenv("PHYSGNN_OUTPUTS", str(tmp_path / "env"))
+    main([f"scene={scene_file}", "video=false"])
+    assert (tmp_path / "env" / "simulate" / "tiny" / "metrics.json").is_file()
+    main([f"scene={scene_file}", "video=false", f"paths.outputs={tmp_path / 'arg'}"])
+    assert (tmp_path / "arg" / "simulate" / "tiny" / "metrics.json").is_file()
+    assert [p.name for p in cwd.iterdir()] == ["outputs"]
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
@@ -95,5 +110,5 @@ def test_errors_are_one_line(argv, message, capsys):
 
 def test_missing_run_folder(scene_file, tmp_path, capsys):
     with pytest.raises(SystemExit):
-        main([f"scene={scene_file}", f"out={tmp_path}", "run=/no/such/run", "video=false"])
+        main([f"scene={scene_file}", f"out={tmp_path / 'out'}", "run=/no/such/run", "video=false"])
     assert "run folder /no/such/run does not exist" in capsys.readouterr().err

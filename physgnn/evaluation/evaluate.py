@@ -11,6 +11,8 @@ Every learned run also falls freely from ``freefall.heights`` (:mod:`physgnn.eva
 ``freefall.csv``) and bounces once per training material (:mod:`physgnn.evaluation.bounce`,
 ``bounce.csv``). Writes metrics.csv, report.md, figures and videos into ``report_dir``; with
 ``rerun=true`` also ``videos/<ood scene>.rrd``, the filmed run's rollouts as Rerun recordings.
+A ``report_dir`` holding files physgnn did not write is refused unless ``overwrite=true``
+(:func:`physgnn.files.claim_folder`).
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from physgnn.evaluation.runs import (
     references,
 )
 from physgnn.evaluation.video3d import render_side_by_side
+from physgnn.files import claim_folder
 from physgnn.report import bounce, figures, freefall, stability, table
 from physgnn.report.document import write_report
 
@@ -51,6 +54,8 @@ def evaluate(cfg: DictConfig) -> Path:
     outputs, report_dir = Path(cfg.paths.outputs), Path(cfg.report_dir)
     if cfg.get("rerun"):
         rerun_log.require()  # before the rollouts, not after them
+    ours = report_dir == Path(cfg.paths.report_dir)
+    claim_folder(report_dir, "report_dir", overwrite=bool(cfg.get("overwrite")), ours=ours)
     runs, skipped = load_runs(cfg, outputs)
     if not runs and not cfg.dataset:
         raise EvalError(f"no finished run under {outputs} (make train first, or pass dataset=PATH)")

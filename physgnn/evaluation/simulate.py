@@ -2,7 +2,9 @@
 
 Simulates the scene (:mod:`physgnn.groundtruth.scenefile`) with pybullet and, given a trained
 run, rolls the learned simulator out from the same start (its first H+1 ground-truth frames,
-as ``make eval`` does). Writes into ``out`` (default ``outputs/simulate/<scene name>``):
+as ``make eval`` does). Writes into ``out`` (default ``${paths.outputs}/simulate/<scene name>``,
+``paths.outputs`` read as every command reads it: ``paths.outputs=``, else ``PHYSGNN_OUTPUTS``,
+else ``outputs``):
 
 - ``simulate.h5``: the dataset schema (:mod:`physgnn.data.dataset`), group ``truth`` and,
   with a run, group ``prediction`` (its finite prefix if it diverged);
@@ -12,6 +14,9 @@ as ``make eval`` does). Writes into ``out`` (default ``outputs/simulate/<scene n
   a run) side by side (:mod:`physgnn.evaluation.video3d`);
 - with ``rerun=FILE.rrd``: both as a Rerun recording (:mod:`physgnn.evaluation.rerun_log`,
   the optional ``rerun`` extra).
+
+A folder ``out`` that holds files physgnn did not write is refused unless ``overwrite=true``
+(:func:`physgnn.files.claim_folder`; the folders it makes carry its marker).
 
 Arguments are ``key=value`` over :data:`KEYS` (not Hydra: ``scene=`` names a file here, where
 Hydra would read the ``scene`` config group).
@@ -24,12 +29,12 @@ from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn import metrics
+from physgnn import CONF_DIR, metrics
 from physgnn.data.dataset import write_split
 from physgnn.errors import PhysgnnError
 from physgnn.evaluation import rerun_log
 from physgnn.evaluation.video3d import render_side_by_side
-from physgnn.files import write_json
+from physgnn.files import claim_folder, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.groundtruth.scenefile import load_scene
 from physgnn.physics.trajectory import Trajectory
@@ -44,6 +49,8 @@ KEYS = {
     "frames": None,
     "tol": "0",
     "rerun": None,
+    "paths.outputs": None,
+    "overwrite": "false",
 }
 METRIC_KEYS = ("mse", "mse20", "chamfer", "energy_gain", "rotation_error", "diverged_at")
 
@@ -62,7 +69,28 @@ def parse_args(argv: list[str]) -> DictConfig:
         args[key] = value
     if not args["scene"]:
         raise SimulateError("missing scene=FILE (a YAML scene file, e.g. conf/scenes/throw.yaml)")
-    return OmegaConf.create(args)
+    cfg = OmegaConf.create()
+    for key, value in args.items():
+        OmegaConf.update(cfg, key, value)  # paths.outputs -> cfg.paths.outputs
+    return cfg
+
+
+def outputs_root(args: DictConfig | dict) -> Path:
+    """``paths.outputs`` as every command reads it (``conf/paths/default.yaml``): the argument
+    ``paths.outputs=``, else ``$PHYSGNN_OUTPUTS``, else ``outputs``."""
+    paths = OmegaConf.load(Path(CONF_DIR) / "paths" / "default.yaml")
+    given = (args.get("paths") or {}).get("outputs")
+    if given:
+        paths.outputs = given
+    return Path(paths.outputs)
+
+
+def flag(args: DictConfig | dict, key: str) -> bool:
+    """The argument ``key``, ``true`` or ``false`` (any case)."""
+    value = args.get(key, KEYS[key])
+    if str(value).lower() not in ("true", "false"):
+        raise SimulateError(f"{key} must be true or false, got '{value}'")
+    return str(value).lower() == "true"
 
 
 def rollout_prediction(simulator, truth: Trajectory) -> Trajectory:
@@ -95,7 +123,8 @@ def simulate(args: DictConfig | dict) -> dict:
         rerun_log.require()  # before the work, not after it
     if args["frames"]:
         scene.n_frames = int(args["frames"])
-    out = Path(args["out"] or Path("outputs") / "simulate" / scene.name)
+    out = Path(args["out"] or outputs_root(args) / "simulate" / scene.name)
+    claim_folder(out, "out", overwrite=flag(args, "overwrite"), ours=not args["out"])
     truth = engine_simulate(scene)
     truth.attrs.update(
         group="truth", scene=scene.name, scene_config=Path(args["scene"]).read_text()
@@ -114,7 +143,7 @@ def simulate(args: DictConfig | dict) -> dict:
         "metrics": scene_metrics(truth, pred, float(args["tol"])),
         "files": {"hdf5": str(h5)},
     }
-    if str(args["video"]).lower() == "true":
+    if flag(args, "video"):
         result["files"].update(write_videos(out, truth, pred, bool(source)))
     if args["rerun"]:
         result["files"]["rerun"] = str(rerun_log.log_rerun(args["rerun"], truth, pred))

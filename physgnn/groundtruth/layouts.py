@@ -1,11 +1,14 @@
 """Building blocks of scenes: materials, planes (ground, arena walls, ramps) and sphere layouts
-(spawned without overlap, clustered, cubes, piles), all numpy."""
+(spawned without overlap, clustered, cubes, piles), all numpy; the checks of a layout (spheres
+clear of planes and of each other, the latter by a scipy k-d tree)."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from itertools import chain
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from physgnn.physics.scene import (
     GROUND,
@@ -15,6 +18,9 @@ from physgnn.physics.scene import (
     ground_plane,
     make_plane,
 )
+
+OVERLAP_TOL = 1e-9  # m: spheres deeper into each other than this overlap
+_CHUNK = 256  # spheres searched at once (memory stays linear in N even if all overlap)
 
 
 def materials_array(materials: list[Mapping]) -> np.ndarray:
@@ -135,6 +141,48 @@ def check_clear_of_planes(
                 f"scene '{name}': sphere {i} at {np.round(pos[i], 2).tolist()} "
                 "starts on or inside a plane; move it"
             )
+
+
+def check_no_overlap(where: str, pos: np.ndarray, radius: np.ndarray) -> None:
+    """Raise SceneError naming the first two overlapping spheres (pos ``[N, 3]``, radius
+    ``[N]``): a neighbour search, memory linear in N (no ``[N, N]`` distances)."""
+    classes = _size_classes(pos, radius)
+    for start in range(0, len(pos), _CHUNK):
+        i, j = _candidates(classes, pos, radius, np.arange(start, min(start + _CHUNK, len(pos))))
+        gap = np.linalg.norm(pos[i] - pos[j], axis=1) - radius[i] - radius[j]
+        hit = np.flatnonzero(gap < -OVERLAP_TOL)
+        if hit.size:
+            k = hit[np.lexsort((j[hit], i[hit]))[0]]
+            raise SceneError(
+                f"{where}: spheres[{i[k]}] and spheres[{j[k]}] overlap by {-gap[k]:.3g} m"
+            )
+
+
+def _size_classes(pos: np.ndarray, radius: np.ndarray) -> list[tuple[cKDTree, np.ndarray, float]]:
+    """One k-d tree per size class (radii within a factor of 2): ``(tree, members [M], largest
+    radius)``. Searching each class out to its own largest radius keeps a big sphere among
+    small ones from making every small pair a candidate."""
+    size = np.floor(np.log2(radius)).astype(np.int64)
+    classes = []
+    for c in np.unique(size):
+        members = np.flatnonzero(size == c)
+        classes.append((cKDTree(pos[members]), members, float(radius[members].max())))
+    return classes
+
+
+def _candidates(classes, pos, radius, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs ``(i [P], j [P])``, ``i`` in ``rows`` and ``j > i``, of spheres that may overlap:
+    ``j`` within ``r_i`` + the largest radius of ``j``'s class (every overlapping pair of
+    ``rows`` with a later sphere is among them)."""
+    i_all, j_all = [], []
+    for tree, members, r_max in classes:
+        hits = tree.query_ball_point(pos[rows], radius[rows] + r_max)
+        counts = np.fromiter(map(len, hits), dtype=np.int64, count=len(rows))
+        flat = np.fromiter(chain.from_iterable(hits), dtype=np.int64, count=int(counts.sum()))
+        i, j = np.repeat(rows, counts), members[flat]
+        i_all.append(i[j > i])
+        j_all.append(j[j > i])
+    return np.concatenate(i_all), np.concatenate(j_all)
 
 
 def pile_positions(n: int, layers: int, radius: float) -> np.ndarray:

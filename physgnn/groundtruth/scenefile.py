@@ -16,19 +16,21 @@ A scene file says everything a :class:`~physgnn.physics.scene.Scene` holds (sche
       - {kind: static, centre: [5, 0, 1], normal: [-0.5, 0, 0.87], reference: [0, 1, 0],
          half_lengths: [2, 3]}
 
+Numbers are YAML 1.2's (``1e1``, ``1e+01`` and ``.5`` are floats, not strings as in YAML 1.1).
 :func:`load_scene` fails with one line naming the file, the place and the problem (unknown
 key, wrong type, overlapping spheres, a zero normal, a sphere inside a plane, ...).
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 from physgnn.files import write_text
-from physgnn.groundtruth.layouts import check_clear_of_planes
+from physgnn.groundtruth.layouts import check_clear_of_planes, check_no_overlap
 from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
 from physgnn.physics.scene import (
     GRAVITY,
@@ -42,6 +44,20 @@ from physgnn.physics.scene import (
 )
 
 DEFAULT_MATERIAL = "default"
+
+
+class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
+    """``yaml.safe_load`` (libyaml's parser where installed) that reads every number a person
+    writes as a number: YAML 1.1 (PyYAML) takes an exponent without a dot or without a sign
+    (``1e+01``, ``1e1``, ``1.0e5``) for a string; YAML 1.2 and JSON read a float, and so does
+    this loader."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
 
 
 def _keys(where: str, d, schema: dict) -> dict:
@@ -140,16 +156,6 @@ def _plane(where: str, d) -> tuple[np.ndarray, int]:
     return row, PLANE_KINDS.index(kind)
 
 
-def check_no_overlap(where: str, pos: np.ndarray, radius: np.ndarray) -> None:
-    """Raise SceneError naming the first two overlapping spheres (pos ``[N, 3]``)."""
-    gap = np.linalg.norm(pos[:, None] - pos[None], axis=-1) - radius[:, None] - radius[None]
-    gap[np.diag_indices(len(pos))] = np.inf
-    if np.any(gap < -1e-9):
-        i, j = np.unravel_index(int(np.argmin(gap)), gap.shape)
-        i, j = sorted((int(i), int(j)))
-        raise SceneError(f"{where}: spheres[{i}] and spheres[{j}] overlap by {-gap[i, j]:.3g} m")
-
-
 def check_above_ground(where: str, pos: np.ndarray, radius: np.ndarray) -> None:
     below = pos[:, 2] - radius < -1e-9
     if np.any(below):
@@ -209,7 +215,7 @@ def load_scene(path: str | Path) -> Scene:
     if not path.is_file():
         raise SceneError(f"scene file {path} does not exist")
     try:
-        d = yaml.safe_load(path.read_text())
+        d = yaml.load(path.read_text(), Loader=_Loader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         at = f" (line {mark.line + 1})" if mark else ""
