@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from physgnn.evaluation import rerun_log
 from physgnn.evaluation.bounce import bounce_rows
@@ -35,6 +35,7 @@ from physgnn.evaluation.rollouts import (
 from physgnn.evaluation.runs import (
     EvalError,
     RunInfo,
+    constrained_variants,
     load_datasets,
     load_runs,
     load_splits,
@@ -57,6 +58,7 @@ def evaluate(cfg: DictConfig) -> Path:
     ours = report_dir == Path(cfg.paths.report_dir)
     claim_folder(report_dir, "report_dir", overwrite=bool(cfg.get("overwrite")), ours=ours)
     runs, skipped = load_runs(cfg, outputs)
+    runs += constrained_variants(runs, int(OmegaConf.select(cfg, "rollout.constraints") or 0))
     if not runs and not cfg.dataset:
         raise EvalError(f"no finished run under {outputs} (make train first, or pass dataset=PATH)")
     if cfg.dataset:

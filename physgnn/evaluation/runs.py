@@ -4,6 +4,7 @@ the test and OOD trajectories of their datasets."""
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,6 +15,7 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn.data.dataset import DatasetError, read_split
 from physgnn.errors import PhysgnnError
 from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
+from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.trajectory import Trajectory
 from physgnn.report.table import config_label
 from physgnn.training import runs as training_runs
@@ -206,3 +208,22 @@ def load_datasets(runs: list[RunInfo], max_frames: int | None, skipped: list[str
             print(f"warning: skipping run {r.name}: {errors[r.dataset]}", file=sys.stderr)
             skipped.append(f"`{r.name}`: {errors[r.dataset]}")
     return data, [r for r in runs if r.dataset in data]
+
+
+def constrained_variants(runs: list[RunInfo], iterations: int) -> list[RunInfo]:
+    """Each learned run again, followed by ``iterations`` of the constraint stage
+    (:mod:`physgnn.models.constrained`), as its own variant: the name and experiment end in
+    ``+ constraints`` so that every table shows it beside the pure model. None for 0."""
+    if iterations < 1:
+        return []
+    return [
+        dataclasses.replace(
+            run,
+            name=f"{run.name} + constraints",
+            experiment=f"{run.experiment} + constraints",
+            simulator=ConstrainedSimulator(run.simulator, iterations),
+            extra={**run.extra, "constraints": iterations},
+        )
+        for run in runs
+        if run.run_dir is not None
+    ]

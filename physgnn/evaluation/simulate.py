@@ -12,6 +12,8 @@ else ``outputs``):
   columns), or the truth's own physics (energy gain, penetration) without a run;
 - ``video.gif`` / ``video.mp4``: truth (left) and prediction (right; the truth again without
   a run) side by side (:mod:`physgnn.evaluation.video3d`);
+- with ``constraints=N`` (N ≥ 1) the learned step is followed by N iterations of the
+  constraint stage (:mod:`physgnn.models.constrained`), recorded in ``metrics.json``;
 - with ``rerun=FILE.rrd``: both as a Rerun recording (:mod:`physgnn.evaluation.rerun_log`,
   the optional ``rerun`` extra).
 
@@ -37,6 +39,7 @@ from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.files import claim_folder, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.groundtruth.scenefile import load_scene
+from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
 from physgnn.training.runs import load_run
@@ -51,6 +54,7 @@ KEYS = {
     "rerun": None,
     "paths.outputs": None,
     "overwrite": "false",
+    "constraints": "0",
 }
 METRIC_KEYS = ("mse", "mse20", "chamfer", "energy_gain", "rotation_error", "diverged_at")
 
@@ -98,12 +102,24 @@ def rollout_prediction(simulator, truth: Trajectory) -> Trajectory:
     return rollout(simulator, [truth])[0]
 
 
-def learned(run_dir: str, truth: Trajectory) -> tuple[Trajectory, str]:
-    """Roll the run's simulator out on ``truth``; returns the prediction and its checkpoint."""
+def learned(run_dir: str, truth: Trajectory, constraints: int = 0) -> tuple[Trajectory, str]:
+    """Roll the run's simulator out on ``truth`` (with ``constraints`` > 0, followed by the
+    constraint stage, :mod:`physgnn.models.constrained`); returns the prediction and its
+    checkpoint."""
     if not Path(run_dir).is_dir():
         raise SimulateError(f"run folder {run_dir} does not exist")
     simulator, _, info = load_run(run_dir)
+    if constraints > 0:
+        simulator = ConstrainedSimulator(simulator, constraints)
     return rollout_prediction(simulator, truth), str(info.get("checkpoint", run_dir))
+
+
+def iterations(args: DictConfig | dict) -> int:
+    """The argument ``constraints``: a whole number >= 0 (0: the pure learned model)."""
+    value = str(args.get("constraints", KEYS["constraints"]))
+    if not value.isdigit():
+        raise SimulateError(f"constraints must be a whole number >= 0 (iterations), got '{value}'")
+    return int(value)
 
 
 def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dict:
@@ -129,10 +145,12 @@ def simulate(args: DictConfig | dict) -> dict:
     truth.attrs.update(
         group="truth", scene=scene.name, scene_config=Path(args["scene"]).read_text()
     )
-    pred, source = (None, "") if not args["run"] else learned(args["run"], truth)
+    steps = iterations(args)
+    pred, source = (None, "") if not args["run"] else learned(args["run"], truth, steps)
     trajs = [truth]
     if pred is not None:
         attrs = {**truth.attrs, "group": "prediction", "diverged_at": pred.diverged_at}
+        attrs["constraints"] = steps
         trajs.append(dataclasses.replace(pred, attrs=attrs))
     h5 = write_split(out / "simulate.h5", trajs, {"split": "simulate", "preset": scene.name})
     result = {
@@ -140,6 +158,7 @@ def simulate(args: DictConfig | dict) -> dict:
         "n_spheres": scene.n_spheres,
         "n_frames": scene.n_frames,
         "run": source or None,
+        "constraints": steps,
         "metrics": scene_metrics(truth, pred, float(args["tol"])),
         "files": {"hdf5": str(h5)},
     }

@@ -270,8 +270,14 @@ class LearnedSimulator(nn.Module):
 
     def forward(self, state) -> tuple[torch.Tensor, torch.Tensor]:
         """``(vel_next [N, 3], angvel_next [N, 3])`` in physical units (m/s, rad/s, world frame)."""
+        vel_next, angvel_next, _ = self.predict(state)
+        return vel_next, angvel_next
+
+    def predict(self, state):
+        """``(vel_next [N, 3], angvel_next [N, 3], graph)``: :meth:`forward` and the graph it
+        was computed on (for a constraint stage, :mod:`physgnn.models.constrained`)."""
         pred, graph = self.normalized_prediction(state)
-        return self.to_physical(state, pred, graph)
+        return (*self.to_physical(state, pred, graph), graph)
 
 
 def _check_sizes(H: int, M: int, boundary_radius: float) -> None:

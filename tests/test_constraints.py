@@ -1,0 +1,139 @@
+"""The constraint stage: analytic oracles for the projection and the wrapped simulator."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from simdata import STATS
+from test_contacts import DT, ballistic, scene
+from torch.testing import assert_close
+
+from physgnn.models.constrained import ConstrainedSimulator
+from physgnn.models.learned import LearnedSimulator
+from physgnn.physics.constraints import project_contacts
+from physgnn.physics.scene import GROUND, STATIC, ground_plane, make_plane
+
+T = torch.tensor
+F64 = torch.float64
+GROUND_ROW = T(ground_plane()[None], dtype=F64)
+NO_PAIRS = torch.zeros(2, 0, dtype=torch.long)
+
+
+def project(pos, pos_next, radius, mass, pairs=NO_PAIRS, planes=GROUND_ROW, kinds=(GROUND,),
+            ps=None, iterations=1):  # fmt: skip
+    pos, pos_next = T(pos, dtype=F64), T(pos_next, dtype=F64)
+    n = pos.shape[0]
+    ps = torch.zeros(2, 0, dtype=torch.long) if ps is None else T(ps)
+    return project_contacts(pos, pos_next, T(radius, dtype=F64), T(mass, dtype=F64), T(pairs),
+                            planes, T(kinds), ps, iterations)  # fmt: skip
+
+
+def test_a_pair_separates_along_its_normal_with_its_momentum_kept():
+    pos = [[0.0, 0.0, 5.0], [1.7, 0.3, 5.0]]  # apart now
+    nxt = [[0.5, 0.1, 5.2], [1.0, 0.2, 4.9]]  # overlapping predicted
+    radius, mass = [0.5, 1.0], [1.0, 3.0]
+    x = project(pos, nxt, radius, mass, pairs=[[0], [1]])
+    assert_close(float((x[0] - x[1]).norm()), 1.5)  # touching
+    shift = x - T(nxt, dtype=F64)
+    normal = T(nxt[0], dtype=F64) - T(nxt[1], dtype=F64)
+    assert_close(
+        torch.linalg.cross(shift[0], normal), torch.zeros(3, dtype=F64), atol=1e-12, rtol=0
+    )
+    momentum = 1.0 * shift[0] + 3.0 * shift[1]
+    assert_close(momentum, torch.zeros(3, dtype=F64), atol=1e-12, rtol=0)
+    assert_close(shift[0].norm() / shift[1].norm(), T(3.0, dtype=F64))  # the light one moves more
+
+
+def test_a_pair_that_already_overlaps_is_not_pushed_apart():
+    pos = [[0.0, 0.0, 5.0], [0.8, 0.0, 5.0]]  # overlapping by 0.2 now
+    nxt = [[0.1, 0.0, 5.0], [0.7, 0.0, 5.0]]  # closing further
+    x = project(pos, nxt, [0.5, 0.5], [1.0, 1.0], pairs=[[0], [1]])
+    assert_close(float((x[0] - x[1]).norm()), 0.8)  # no deeper than now, no further apart
+
+
+def test_a_sphere_that_would_pass_the_ground_ends_on_it():
+    x = project([[1.0, 2.0, 1.0]], [[1.5, 2.5, -2.0]], [0.5], [1.0], ps=[[0], [0]])
+    assert_close(x[0], T([1.5, 2.5, 0.5], dtype=F64))
+
+
+def test_a_sphere_crossing_a_tilted_plane_in_one_frame_ends_on_its_front_face():
+    ramp = make_plane((0, 0, 2), (0, np.sin(0.5), np.cos(0.5)), (1, 0, 0), 5.0, 5.0)
+    planes = T(np.stack([ground_plane(), ramp]), dtype=F64)
+    normal = planes[1, 3:6]
+    start = planes[1, 0:3] + 1.0 * normal
+    through = planes[1, 0:3] - 1.5 * normal + T([0.3, 0.0, 0.0], dtype=F64)  # behind, over it
+    x = project([start.tolist()], [through.tolist()], [0.5], [1.0], planes=planes,
+                kinds=(GROUND, STATIC), ps=[[1], [0]])  # fmt: skip
+    assert_close(float(((x[0] - planes[1, 0:3]) * normal).sum()), 0.5)
+    # a sphere behind the ramp's plane, beside it, is never lifted onto it
+    below = (planes[1, 0:3] - 1.0 * normal + T([7.0, 0, 0], dtype=F64)).tolist()
+    under = (planes[1, 0:3] - 1.0 * normal).tolist()
+    x = project([below], [under], [0.5], [1.0], planes=planes, kinds=(GROUND, STATIC),
+                ps=[[1], [0]])  # fmt: skip
+    assert_close(x[0], T(under, dtype=F64))
+
+
+def test_a_stack_stays_put_and_loses_energy():
+    pos = [[0.0, 0.0, 0.5], [0.0, 0.0, 1.5]]  # resting on the ground, one on the other
+    fall = -9.81 * DT * DT
+    nxt = [[0.0, 0.0, 0.5 + fall], [0.0, 0.0, 1.5 + fall]]
+    x = project(pos, nxt, [0.5, 0.5], [1.0, 1.0], pairs=[[0], [1]], ps=[[0, 0], [0, 1]],
+                iterations=40)  # fmt: skip
+    assert_close(x, T(pos, dtype=F64), atol=1e-4, rtol=0)
+    v_hat, v = (T(nxt, dtype=F64) - T(pos, dtype=F64)) / DT, (x - T(pos, dtype=F64)) / DT
+    assert float((v**2).sum()) <= float((v_hat**2).sum())
+
+
+def test_energy_never_rises_on_random_falls():
+    gen = torch.Generator().manual_seed(0)
+    for _ in range(20):
+        n = 6
+        pos = torch.rand(n, 3, generator=gen, dtype=F64) * T([4.0, 4.0, 0.0]) + T([0, 0, 0.6])
+        pos[:, 2] += torch.arange(n, dtype=F64) * 1.2  # a column, apart
+        vel = torch.randn(n, 3, generator=gen, dtype=F64) * 3
+        mass = torch.rand(n, generator=gen, dtype=F64) + 0.5
+        iu = torch.triu_indices(n, n, 1)
+        ps = torch.stack([torch.zeros(n, dtype=torch.long), torch.arange(n)])
+        x = project_contacts(pos, pos + DT * vel, torch.full((n,), 0.5, dtype=F64), mass, iu,
+                             GROUND_ROW, T([GROUND]), ps, 10)  # fmt: skip
+        v = (x - pos) / DT
+        kinetic = lambda u: float((mass[:, None] * u**2).sum())  # noqa: E731
+        assert kinetic(v) <= kinetic(vel) + 1e-9
+        assert float(x[:, 2].min()) >= 0.5 - 1e-9  # nobody below the ground
+
+
+def make_sim(**kwargs):
+    torch.manual_seed(0)
+    return LearnedSimulator(STATS, H=2, M=1, hidden=8, gravity_prior=True, **kwargs)
+
+
+def test_a_scene_without_contact_is_untouched_bit_for_bit():
+    sim = make_sim()
+    state = ballistic(scene([[0, 0, 20], [5, 0, 30]], [[1, 2, -3], [0, 0, 4]], [0.5, 0.7]))
+    vel, angvel = sim(state)
+    wrapped = ConstrainedSimulator(sim, 5)
+    vel_c, angvel_c = wrapped(state)
+    assert torch.equal(vel_c, vel) and torch.equal(angvel_c, angvel)
+    assert wrapped.H == 2 and wrapped.graph_builder is sim.graph_builder
+
+
+def test_the_wrapped_step_keeps_spheres_out_of_the_ground():
+    sim = make_sim()
+    state = scene([[0, 0, 0.52], [3, 0, 0.5]], [[0, 0, -3.0], [0, 0, 0]], [0.5, 0.5])
+    vel, _ = ConstrainedSimulator(sim, 5)(state)
+    z_next = state.pos[:, 2] + DT * vel[:, 2]
+    assert float(z_next.min()) >= 0.5 - 1e-5
+
+
+def test_constraints_need_a_learned_simulator():
+    class Still(torch.nn.Module):
+        H = 1
+
+        def forward(self, state):
+            return torch.zeros_like(state.pos), torch.zeros_like(state.pos)
+
+    with pytest.raises(TypeError, match="learned simulator"):
+        ConstrainedSimulator(Still(), 3)
+    with pytest.raises(ValueError, match=">= 1"):
+        ConstrainedSimulator(make_sim(), 0)
