@@ -14,6 +14,7 @@ from simdata import STATS
 import physgnn.evaluation.simulate as S
 from physgnn import metrics
 from physgnn.data.dataset import read_split
+from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.models.learned import LearnedSimulator
 from physgnn.rollout import rollout
 from physgnn.simulate import main
@@ -50,7 +51,9 @@ def test_truth_only_writes_hdf5_metrics_and_video(scene_file, tmp_path, capsys):
 
 def test_learned_rollout_from_the_same_start(scene_file, tmp_path, monkeypatch):
     sim = LearnedSimulator(STATS, H=1, M=1, hidden=8).eval()
-    monkeypatch.setattr(S, "learned", lambda run, truth: (S.rollout_prediction(sim, truth), run))
+    monkeypatch.setattr(
+        S, "learned", lambda run, truth, steps: (S.rollout_prediction(sim, truth), run)
+    )
     out = tmp_path / "out"
     result = S.run(S.parse_args([f"scene={scene_file}", f"out={out}", "run=R", "video=false"]))
     with h5py.File(out / "simulate.h5") as f:
@@ -99,6 +102,7 @@ def test_default_out_follows_paths_outputs_as_every_command(scene_file, tmp_path
         ([], "missing scene=FILE"),
         (["scene=x.yaml", "frame=3"], "bad argument 'frame=3'"),
         (["scene=/nonexistent.yaml"], "does not exist"),
+        (["scene=x.yaml", "constraints=-1"], "constraints must be a whole number >= 0"),
     ],
 )
 def test_errors_are_one_line(argv, message, capsys):
@@ -112,3 +116,15 @@ def test_missing_run_folder(scene_file, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main([f"scene={scene_file}", f"out={tmp_path / 'out'}", "run=/no/such/run", "video=false"])
     assert "run folder /no/such/run does not exist" in capsys.readouterr().err
+
+
+def test_constraints_wrap_the_learned_simulator_and_are_recorded(scene_file, tmp_path, monkeypatch):
+    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8, gravity_prior=True).eval()
+    monkeypatch.setattr(S, "load_run", lambda run_dir: (sim, None, {"checkpoint": "ck"}))
+    out = tmp_path / "out"
+    argv = [f"scene={scene_file}", f"out={out}", f"run={tmp_path}", "video=false", "constraints=4"]
+    result = S.run(S.parse_args(argv))
+    assert result["constraints"] == 4
+    groups = {t.attrs["group"]: t for t in read_split(out / "simulate.h5")}
+    expected = rollout(ConstrainedSimulator(sim, 4), [groups["truth"]])[0]
+    np.testing.assert_allclose(groups["prediction"].pos, expected.pos, rtol=1e-6, atol=1e-6)

@@ -134,6 +134,7 @@ def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dic
 
 def simulate(args: DictConfig | dict) -> dict:
     """Simulate, roll out, write the files; returns what was written and the metrics."""
+    steps = iterations(args)
     scene = load_scene(args["scene"])
     if args["rerun"]:
         rerun_log.require()  # before the work, not after it
@@ -145,7 +146,6 @@ def simulate(args: DictConfig | dict) -> dict:
     truth.attrs.update(
         group="truth", scene=scene.name, scene_config=Path(args["scene"]).read_text()
     )
-    steps = iterations(args)
     pred, source = (None, "") if not args["run"] else learned(args["run"], truth, steps)
     trajs = [truth]
     if pred is not None:
