@@ -65,11 +65,12 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
 def test_bench_values_are_sane(quick):
     out, result = quick
     assert result["machine"]["threads"] == 1 and result["machine"]["matmul_gflops"] > 0
-    # quick: baseline on both sizes, M1 on 10 spheres only
+    # quick: baseline on both sizes, M1 and the constraint stage on 10 spheres only
     assert [(r["config"], r["n_spheres"]) for r in result["learned"]] == [
         ("baseline", 10),
         ("baseline", 30),
         ("M1", 10),
+        ("constraints", 10),
     ]
     for r in result["learned"]:
         parts = r["graph_ms"] + r["network_ms"] + r["integrate_ms"]

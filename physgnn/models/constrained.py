@@ -52,6 +52,13 @@ class ConstrainedSimulator(nn.Module):
     def graph_builder(self):
         return self.simulator.graph_builder
 
+    @property
+    def network(self):
+        return self.simulator.network
+
+    def rotating(self, state) -> torch.Tensor:
+        return self.simulator.rotating(state)
+
     def forward(self, state) -> tuple[torch.Tensor, torch.Tensor]:
         vel, angvel, graph = self.simulator.predict(state)
         return self.correct(state, vel, graph), angvel
