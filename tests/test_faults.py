@@ -5,6 +5,7 @@ run is a state that resumes, and one failing job never stops a sweep."""
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import shutil
@@ -378,6 +379,30 @@ def test_a_resume_with_nothing_left_to_train_says_so(tiny_dataset, tmp_path):
     last = first["checkpoints"]["last"]
     with pytest.raises(ConfigError, match="nothing to train: .* trainer.max_epochs=1 \\(step 2\\)"):
         train(config(tiny_dataset, tmp_path / "b", *SHORT, f"ckpt_path={last}"))
+
+
+# --- a full disk ------------------------------------------------------------------------------
+
+
+def test_a_full_disk_keeps_the_last_good_checkpoint_and_says_failed(tiny_dataset, tmp_path,
+                                                                    monkeypatch):  # fmt: skip
+    save = torch.save
+
+    def full_disk(obj, f, *args, **kwargs):
+        """The epoch-2 save to a file writes half of it, then the disk is full."""
+        if isinstance(f, str | Path) and obj.get("global_step", 0) > 2:
+            Path(f).write_bytes(b"half a checkpoint")
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return save(obj, f, *args, **kwargs)
+
+    monkeypatch.setattr(torch, "save", full_disk)
+    with pytest.raises(OSError, match="No space left on device"):
+        train(config(tiny_dataset, tmp_path, *SHORT, "trainer.max_epochs=2"))
+    assert torch.load(tmp_path / "checkpoints" / "last.ckpt", weights_only=True)["global_step"] == 2
+    assert sorted(p.name for p in (tmp_path / "checkpoints").iterdir())[-1] == "last.ckpt"
+    assert not list(tmp_path.rglob("*.tmp*"))
+    info = read_run_json(tmp_path)
+    assert info["status"] == "failed" and "No space left on device" in info["error"]
 
 
 # --- killed in a subprocess ----------------------------------------------------------------------

@@ -27,6 +27,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError, Interrupted, one_line, signal_name
 from physgnn.files import write_text
+from physgnn.training.checkpoint_io import AtomicCheckpointIO
 from physgnn.training.checks import (
     check_arguments,
     check_budget,
@@ -61,8 +62,9 @@ def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
     logger = instantiate(cfg.logger) if cfg.get("logger") else False
     root = str(cfg.run_dir)
     # The data module shares the pairs out between DDP processes itself (EpochSampler)
+    # Checkpoints go through a temporary file and a rename (checkpoint_io.py)
     return instantiate(cfg.trainer, callbacks=callbacks, logger=logger, default_root_dir=root,
-                       use_distributed_sampler=False)  # fmt: skip
+                       use_distributed_sampler=False, plugins=[AtomicCheckpointIO()])  # fmt: skip
 
 
 def build(cfg: DictConfig, extra_callbacks=()):
@@ -222,7 +224,10 @@ def _stopped(err: BaseException, run_dir: Path, info: dict, stop: StopOnSignal):
     else:
         info.update(status="failed", error=f"{type(err).__name__}: {one_line(err)}")
         outcome = err
-    _record(run_dir, info)
+    try:
+        _record(run_dir, info)
+    except OSError as record_err:  # a full disk: the error that stopped the run comes first
+        log.error("run %s: run.json could not be written (%s)", run_dir, record_err)
     log.error("run %s: %s (%s)", run_dir, info["status"], info["error"])
     if isinstance(err, StopTraining):
         stop.chain()  # a scheduler's pre-emption handler: it requeues the job and exits
