@@ -10,6 +10,7 @@ import json
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -379,6 +380,45 @@ def test_a_resume_with_nothing_left_to_train_says_so(tiny_dataset, tmp_path):
     last = first["checkpoints"]["last"]
     with pytest.raises(ConfigError, match="nothing to train: .* trainer.max_epochs=1 \\(step 2\\)"):
         train(config(tiny_dataset, tmp_path / "b", *SHORT, f"ckpt_path={last}"))
+
+
+# --- a run folder in use -----------------------------------------------------------------------
+
+
+def running_record(run_dir: Path, pid: int) -> dict:
+    info = {"status": "running", "pid": pid, "host": socket.gethostname(),
+            "started": "2026-01-02T03:04:05"}  # fmt: skip
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "run.json").write_text(json.dumps(info))
+    return info
+
+
+def test_a_run_folder_in_use_is_refused_in_one_line(tiny_dataset, tmp_path, monkeypatch, capsys):
+    run_dir = tmp_path / "run"
+    holder = subprocess.Popen(["sleep", "60"])
+    try:
+        info = running_record(run_dir, holder.pid)
+        args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={run_dir}"]
+        code, line = run_main(monkeypatch, capsys, *args, f"hydra.run.dir={tmp_path / 'h'}")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert code == 2 and line == (
+        f"error: run_dir {run_dir} is in use: a training started 2026-01-02T03:04:05 runs "
+        f"there (pid {holder.pid} on {info['host']}): wait for it to end, stop it (kill "
+        f"{holder.pid}: it saves last.ckpt, then train again there to resume), or choose "
+        "another run_dir"
+    )
+    assert read_run_json(run_dir) == info and sorted(p.name for p in run_dir.iterdir()) == [
+        "run.json"
+    ]
+
+
+def test_a_running_record_of_a_dead_process_is_taken_over(tiny_dataset, tmp_path):
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    running_record(tmp_path, dead.pid)
+    assert train(config(tiny_dataset, tmp_path, *SHORT))["status"] == "finished"
 
 
 # --- a full disk ------------------------------------------------------------------------------

@@ -5,16 +5,19 @@ feed, the step budget, the checkpoint to resume from and whether it fits the mod
 from __future__ import annotations
 
 import inspect
+import os
+import socket
 import types
 import typing
 from pathlib import Path
 
 import torch
 from hydra.utils import get_class
+from lightning.pytorch.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
-from physgnn.training.runs import RUN_JSON, run_status
+from physgnn.training.runs import RUN_JSON, read_run_json, run_status
 
 HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
 # A run folder in one of these states is resumed from its last.ckpt when trained again (a
@@ -83,9 +86,40 @@ def check_budget(trainer_cfg: DictConfig) -> None:
             )
 
 
+def _alive(pid) -> bool:
+    """Whether process ``pid`` (of this host) is alive, and not this process."""
+    if not isinstance(pid, int) or pid <= 0 or pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def check_not_running(run_dir: Path) -> None:
+    """A ``run_dir`` whose run.json says ``running`` for a process alive on this host is in
+    use: refused in one line naming it. A ``running`` record of a dead process (a run killed
+    outright), or of another host (a requeued cluster job), is taken over."""
+    if rank_zero_only.rank != 0:  # DDP's other processes: rank 0 holds the folder for them
+        return
+    info = read_run_json(run_dir) if run_status(run_dir) == "running" else {}
+    if info.get("host") == socket.gethostname() and _alive(info.get("pid")):
+        raise ConfigError(
+            f"run_dir {run_dir} is in use: a training started {info.get('started')} runs there "
+            f"(pid {info['pid']} on {info['host']}): wait for it to end, stop it (kill "
+            f"{info['pid']}: it saves last.ckpt, then train again there to resume), or choose "
+            "another run_dir"
+        )
+
+
 def check_run_dir(cfg: DictConfig, run_dir: Path) -> None:
-    """A ``run_dir`` holding another run's checkpoints is never trained over: only an
-    interrupted run there is resumed, from its own ``last.ckpt``."""
+    """A ``run_dir`` in use by a live training is refused (:func:`check_not_running`); one
+    holding another run's checkpoints is never trained over: only an interrupted run there is
+    resumed, from its own ``last.ckpt``."""
+    check_not_running(run_dir)
     status = run_status(run_dir) if (run_dir / RUN_JSON).exists() else None
     last = run_dir / "checkpoints" / "last.ckpt"
     if not any((run_dir / "checkpoints").glob("*.ckpt")):
