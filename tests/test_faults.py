@@ -382,6 +382,26 @@ def test_a_resume_with_nothing_left_to_train_says_so(tiny_dataset, tmp_path):
         train(config(tiny_dataset, tmp_path / "b", *SHORT, f"ckpt_path={last}"))
 
 
+# --- the run's own train.log -------------------------------------------------------------------
+
+
+def test_run_dir_gets_the_log_of_every_session(tiny_dataset, tmp_path, monkeypatch, capsys):
+    run_dir, hydra_dir = tmp_path / "run", tmp_path / "hydra"
+    args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={run_dir}", *SHORT]
+    code, line = run_main(monkeypatch, capsys, *args, f"hydra.run.dir={hydra_dir}/1",
+                          *signal_at(signal.SIGINT, 1))  # fmt: skip
+    assert code == 130 and line.endswith(f"Resume: python -m physgnn.train run_dir={run_dir} "
+                                         "(same overrides)")  # fmt: skip
+    first = (run_dir / "train.log").read_text()  # a fresh run given its folder
+    assert f"training baseline in {run_dir}\n" in first and "interrupted (stopped by" in first
+    monkeypatch.setattr(sys, "argv", ["physgnn.train", *args, f"hydra.run.dir={hydra_dir}/2"])
+    train_command.main()  # the resume command
+    log = (run_dir / "train.log").read_text()
+    assert log.startswith(first) and f"resuming from {run_dir}/checkpoints/last.ckpt" in log
+    assert log.rstrip().endswith("finished after 2 steps")
+    assert (hydra_dir / "2" / "train.log").read_text() == ""  # nothing in Hydra's own folder
+
+
 # --- a run folder in use -----------------------------------------------------------------------
 
 

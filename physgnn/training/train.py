@@ -37,6 +37,7 @@ from physgnn.training.checks import (
 )
 from physgnn.training.lit import NonFiniteLossError
 from physgnn.training.progress import RunProgress, StopOnSignal, StopTraining, save_last
+from physgnn.training.runlog import run_log
 from physgnn.training.runs import write_run_json
 
 log = logging.getLogger(__name__)
@@ -143,10 +144,15 @@ def _start(cfg: DictConfig, run_dir: Path) -> dict:
 def train(cfg: DictConfig) -> dict:
     """Train ``cfg.model`` on ``cfg.datamodule``; returns the run's summary (also run.json)."""
     _log_to_run_file()
-    L.seed_everything(cfg.seed, workers=True)
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     check_run_dir(cfg, run_dir)  # before run.json is written: the folder may be another run's
+    with run_log(run_dir):
+        return _train(cfg, run_dir)
+
+
+def _train(cfg: DictConfig, run_dir: Path) -> dict:
+    """:func:`train` in ``run_dir``, once it may train there; run.json records how it ends."""
     _keep_config(cfg, run_dir)
     info = _start(cfg, run_dir)
     progress, stop, trainer = RunProgress(), StopOnSignal(), None
@@ -156,6 +162,7 @@ def train(cfg: DictConfig) -> dict:
         _record(run_dir, info)
         log.info("training %s in %s%s", cfg.experiment_name, run_dir,
                  f", resuming from {ckpt_path}" if ckpt_path else "")  # fmt: skip
+        L.seed_everything(cfg.seed, workers=True)
         datamodule, lit, trainer = build(cfg, [progress, stop])
         resumed_step = check_checkpoint(ckpt_path, lit, cfg.get("model"))
         trainer.fit(lit, datamodule=datamodule, ckpt_path=ckpt_path)
