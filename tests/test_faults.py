@@ -29,6 +29,7 @@ from physgnn import eval as eval_command
 from physgnn import generate as generate_command
 from physgnn import simulate as simulate_command
 from physgnn import train as train_command
+from physgnn.ablation.registry import append_record, read_registry
 from physgnn.cli import command
 from physgnn.data.dataset import DATASET_MARKER
 from physgnn.errors import ConfigError, interrupt_signal, sigterm_interrupts
@@ -345,6 +346,8 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
         ("datamodule.batch_size=1.5", "datamodule.batch_size must be a whole number, got 1.5"),
         ("+model.Mx=3", "model.Mx is not an argument of LearnedSimulator (known: H, M, "),
         ("trainer.max_epochs=0", "trainer.max_epochs=0 trains nothing: give at least 1"),
+        ("lit.optimizer.lr=-1", "lit.optimizer.lr must be a number > 0, got -1 (conf/train.yaml"),
+        ("seed=-5", "seed must be a whole number from 0 to 4294967295, got -5 (conf/train.yaml"),
     ],
 )
 def test_config_mistakes_name_the_key_and_are_recorded(tiny_dataset, tmp_path, monkeypatch,
@@ -354,6 +357,40 @@ def test_config_mistakes_name_the_key_and_are_recorded(tiny_dataset, tmp_path, m
     info = read_run_json(tmp_path)  # the run folder says what went wrong ...
     assert info["status"] == "failed" and message in info["error"]
     assert message in (tmp_path / "train.log").read_text()  # ... and so does its log
+
+
+def test_physgnn_outputs_naming_a_file_is_one_line(tmp_path, monkeypatch, capsys):
+    outputs = tmp_path / "outputs"
+    outputs.write_text("not a folder")
+    monkeypatch.setenv("PHYSGNN_OUTPUTS", str(outputs))
+    code, line = run_main(monkeypatch, capsys, "data=tiny", *SHORT)
+    assert code == 2 and line == (
+        f"error: PHYSGNN_OUTPUTS={outputs} is a file: set it to a folder (physgnn writes its "
+        "data, runs and reports there), or unset it to write into ./outputs"
+    )
+    assert outputs.read_text() == "not a folder"
+
+
+@pytest.mark.parametrize(
+    "bad,problem",
+    [
+        ('{"key": "a", "seed": 0, "bud', "not a JSON line (Unterminated string starting at)"),
+        ('{"seed": 0, "budget": {}}', "not a run record (KeyError: 'key')"),
+        ("[1, 2]", "not a run record (TypeError: list indices must be integers or slices, "
+         "not str)"),
+    ],
+)  # fmt: skip
+def test_a_corrupt_registry_line_is_one_line(tmp_path, capsys, bad, problem):
+    registry = tmp_path / "registry.jsonl"
+    append_record(registry, {"key": "a", "seed": 0, "budget": {"steps": 3}, "status": "finished"})
+    registry.write_text(registry.read_text() + bad + "\n")
+    with pytest.raises(SystemExit) as exit_info:
+        command("study", lambda cfg: read_registry(registry)).__wrapped__(OmegaConf.create())
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err == (
+        f"error: {registry}:2: {problem}: repair or delete that line (one JSON record per run; a "
+        "run whose line is deleted is trained again by make study)\n"
+    )
 
 
 def test_zero_std_in_stats_names_the_file_and_key(tiny_dataset, tmp_path, monkeypatch, capsys):

@@ -24,6 +24,7 @@ HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
 # requeued cluster job; a run killed outright; a run whose restart had a config mistake); any
 # other run with checkpoints (finished, truncated, diverged, debug) is never trained over.
 RESUMABLE = ("interrupted", "running", "failed")
+MAX_SEED = 2**32 - 1
 WORDS = {int: "a whole number", float: "a number", bool: "true or false", str: "a string"}
 
 
@@ -73,6 +74,28 @@ def check_arguments(cfg: DictConfig, sections=("model", "datamodule", "lit")) ->
             value = OmegaConf.select(node, key)
             if not isinstance(value, DictConfig) and not _fits(value, hints.get(key)):
                 raise ConfigError(f"{section}.{key} must be {_words(hints[key])}, got {value!r}")
+
+
+def check_seed(seed) -> None:
+    """``seed`` is a whole number that numpy, torch and Python all take: 0 to 2³² − 1."""
+    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= MAX_SEED:
+        raise ConfigError(
+            f"seed must be a whole number from 0 to {MAX_SEED}, got {seed!r} (conf/train.yaml: "
+            "seed; e.g. seed=0)"
+        )
+
+
+def check_optimizer(lit_cfg: DictConfig | None) -> None:
+    """``lit.optimizer.lr`` is a positive number (torch's optimizers fail deep inside
+    ``fit`` otherwise)."""
+    lr = OmegaConf.select(lit_cfg, "optimizer.lr") if lit_cfg is not None else None
+    if lr is None:
+        return
+    if not isinstance(lr, int | float) or isinstance(lr, bool) or not 0 < lr < float("inf"):
+        raise ConfigError(
+            f"lit.optimizer.lr must be a number > 0, got {lr!r} (conf/train.yaml: "
+            "lit.optimizer.lr, default 1.0e-3)"
+        )
 
 
 def check_budget(trainer_cfg: DictConfig) -> None:

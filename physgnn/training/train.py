@@ -32,7 +32,9 @@ from physgnn.training.checks import (
     check_arguments,
     check_budget,
     check_checkpoint,
+    check_optimizer,
     check_run_dir,
+    check_seed,
     resume_from,
 )
 from physgnn.training.lit import NonFiniteLossError
@@ -71,6 +73,7 @@ def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
 def build(cfg: DictConfig, extra_callbacks=()):
     """``(datamodule, LitSimulator, trainer)`` of a composed training config."""
     check_arguments(cfg)
+    check_optimizer(cfg.get("lit"))
     datamodule = instantiate(cfg.datamodule)
     simulator = instantiate(cfg.model, stats=datamodule.stats())
     simulator.effects_trained.copy_(datamodule.effects_trained())
@@ -130,7 +133,7 @@ def _start(cfg: DictConfig, run_dir: Path) -> dict:
         "status": "running",
         "experiment": cfg.experiment_name,
         "overrides": _overrides(),
-        "seed": int(cfg.seed),
+        "seed": cfg.seed,
         "run_dir": str(run_dir),
         "resumed_from": None,
         "started": datetime.now().isoformat(timespec="seconds"),
@@ -162,6 +165,7 @@ def _train(cfg: DictConfig, run_dir: Path) -> dict:
         _record(run_dir, info)
         log.info("training %s in %s%s", cfg.experiment_name, run_dir,
                  f", resuming from {ckpt_path}" if ckpt_path else "")  # fmt: skip
+        check_seed(cfg.seed)
         L.seed_everything(cfg.seed, workers=True)
         datamodule, lit, trainer = build(cfg, [progress, stop])
         resumed_step = check_checkpoint(ckpt_path, lit, cfg.get("model"))
