@@ -1,6 +1,7 @@
-"""Files written atomically (a ``<name>.tmp`` beside the target, then renamed over it), so an
-interrupted run never leaves a half file under the real name; CSV tables with typed reads;
-output folders that physgnn may write into (:func:`claim_folder`)."""
+"""Files written atomically (a ``<name>.tmp`` beside the target, flushed to disk, then renamed
+over it), so an interrupted run or a full disk never leaves a half file under the real name;
+CSV tables with typed reads; output folders that physgnn may write into (:func:`claim_folder`).
+"""
 
 from __future__ import annotations
 
