@@ -25,6 +25,7 @@ Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instea
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import sys
@@ -44,6 +45,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
 from physgnn.errors import (
+    ConfigError,
     Interrupted,
     PhysgnnError,
     interrupt_signal,
@@ -156,7 +158,35 @@ def command(
     main.__module__ = f"physgnn.{name}"
     if parse is not None:
         return _parsed(main, parse)
-    return hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main)
+    return _outputs_checked(
+        hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main)
+    )
+
+
+def check_outputs_env() -> None:
+    """``PHYSGNN_OUTPUTS``, where set, is not a file: Hydra makes its output folder under it
+    before any command runs, and would fail with a traceback."""
+    outputs = os.environ.get("PHYSGNN_OUTPUTS")
+    if outputs and os.path.exists(outputs) and not os.path.isdir(outputs):
+        raise ConfigError(
+            f"PHYSGNN_OUTPUTS={outputs} is a file: set it to a folder (physgnn writes its data, "
+            "runs and reports there), or unset it to write into ./outputs"
+        )
+
+
+def _outputs_checked(hydra_main: Callable) -> Callable:
+    """``hydra_main`` after :func:`check_outputs_env` (its error printed as one line)."""
+
+    @functools.wraps(hydra_main)
+    def main(*args, **kwargs):
+        try:
+            check_outputs_env()
+        except ConfigError as err:
+            fail(err)
+        return hydra_main(*args, **kwargs)
+
+    main.__wrapped__ = hydra_main.__wrapped__  # the body, as documented in :func:`command`
+    return main
 
 
 def compose_config(name: str, overrides: list[str] | None = None) -> DictConfig:

@@ -1,6 +1,7 @@
-"""Files written atomically (a ``<name>.tmp`` beside the target, then renamed over it), so an
-interrupted run never leaves a half file under the real name; CSV tables with typed reads;
-output folders that physgnn may write into (:func:`claim_folder`)."""
+"""Files written atomically (a ``<name>.tmp`` beside the target, flushed to disk, then renamed
+over it), so an interrupted run or a full disk never leaves a half file under the real name;
+CSV tables with typed reads; output folders that physgnn may write into (:func:`claim_folder`).
+"""
 
 from __future__ import annotations
 
@@ -21,18 +22,30 @@ OUTPUT_MARKER = "physgnn-output.json"
 
 @contextmanager
 def atomic_path(path: str | Path, keep_suffix: bool = False) -> Iterator[Path]:
-    """Yield ``<path>.tmp`` to write; on success it replaces ``path`` (folders are made),
-    on an error it is removed and ``path`` is left as it was. ``keep_suffix``:
-    ``<stem>.tmp<suffix>`` instead, for writers that choose the format by the suffix."""
+    """Yield ``<path>.tmp`` to write; on success it is flushed to disk and replaces ``path``
+    (folders are made), on an error (a full disk included) it is removed and ``path`` is left
+    as it was. ``keep_suffix``: ``<stem>.tmp<suffix>`` instead, for writers that choose the
+    format by the suffix."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     name = f"{path.stem}.tmp{path.suffix}" if keep_suffix else path.name + ".tmp"
     tmp = path.with_name(name)
     try:
         yield tmp
+        _sync(tmp)
         os.replace(tmp, path)
+        _sync(path.parent)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def _sync(path: Path) -> None:
+    """Flush ``path`` (a file, or a folder's entries) to disk."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def write_text(path: str | Path, text: str) -> Path:

@@ -5,10 +5,12 @@ run is a state that resumes, and one failing job never stops a sweep."""
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -27,6 +29,7 @@ from physgnn import eval as eval_command
 from physgnn import generate as generate_command
 from physgnn import simulate as simulate_command
 from physgnn import train as train_command
+from physgnn.ablation.registry import append_record, read_registry
 from physgnn.cli import command
 from physgnn.data.dataset import DATASET_MARKER
 from physgnn.errors import ConfigError, interrupt_signal, sigterm_interrupts
@@ -343,6 +346,8 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
         ("datamodule.batch_size=1.5", "datamodule.batch_size must be a whole number, got 1.5"),
         ("+model.Mx=3", "model.Mx is not an argument of LearnedSimulator (known: H, M, "),
         ("trainer.max_epochs=0", "trainer.max_epochs=0 trains nothing: give at least 1"),
+        ("lit.optimizer.lr=-1", "lit.optimizer.lr must be a number > 0, got -1 (conf/train.yaml"),
+        ("seed=-5", "seed must be a whole number from 0 to 4294967295, got -5 (conf/train.yaml"),
     ],
 )
 def test_config_mistakes_name_the_key_and_are_recorded(tiny_dataset, tmp_path, monkeypatch,
@@ -352,6 +357,40 @@ def test_config_mistakes_name_the_key_and_are_recorded(tiny_dataset, tmp_path, m
     info = read_run_json(tmp_path)  # the run folder says what went wrong ...
     assert info["status"] == "failed" and message in info["error"]
     assert message in (tmp_path / "train.log").read_text()  # ... and so does its log
+
+
+def test_physgnn_outputs_naming_a_file_is_one_line(tmp_path, monkeypatch, capsys):
+    outputs = tmp_path / "outputs"
+    outputs.write_text("not a folder")
+    monkeypatch.setenv("PHYSGNN_OUTPUTS", str(outputs))
+    code, line = run_main(monkeypatch, capsys, "data=tiny", *SHORT)
+    assert code == 2 and line == (
+        f"error: PHYSGNN_OUTPUTS={outputs} is a file: set it to a folder (physgnn writes its "
+        "data, runs and reports there), or unset it to write into ./outputs"
+    )
+    assert outputs.read_text() == "not a folder"
+
+
+@pytest.mark.parametrize(
+    "bad,problem",
+    [
+        ('{"key": "a", "seed": 0, "bud', "not a JSON line (Unterminated string starting at)"),
+        ('{"seed": 0, "budget": {}}', "not a run record (KeyError: 'key')"),
+        ("[1, 2]", "not a run record (TypeError: list indices must be integers or slices, "
+         "not str)"),
+    ],
+)  # fmt: skip
+def test_a_corrupt_registry_line_is_one_line(tmp_path, capsys, bad, problem):
+    registry = tmp_path / "registry.jsonl"
+    append_record(registry, {"key": "a", "seed": 0, "budget": {"steps": 3}, "status": "finished"})
+    registry.write_text(registry.read_text() + bad + "\n")
+    with pytest.raises(SystemExit) as exit_info:
+        command("study", lambda cfg: read_registry(registry)).__wrapped__(OmegaConf.create())
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err == (
+        f"error: {registry}:2: {problem}: repair or delete that line (one JSON record per run; a "
+        "run whose line is deleted is trained again by make study)\n"
+    )
 
 
 def test_zero_std_in_stats_names_the_file_and_key(tiny_dataset, tmp_path, monkeypatch, capsys):
@@ -378,6 +417,89 @@ def test_a_resume_with_nothing_left_to_train_says_so(tiny_dataset, tmp_path):
     last = first["checkpoints"]["last"]
     with pytest.raises(ConfigError, match="nothing to train: .* trainer.max_epochs=1 \\(step 2\\)"):
         train(config(tiny_dataset, tmp_path / "b", *SHORT, f"ckpt_path={last}"))
+
+
+# --- the run's own train.log -------------------------------------------------------------------
+
+
+def test_run_dir_gets_the_log_of_every_session(tiny_dataset, tmp_path, monkeypatch, capsys):
+    run_dir, hydra_dir = tmp_path / "run", tmp_path / "hydra"
+    args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={run_dir}", *SHORT]
+    code, line = run_main(monkeypatch, capsys, *args, f"hydra.run.dir={hydra_dir}/1",
+                          *signal_at(signal.SIGINT, 1))  # fmt: skip
+    assert code == 130 and line.endswith(f"Resume: python -m physgnn.train run_dir={run_dir} "
+                                         "(same overrides)")  # fmt: skip
+    first = (run_dir / "train.log").read_text()  # a fresh run given its folder
+    assert f"training baseline in {run_dir}\n" in first and "interrupted (stopped by" in first
+    monkeypatch.setattr(sys, "argv", ["physgnn.train", *args, f"hydra.run.dir={hydra_dir}/2"])
+    train_command.main()  # the resume command
+    log = (run_dir / "train.log").read_text()
+    assert log.startswith(first) and f"resuming from {run_dir}/checkpoints/last.ckpt" in log
+    assert log.rstrip().endswith("finished after 2 steps")
+    assert (hydra_dir / "2" / "train.log").read_text() == ""  # nothing in Hydra's own folder
+
+
+# --- a run folder in use -----------------------------------------------------------------------
+
+
+def running_record(run_dir: Path, pid: int) -> dict:
+    info = {"status": "running", "pid": pid, "host": socket.gethostname(),
+            "started": "2026-01-02T03:04:05"}  # fmt: skip
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "run.json").write_text(json.dumps(info))
+    return info
+
+
+def test_a_run_folder_in_use_is_refused_in_one_line(tiny_dataset, tmp_path, monkeypatch, capsys):
+    run_dir = tmp_path / "run"
+    holder = subprocess.Popen(["sleep", "60"])
+    try:
+        info = running_record(run_dir, holder.pid)
+        args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={run_dir}"]
+        code, line = run_main(monkeypatch, capsys, *args, f"hydra.run.dir={tmp_path / 'h'}")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert code == 2 and line == (
+        f"error: run_dir {run_dir} is in use: a training started 2026-01-02T03:04:05 runs "
+        f"there (pid {holder.pid} on {info['host']}): wait for it to end, stop it (kill "
+        f"{holder.pid}: it saves last.ckpt, then train again there to resume), or choose "
+        "another run_dir"
+    )
+    assert read_run_json(run_dir) == info and sorted(p.name for p in run_dir.iterdir()) == [
+        "run.json"
+    ]
+
+
+def test_a_running_record_of_a_dead_process_is_taken_over(tiny_dataset, tmp_path):
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    running_record(tmp_path, dead.pid)
+    assert train(config(tiny_dataset, tmp_path, *SHORT))["status"] == "finished"
+
+
+# --- a full disk ------------------------------------------------------------------------------
+
+
+def test_a_full_disk_keeps_the_last_good_checkpoint_and_says_failed(tiny_dataset, tmp_path,
+                                                                    monkeypatch):  # fmt: skip
+    save = torch.save
+
+    def full_disk(obj, f, *args, **kwargs):
+        """The epoch-2 save to a file writes half of it, then the disk is full."""
+        if isinstance(f, str | Path) and obj.get("global_step", 0) > 2:
+            Path(f).write_bytes(b"half a checkpoint")
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return save(obj, f, *args, **kwargs)
+
+    monkeypatch.setattr(torch, "save", full_disk)
+    with pytest.raises(OSError, match="No space left on device"):
+        train(config(tiny_dataset, tmp_path, *SHORT, "trainer.max_epochs=2"))
+    assert torch.load(tmp_path / "checkpoints" / "last.ckpt", weights_only=True)["global_step"] == 2
+    assert sorted(p.name for p in (tmp_path / "checkpoints").iterdir())[-1] == "last.ckpt"
+    assert not list(tmp_path.rglob("*.tmp*"))
+    info = read_run_json(tmp_path)
+    assert info["status"] == "failed" and "No space left on device" in info["error"]
 
 
 # --- killed in a subprocess ----------------------------------------------------------------------

@@ -13,9 +13,15 @@ import json
 import os
 from pathlib import Path
 
+from physgnn.errors import PhysgnnError
+
 # Statuses of a run whose result is in: trained to the budget (or stopped by the clock guard,
 # ``truncated``) and measured, or exploded in training (``diverged``: a result too).
 DONE = ("finished", "truncated", "diverged")
+
+
+class RegistryError(PhysgnnError, ValueError):
+    """A registry line that is not a run's record (one line naming the file and the line)."""
 
 
 def read_registry(path: str | Path) -> list[dict]:
@@ -25,14 +31,27 @@ def read_registry(path: str | Path) -> list[dict]:
         return []
     latest: dict[tuple, dict] = {}
     for n, line in enumerate(path.read_text().splitlines(), 1):
-        if not line.strip():
-            continue
-        try:
-            record = json.loads(line)
-        except json.JSONDecodeError as err:
-            raise ValueError(f"{path}:{n}: not a JSON line ({err.msg})") from err
-        latest[record_id(record)] = record
+        if line.strip():
+            record = _record(line, f"{path}:{n}")
+            latest[record_id(record)] = record
     return list(latest.values())
+
+
+def _record(line: str, where: str) -> dict:
+    """One line of the registry read as a record, else :class:`RegistryError` naming it."""
+    try:
+        record = json.loads(line)
+        record_id(record)
+    except json.JSONDecodeError as err:
+        problem = f"not a JSON line ({err.msg})"
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
+        problem = f"not a run record ({type(err).__name__}: {err})"
+    else:
+        return record
+    raise RegistryError(
+        f"{where}: {problem}: repair or delete that line (one JSON record per run; a run whose "
+        "line is deleted is trained again by make study)"
+    )
 
 
 def record_id(record: dict) -> tuple:

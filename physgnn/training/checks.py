@@ -5,22 +5,26 @@ feed, the step budget, the checkpoint to resume from and whether it fits the mod
 from __future__ import annotations
 
 import inspect
+import os
+import socket
 import types
 import typing
 from pathlib import Path
 
 import torch
 from hydra.utils import get_class
+from lightning.pytorch.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
-from physgnn.training.runs import RUN_JSON, run_status
+from physgnn.training.runs import RUN_JSON, read_run_json, run_status
 
 HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
 # A run folder in one of these states is resumed from its last.ckpt when trained again (a
 # requeued cluster job; a run killed outright; a run whose restart had a config mistake); any
 # other run with checkpoints (finished, truncated, diverged, debug) is never trained over.
 RESUMABLE = ("interrupted", "running", "failed")
+MAX_SEED = 2**32 - 1
 WORDS = {int: "a whole number", float: "a number", bool: "true or false", str: "a string"}
 
 
@@ -72,6 +76,28 @@ def check_arguments(cfg: DictConfig, sections=("model", "datamodule", "lit")) ->
                 raise ConfigError(f"{section}.{key} must be {_words(hints[key])}, got {value!r}")
 
 
+def check_seed(seed) -> None:
+    """``seed`` is a whole number that numpy, torch and Python all take: 0 to 2³² − 1."""
+    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= MAX_SEED:
+        raise ConfigError(
+            f"seed must be a whole number from 0 to {MAX_SEED}, got {seed!r} (conf/train.yaml: "
+            "seed; e.g. seed=0)"
+        )
+
+
+def check_optimizer(lit_cfg: DictConfig | None) -> None:
+    """``lit.optimizer.lr`` is a positive number (torch's optimizers fail deep inside
+    ``fit`` otherwise)."""
+    lr = OmegaConf.select(lit_cfg, "optimizer.lr") if lit_cfg is not None else None
+    if lr is None:
+        return
+    if not isinstance(lr, int | float) or isinstance(lr, bool) or not 0 < lr < float("inf"):
+        raise ConfigError(
+            f"lit.optimizer.lr must be a number > 0, got {lr!r} (conf/train.yaml: "
+            "lit.optimizer.lr, default 1.0e-3)"
+        )
+
+
 def check_budget(trainer_cfg: DictConfig) -> None:
     """``trainer.max_epochs`` and ``trainer.max_steps`` train something: >= 1, or -1 (no
     limit) or null."""
@@ -83,9 +109,40 @@ def check_budget(trainer_cfg: DictConfig) -> None:
             )
 
 
+def _alive(pid) -> bool:
+    """Whether process ``pid`` (of this host) is alive, and not this process."""
+    if not isinstance(pid, int) or pid <= 0 or pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def check_not_running(run_dir: Path) -> None:
+    """A ``run_dir`` whose run.json says ``running`` for a process alive on this host is in
+    use: refused in one line naming it. A ``running`` record of a dead process (a run killed
+    outright), or of another host (a requeued cluster job), is taken over."""
+    if rank_zero_only.rank != 0:  # DDP's other processes: rank 0 holds the folder for them
+        return
+    info = read_run_json(run_dir) if run_status(run_dir) == "running" else {}
+    if info.get("host") == socket.gethostname() and _alive(info.get("pid")):
+        raise ConfigError(
+            f"run_dir {run_dir} is in use: a training started {info.get('started')} runs there "
+            f"(pid {info['pid']} on {info['host']}): wait for it to end, stop it (kill "
+            f"{info['pid']}: it saves last.ckpt, then train again there to resume), or choose "
+            "another run_dir"
+        )
+
+
 def check_run_dir(cfg: DictConfig, run_dir: Path) -> None:
-    """A ``run_dir`` holding another run's checkpoints is never trained over: only an
-    interrupted run there is resumed, from its own ``last.ckpt``."""
+    """A ``run_dir`` in use by a live training is refused (:func:`check_not_running`); one
+    holding another run's checkpoints is never trained over: only an interrupted run there is
+    resumed, from its own ``last.ckpt``."""
+    check_not_running(run_dir)
     status = run_status(run_dir) if (run_dir / RUN_JSON).exists() else None
     last = run_dir / "checkpoints" / "last.ckpt"
     if not any((run_dir / "checkpoints").glob("*.ckpt")):

@@ -27,15 +27,19 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError, Interrupted, one_line, signal_name
 from physgnn.files import write_text
+from physgnn.training.checkpoint_io import AtomicCheckpointIO
 from physgnn.training.checks import (
     check_arguments,
     check_budget,
     check_checkpoint,
+    check_optimizer,
     check_run_dir,
+    check_seed,
     resume_from,
 )
 from physgnn.training.lit import NonFiniteLossError
 from physgnn.training.progress import RunProgress, StopOnSignal, StopTraining, save_last
+from physgnn.training.runlog import run_log
 from physgnn.training.runs import write_run_json
 
 log = logging.getLogger(__name__)
@@ -61,13 +65,15 @@ def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
     logger = instantiate(cfg.logger) if cfg.get("logger") else False
     root = str(cfg.run_dir)
     # The data module shares the pairs out between DDP processes itself (EpochSampler)
+    # Checkpoints go through a temporary file and a rename (checkpoint_io.py)
     return instantiate(cfg.trainer, callbacks=callbacks, logger=logger, default_root_dir=root,
-                       use_distributed_sampler=False)  # fmt: skip
+                       use_distributed_sampler=False, plugins=[AtomicCheckpointIO()])  # fmt: skip
 
 
 def build(cfg: DictConfig, extra_callbacks=()):
     """``(datamodule, LitSimulator, trainer)`` of a composed training config."""
     check_arguments(cfg)
+    check_optimizer(cfg.get("lit"))
     datamodule = instantiate(cfg.datamodule)
     simulator = instantiate(cfg.model, stats=datamodule.stats())
     simulator.effects_trained.copy_(datamodule.effects_trained())
@@ -127,7 +133,7 @@ def _start(cfg: DictConfig, run_dir: Path) -> dict:
         "status": "running",
         "experiment": cfg.experiment_name,
         "overrides": _overrides(),
-        "seed": int(cfg.seed),
+        "seed": cfg.seed,
         "run_dir": str(run_dir),
         "resumed_from": None,
         "started": datetime.now().isoformat(timespec="seconds"),
@@ -141,10 +147,15 @@ def _start(cfg: DictConfig, run_dir: Path) -> dict:
 def train(cfg: DictConfig) -> dict:
     """Train ``cfg.model`` on ``cfg.datamodule``; returns the run's summary (also run.json)."""
     _log_to_run_file()
-    L.seed_everything(cfg.seed, workers=True)
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     check_run_dir(cfg, run_dir)  # before run.json is written: the folder may be another run's
+    with run_log(run_dir):
+        return _train(cfg, run_dir)
+
+
+def _train(cfg: DictConfig, run_dir: Path) -> dict:
+    """:func:`train` in ``run_dir``, once it may train there; run.json records how it ends."""
     _keep_config(cfg, run_dir)
     info = _start(cfg, run_dir)
     progress, stop, trainer = RunProgress(), StopOnSignal(), None
@@ -154,6 +165,8 @@ def train(cfg: DictConfig) -> dict:
         _record(run_dir, info)
         log.info("training %s in %s%s", cfg.experiment_name, run_dir,
                  f", resuming from {ckpt_path}" if ckpt_path else "")  # fmt: skip
+        check_seed(cfg.seed)
+        L.seed_everything(cfg.seed, workers=True)
         datamodule, lit, trainer = build(cfg, [progress, stop])
         resumed_step = check_checkpoint(ckpt_path, lit, cfg.get("model"))
         trainer.fit(lit, datamodule=datamodule, ckpt_path=ckpt_path)
@@ -222,7 +235,10 @@ def _stopped(err: BaseException, run_dir: Path, info: dict, stop: StopOnSignal):
     else:
         info.update(status="failed", error=f"{type(err).__name__}: {one_line(err)}")
         outcome = err
-    _record(run_dir, info)
+    try:
+        _record(run_dir, info)
+    except OSError as record_err:  # a full disk: the error that stopped the run comes first
+        log.error("run %s: run.json could not be written (%s)", run_dir, record_err)
     log.error("run %s: %s (%s)", run_dir, info["status"], info["error"])
     if isinstance(err, StopTraining):
         stop.chain()  # a scheduler's pre-emption handler: it requeues the job and exits
