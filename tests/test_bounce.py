@@ -70,3 +70,11 @@ def test_bounce_section_and_csv_round_trip(tmp_path):
     text = bounce.section(back)
     assert "0.96" in text and "`a`" in text
     assert "No bounce" in bounce.section([])
+
+
+def test_no_bounce_is_nan():
+    pred = Trajectory.__new__(Trajectory)
+    pred.pos = np.zeros((5, 1, 3))
+    pred.pos[:, 0, 2] = [5.0, 4.0, 3.0, 2.0, 1.0]
+    pred.vel = np.full((5, 1, 3), -10.0)
+    assert np.isnan(_first_apex(pred, 0.5, 0.1))

@@ -57,5 +57,7 @@ def _first_apex(pred, radius: float, dt: float) -> float:
     """Height of the sphere's bottom at the apex after its first bounce (NaN: none)."""
     z = np.asarray(pred.pos[:, 0, 2], np.float64) - radius
     vz = np.asarray(pred.vel[:, 0, 2], np.float64)
+    if not ((vz[:-1] <= 0) & (vz[1:] > 0)).any():  # never moved up again: no bounce
+        return float("nan")
     apex = apex_heights(z, vz, dt)
     return float(apex[0]) if apex.size else float("nan")
