@@ -48,6 +48,16 @@ def _sync(path: Path) -> None:
         os.close(fd)
 
 
+def portable(path: str | Path) -> str:
+    """``path`` as committed files show it: relative to the working folder when it lies below
+    it (``outputs/study/...``, not a machine's absolute path), else unchanged."""
+    path = Path(path)
+    try:
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
 def write_text(path: str | Path, text: str) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text)

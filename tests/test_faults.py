@@ -36,7 +36,7 @@ from physgnn.errors import ConfigError, interrupt_signal, sigterm_interrupts
 from physgnn.evaluation.data_report import DataReportError, data_report
 from physgnn.evaluation.evaluate import evaluate
 from physgnn.evaluation.runs import EvalError, find_runs, load_runs
-from physgnn.files import OUTPUT_MARKER
+from physgnn.files import OUTPUT_MARKER, portable
 from physgnn.training.progress import StopOnSignal
 from physgnn.training.runs import read_run_json
 from physgnn.training.train import TrainingInterrupted, train
@@ -622,3 +622,10 @@ def test_sigterm_is_an_interrupt_where_nobody_handles_it():
         time.sleep(1)  # the handler runs before this returns
     assert interrupt_signal(stopped.value) == signal.SIGTERM
     assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+
+
+def test_paths_in_committed_files_are_relative_to_the_working_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert portable(tmp_path / "outputs" / "study" / "seed0") == "outputs/study/seed0"
+    assert portable("outputs/study") == "outputs/study"
+    assert portable("/elsewhere/study") == "/elsewhere/study"  # not below it: unchanged

@@ -22,7 +22,7 @@ from physgnn.ablation.figures import plot_study_fps, plot_study_sweep
 from physgnn.ablation.jobs import Config
 from physgnn.ablation.registry import DONE, budget_id
 from physgnn.ablation.verdicts import table2
-from physgnn.files import write_text
+from physgnn.files import portable, write_text
 from physgnn.report.format import fmt, md_table
 
 FIGURE_SWEEPS = {  # sweep → (figure title, metrics)
@@ -209,7 +209,7 @@ def _footer(out: Path, cfg) -> str:
              "physgnn.study; --dry-run lists the jobs and the time they will take", "```", "",
              "A clean checkout has this registry, so `make study` trains nothing and rewrites "
              "this page; to run the study again from scratch, move `registry.jsonl` away "
-             f"(runs train under `{cfg.runs_dir}`)."]  # fmt: skip
+             f"(runs train under `{portable(cfg.runs_dir)}`)."]  # fmt: skip
     if (out / "discussion.md").exists():
         lines += ["", "The discussion of these results: [discussion.md](discussion.md)."]
     return "\n".join(lines)

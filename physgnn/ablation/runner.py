@@ -21,6 +21,7 @@ import torch
 from physgnn.ablation.measure import measure_run
 from physgnn.benchmark.machine import cpu_name
 from physgnn.errors import one_line
+from physgnn.files import portable
 from physgnn.training.runs import read_run_json
 
 TRAINED = ("finished", "truncated")
@@ -110,7 +111,7 @@ def run_job(spec: dict) -> dict:
         "commit": spec.get("commit"),
         "date": datetime.now(UTC).strftime("%Y-%m-%d %H:%M"),
         "horizon": spec["horizon"],
-        "run_dir": str(run_dir),
+        "run_dir": portable(run_dir),
     }
     if status in TRAINED:
         record["logged"] = last_logged(run_dir)
@@ -129,7 +130,7 @@ def lost_job(spec: dict, err: BaseException) -> dict:
     return {
         "key": spec["key"], "overrides": spec["overrides"], "seed": spec["seed"],
         "budget": spec["budget"], "status": "failed", "reason": f"job lost: {one_line(err)}",
-        "run_dir": spec["run_dir"], "commit": spec.get("commit"),
+        "run_dir": portable(spec["run_dir"]), "commit": spec.get("commit"),
     }  # fmt: skip
 
 
