@@ -55,12 +55,14 @@ class Graph:
       sorted by (plane, sphere).
     - ``ps_attr [F, 10]``: ``[v_i, n_s, clip(δ_is), clip(h_is)]``: ``δ_is`` the offset from the
       closest point of plane s to sphere i, ``h_is = δ_is·n_s`` (signed), clipped at ``ρ_i``.
+    - ``allowance [N]`` (float64): the motion allowance ``a_i`` the edges were chosen with.
     """
 
     pp_index: torch.Tensor
     pp_attr: torch.Tensor
     ps_index: torch.Tensor
     ps_attr: torch.Tensor
+    allowance: torch.Tensor
 
     @property
     def num_pairs(self) -> int:
@@ -111,7 +113,7 @@ class GraphBuilder:
         allowance = self.allowance(state)
         pp_index, pp_attr = self._pp_edges(state, batch, allowance)
         ps_index, ps_attr = self._ps_edges(state, batch, allowance)
-        return Graph(pp_index, pp_attr, ps_index, ps_attr)
+        return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance)
 
     def allowance(self, state, moving: torch.Tensor | None = None) -> torch.Tensor:
         """Motion allowance ``a_i`` of every sphere, float64 ``[N]``; ``moving [N]`` (bool):

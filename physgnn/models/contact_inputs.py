@@ -77,14 +77,14 @@ def in_reach(state, graph, builder) -> torch.Tensor:
     """``[N]`` bool: spheres that may touch something before the next frame or touched
     something during the last one (module doc): a pp edge, a wall / static ps edge, the ground
     within ``a_i + ε + g·dt²``, or :func:`recent_contact`. ``builder`` is
-    the :class:`~physgnn.graph.builder.GraphBuilder` that built ``graph``."""
+    the :class:`~physgnn.graph.builder.GraphBuilder` that built ``graph`` (its ε)."""
     n = state.pos.shape[0]
     touched = state.pos.new_zeros(n)
     touched.index_add_(0, graph.pp_index[1], state.pos.new_ones(graph.pp_index.shape[1]))
     plane, sphere = graph.ps_index
     bounded = state.plane_kind[plane] != GROUND
     dt = state.scene_dt[sphere]
-    limit = builder.allowance(state)[sphere] + builder.epsilon
+    limit = graph.allowance[sphere] + builder.epsilon
     # the edge features' heights are clipped: the clearance from the geometry itself
     depth = edge_plane_depth(
         state.pos, state.radius, state.planes, state.plane_kind, graph.ps_index

@@ -151,6 +151,11 @@ class LearnedSimulator(nn.Module):
         """σ_v of the contact features: the RMS of the three velocity stds (m/s)."""
         return self.vel_std.square().mean().sqrt()
 
+    @property
+    def delta_speed_scale(self) -> torch.Tensor:
+        """σ_Δv of the contact penalty: the RMS of the three velocity-change stds (m/s)."""
+        return self.delta_vel_std.square().mean().sqrt()
+
     @staticmethod
     def stats_from_state_dict(state_dict: dict, prefix: str = "") -> dict:
         """The ``stats`` dict stored in a checkpoint's buffers (to rebuild the simulator)."""
@@ -249,22 +254,21 @@ class LearnedSimulator(nn.Module):
         return torch.cat([dvel, dang], 1)
 
     def to_physical(
-        self, state, pred: torch.Tensor, graph=None
+        self, state, pred: torch.Tensor, reach: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Normalised output ``[N, 6]`` → ``(v_{t+1} [N, 3], ω_{t+1} [N, 3])``; spheres of a
-        scene without rotation keep ``ω_t``. With ``gravity_prior`` (needs the ``graph`` the
-        prediction was made on) spheres out of reach of any contact fly ballistically."""
+        scene without rotation keep ``ω_t``. With ``gravity_prior``, spheres outside
+        ``reach [N]`` (:meth:`in_reach` of the prediction's graph) fly ballistically."""
         vel_next = state.vel[:, 0] + pred[:, :3] * self.delta_vel_std + self.delta_vel_mean
         angvel_next = (
             state.angvel[:, 0] + pred[:, 3:] * self.delta_angvel_std + self.delta_angvel_mean
         )
         if self.gravity_prior:
-            if graph is None:
-                raise ValueError("gravity_prior needs the graph of the prediction")
-            reach = self.in_reach(state, graph)[:, None]
+            if reach is None:
+                raise ValueError("gravity_prior needs the spheres in reach of a contact")
             vel_free, angvel_free = contact_inputs.free_flight(state)
-            vel_next = torch.where(reach, vel_next, vel_free)
-            angvel_next = torch.where(reach, angvel_next, angvel_free)
+            vel_next = torch.where(reach[:, None], vel_next, vel_free)
+            angvel_next = torch.where(reach[:, None], angvel_next, angvel_free)
         angvel_next = torch.where(self.rotating(state)[:, None], angvel_next, state.angvel[:, 0])
         return vel_next, angvel_next
 
@@ -277,7 +281,8 @@ class LearnedSimulator(nn.Module):
         """``(vel_next [N, 3], angvel_next [N, 3], graph)``: :meth:`forward` and the graph it
         was computed on (for a constraint stage, :mod:`physgnn.models.constrained`)."""
         pred, graph = self.normalized_prediction(state)
-        return (*self.to_physical(state, pred, graph), graph)
+        reach = self.in_reach(state, graph) if self.gravity_prior else None
+        return (*self.to_physical(state, pred, reach), graph)
 
 
 def _check_sizes(H: int, M: int, boundary_radius: float) -> None:

@@ -90,12 +90,10 @@ def _plane_distance(
     height along the normal over the rectangle (the ground: everywhere), else the distance to
     the rectangle and the unit direction from it to the point."""
     normal = planes[:, 3:6]
-    offset = rectangle_offset(points, planes).to(points.dtype)
+    offset = rectangle_offset(points, planes).to(points.dtype)  # the ground: along its normal
     height = (offset * normal).sum(1)
     beside = offset - height[:, None] * normal
     over = (kind == GROUND) | (beside.norm(dim=1) <= 1e-6)
-    ground_height = ((points - planes[:, 0:3]) * normal).sum(1)
-    height = torch.where(kind == GROUND, ground_height, height)
     length = offset.norm(dim=1)
     dist = torch.where(over, height, length)
     direction = torch.where(over[:, None], normal, offset / length.clamp_min(1e-12)[:, None])

@@ -54,11 +54,23 @@ def plane_depth(
     """
     p, r, plane = pos.to(torch.float64), radius.to(torch.float64), plane.to(torch.float64)
     if kind == GROUND:
-        return r - ((p - plane[0:3]) * plane[3:6]).sum(-1)
-    offset = rectangle_offset(p, plane)
-    height = (offset * plane[3:6]).sum(-1)
+        return _half_space_depth(p, r, plane)
+    return _rectangle_depth(p, r, plane, 1e-12)
+
+
+def _half_space_depth(p: torch.Tensor, r: torch.Tensor, plane: torch.Tensor) -> torch.Tensor:
+    """``r − (p − c)·n``, broadcast: p ``[..., 3]``, r ``[...]``, plane ``[..., 11]``."""
+    return r - ((p - plane[..., 0:3]) * plane[..., 3:6]).sum(-1)
+
+
+def _rectangle_depth(p: torch.Tensor, r: torch.Tensor, plane: torch.Tensor, tol: float):
+    """The depth into a one-sided rectangle of :func:`plane_depth`, broadcast as
+    :func:`_half_space_depth`, in the dtype of ``p``; ``tol``: how far the distance may exceed
+    ``|h|`` for a centre behind the plane to count as over its footprint."""
+    offset = rectangle_offset(p, plane).to(p.dtype)
+    height = (offset * plane[..., 3:6]).sum(-1)
     distance = torch.linalg.vector_norm(offset, dim=-1)
-    behind = (height < 0) & (height > -r) & (distance <= -height + 1e-12)  # over the footprint
+    behind = (height < 0) & (height > -r) & (distance <= -height + tol)  # over the footprint
     return r + torch.where(behind, -height, -distance)
 
 
@@ -84,10 +96,5 @@ def edge_plane_depth(
     (row 0 plane, row 1 sphere) → ``[F]``; differentiable in ``pos``.
     """
     plane, p, r = planes[index[0]], pos[index[1]], radius[index[1]]
-    offset = rectangle_offset(p, plane).to(pos.dtype)
-    height = (offset * plane[:, 3:6]).sum(-1)
-    ground_height = ((p - plane[:, 0:3]) * plane[:, 3:6]).sum(-1)
-    distance = torch.linalg.vector_norm(offset, dim=-1)
-    behind = (height < 0) & (height > -r) & (distance <= -height + 1e-6)
-    bounded = r + torch.where(behind, -height, -distance)
-    return torch.where(plane_kind[index[0]] == GROUND, r - ground_height, bounded)
+    ground = plane_kind[index[0]] == GROUND
+    return torch.where(ground, _half_space_depth(p, r, plane), _rectangle_depth(p, r, plane, 1e-6))

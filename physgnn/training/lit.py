@@ -205,15 +205,13 @@ class LitSimulator(L.LightningModule):
         sim = self.simulator
         pred, graph = sim.normalized_prediction(state)
         target = sim.normalized_target(state)
-        counted = sim.in_reach(state, graph) if sim.gravity_prior else None
-        mse = masked_mse(pred, target, sim.rotating(state), counted)
-        vel_next, _ = sim.to_physical(state, pred, graph)
+        reach = sim.in_reach(state, graph) if sim.gravity_prior else None
+        mse = masked_mse(pred, target, sim.rotating(state), reach)
+        vel_next, _ = sim.to_physical(state, pred, reach)
         energy = energy_increase(state, vel_next).mean()
         weighted = self.lambda_energy * energy
-        contact = contact_penalty(
-            state, vel_next, graph, self.contact_tol * sim.length_scale,
-            sim.delta_vel_std.square().mean().sqrt(),
-        )  # fmt: skip
+        tol = self.contact_tol * sim.length_scale
+        contact = contact_penalty(state, vel_next, graph, tol, sim.delta_speed_scale)
         loss = mse + weighted + self.lambda_contact * contact
         share = (weighted / loss.clamp_min(1e-30)).detach()
         return {"loss": loss, "loss_mse": mse, "loss_energy": energy, "energy_share": share,
