@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch_geometric.data import Batch
 
-from physgnn.data.state import SceneState, TrajectoryFrames
+from physgnn.data.state import SceneState, TrajectoryFrames, layout_of
 from physgnn.errors import PhysgnnError
 from physgnn.models.profiling import StepTimer
 from physgnn.models.protocol import hooks_of
@@ -95,11 +95,9 @@ def rollout(
 
 
 def _history(own: int | None, history: int | None) -> int:
-    if history is not None:
-        return int(history)
-    if own is None:
+    if history is None and own is None:
         raise RolloutError("pass history=H: the simulator has no integer 'H'")
-    return own
+    return int(history) if history is not None else own
 
 
 def _check_start(traj: Trajectory, length: int, h: int) -> None:
@@ -154,7 +152,9 @@ class _Batch:
         if not states:
             self.batch = None
             return
-        b = Batch.from_data_list(states).to(self.device)
+        b = Batch.from_data_list(states)
+        b.host_sizes = layout_of(states)  # graph builds then read no size back
+        b = b.to(self.device)
         for key in _FLOAT_KEYS:
             b[key] = b[key].to(self.dtype)
         self.batch = b

@@ -44,7 +44,10 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
     out, result = quick
     data = json.loads((out / "bench.json").read_text())
     assert data == json.loads(json.dumps(result))
-    assert set(data) == {"machine", "learned", "pybullet", "training"}
+    assert set(data) == {"machine", "learned", "pybullet", "training", "gpu_readiness"}
+    assert set(data["gpu_readiness"]) == {"train_step", "rollout_frame"}
+    for counts in data["gpu_readiness"].values():
+        assert set(counts) == {"syncs", "kernels", "host_ms"}
     assert set(data["machine"]) == {"cpu", "threads", "matmul_gflops"}
     assert set(data["training"]) == {"pairs_per_s", "nodes_per_s", "share_of_matmul"}
     learned_keys = {

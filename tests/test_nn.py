@@ -358,7 +358,8 @@ def test_flops_per_step_equals_measured_flops(kwargs, pairs, no_ps):
         (lambda g: dict(g, ps_attr=g["ps_attr"][:6]), "ps_attr"),
     ],
 )
-def test_bad_graph_input_gets_one_clear_error(change, match):
+def test_bad_graph_input_gets_one_clear_error(change, match, monkeypatch):
+    monkeypatch.setenv("PHYSGNN_CHECKS", "1")  # the layout check reads back: debug only
     with pytest.raises(ValueError, match=match):
         model()(**change(graph()))
 

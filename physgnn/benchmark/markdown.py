@@ -6,7 +6,7 @@ import math
 import os
 
 from physgnn.benchmark.targets import targets
-from physgnn.benchmark.training_tables import training_sections
+from physgnn.benchmark.training_tables import gpu_readiness_section, training_sections
 from physgnn.report.format import fmt, md_table
 
 
@@ -238,6 +238,7 @@ def write_markdown(result: dict, extra: dict) -> str:
         "|z − (z0 − ½gt²)| of one sphere after 4 s (semi-implicit Euler lags by g·h·t/2).",
         accuracy_table(extra),
         *training_sections(extra),
+        *gpu_readiness_section(result),
         "## Cost follows activity",
         activity_table(extra),
         "## Speed work in the measured code",

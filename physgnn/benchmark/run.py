@@ -23,6 +23,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.benchmark import activity, machine, profile, scenes
+from physgnn.benchmark.gpu_readiness import gpu_readiness
 from physgnn.benchmark.learned import batched_rows, learned_rows
 from physgnn.benchmark.markdown import write_markdown
 from physgnn.benchmark.pybullet import accuracy_sweep, pybullet_rows, pybullet_runs
@@ -57,6 +58,10 @@ def bench(cfg: DictConfig) -> dict:
         "pybullet": pybullet_rows(cfg, m["runs"], m["pybullet_accuracy"]),
         "training": {
             k: m["training"][k] for k in ("pairs_per_s", "nodes_per_s", "share_of_matmul")
+        },
+        "gpu_readiness": {
+            part: {k: v for k, v in counts.items() if k != "where"}
+            for part, counts in m["gpu_readiness"].items()
         },
     }
     extra = {
@@ -93,6 +98,8 @@ def measure(cfg: DictConfig, rng: np.random.Generator, matmul: float, phases: di
     m["activity"] = timed("activity", activity.activity_rows, cfg, runs, stats, rng)
     m["rollout"] = timed("rollout", activity.rollout_rows, cfg, runs, stats)
     m["batched"] = timed("batched", batched_rows, cfg, runs, stats)
+    moving = runs[cfg.gpu_readiness.rollout_size]["traj"]
+    m["gpu_readiness"] = timed("gpu readiness", gpu_readiness, cfg, train_trajs, stats, moving)
     return m
 
 

@@ -64,3 +64,23 @@ def training_sections(extra: dict) -> list[str]:
         "backward), the push-forward graphs' once.",
         profile_table(extra),
     ]
+
+
+def gpu_readiness_section(result: dict) -> list[str]:
+    """Syncs, kernels and host ms of a training step and a rollout frame, with the title."""
+    g = result.get("gpu_readiness")
+    if not g:
+        return []
+    body = [
+        [part.replace("_", " "), f"{c['syncs']:.1f}", f"{c['kernels']:.0f}", f"{c['host_ms']:.1f}"]
+        for part, c in g.items()
+    ]
+    return [
+        "## What would make a GPU wait (counted on this machine)",
+        "Per training step (the default recipe through Lightning, push-forward drawn each step: "
+        "the most of the steps counted) and per rollout frame: host round trips a GPU would "
+        "wait for (syncs), aten ops (about one kernel each) and host ms with a network of "
+        "hidden size 4, torch neighbour backend (physgnn/benchmark/gpu_readiness.py; the "
+        "source lines of the syncs are in bench_extra.json).",
+        md_table(["", "syncs", "kernels", "host ms"], body),
+    ]

@@ -97,7 +97,10 @@ class PairDataset(Dataset):
         if self.future > 0:
             ahead = base + (frame + 1 + torch.arange(self.future + 1)) * n  # [N, K+1]
             fields["future_pos"], fields["future_angvel"] = tab["pos"][ahead], tab["angvel"][ahead]
-        return Batch(_base_cls=SceneState, **fields, batch=node_graph, ptr=ptr)
+        batch = Batch(_base_cls=SceneState, **fields, batch=node_graph, ptr=ptr)
+        # the layout, read here on the host, saves each graph build a read-back from the device
+        batch.host_sizes = tuple(self.n_spheres[traj].tolist()), tuple(self.n_planes[traj].tolist())
+        return batch
 
 
 def _segments(counts: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -56,6 +56,32 @@ def scene_of_sphere(state) -> torch.Tensor:
     return batch.long()
 
 
+def host_sizes(state) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """``(spheres per scene, planes per scene)`` as host ints, the layout the graph builder
+    writes its candidates from: ``state.host_sizes`` where the code that made the batch kept
+    it (a tuple of two tuples), the shapes of a single scene, else counted on the device and
+    read back once (a sync on a GPU)."""
+    sizes = getattr(state, "host_sizes", None)
+    if sizes is not None:
+        return sizes
+    if getattr(state, "batch", None) is None:
+        return (state.pos.shape[0],), (state.planes.shape[0],)
+    return _layout(state, state.dt.shape[0])
+
+
+def layout_of(states: list) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """:func:`host_sizes` of the batch of ``states`` (single scenes), from their shapes."""
+    return tuple(s.pos.shape[0] for s in states), tuple(s.planes.shape[0] for s in states)
+
+
+def _layout(state, scenes: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    batch, plane_batch = scene_of_sphere(state), state.plane_batch.long()
+    spheres = batch.new_zeros(scenes).scatter_add_(0, batch, torch.ones_like(batch))
+    planes = batch.new_zeros(scenes).scatter_add_(0, plane_batch, torch.ones_like(plane_batch))
+    counts = torch.cat([spheres, planes]).tolist()  # the one read-back
+    return tuple(counts[:scenes]), tuple(counts[scenes:])
+
+
 def effects_tensor(effects: Effects) -> torch.Tensor:
     """``[1, 5]`` bool row in the order of ``EFFECT_NAMES``."""
     return torch.tensor([[getattr(effects, k) for k in EFFECT_NAMES]], dtype=torch.bool)
@@ -123,6 +149,8 @@ def subset_state(state, mask: torch.Tensor):
             continue
         if key in NODE_KEYS or (value.dim() > 0 and value.shape[0] == n):
             sub[key] = value[mask]
+    if getattr(state, "host_sizes", None) is not None:
+        sub.host_sizes = None  # the layout changed
     if getattr(state, "ptr", None) is not None:
         counts = torch.bincount(scene_of_sphere(state)[mask], minlength=state.dt.shape[0])
         sub.ptr = torch.cat([counts.new_zeros(1), torch.cumsum(counts, 0)])

@@ -27,12 +27,14 @@ without ``surface_contact``; the ground edge exists when ``gravity`` or ``surfac
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import torch
 
-from physgnn.data.state import scene_of_sphere
+from physgnn.data.state import host_sizes, scene_of_sphere
+from physgnn.graph.candidates import compact, scene_pairs, scene_plane_pairs
 from physgnn.graph.neighbors import BACKENDS, radius_pairs
 from physgnn.physics.geometry import rectangle_offset
 from physgnn.physics.scene import EFFECT_NAMES, GROUND
@@ -41,6 +43,10 @@ CONNECTIVITIES = ("epsilon", "vmax", "vi")
 _GRAVITY = EFFECT_NAMES.index("gravity")
 _SPHERE_CONTACT = EFFECT_NAMES.index("sphere_contact")
 _SURFACE_CONTACT = EFFECT_NAMES.index("surface_contact")
+# Up to this many same-scene pairs (or this many per sphere) the pp candidates are all pairs of
+# each scene, written down with no read-back; beyond it a radius search proposes them.
+ALL_PAIRS_MAX = 1 << 18
+ALL_PAIRS_PER_SPHERE = 64
 
 
 @dataclass
@@ -111,9 +117,20 @@ class GraphBuilder:
     def __call__(self, state) -> Graph:
         batch = scene_of_sphere(state)
         allowance = self.allowance(state)
-        pp_index, pp_attr = self._pp_edges(state, batch, allowance)
-        ps_index, ps_attr = self._ps_edges(state, batch, allowance)
-        return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance)
+        spheres, planes = host_sizes(state)
+        src, dst = self._pair_candidates(state, batch, allowance, spheres)
+        pp_mask = self._pp_rule(state, batch, allowance, src, dst)
+        plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long())
+        ps_mask = self._ps_rule(state, batch, allowance, plane, sphere)
+        n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
+        keep = compact(pp_mask, n_pp)
+        pp_index, pp_attr = _paired(state.pos, src[keep], dst[keep])
+        keep = compact(ps_mask, n_ps)
+        ps_index = torch.stack([plane[keep], sphere[keep]])
+        if checks_on():
+            _check_ground(state, batch)
+        clip = self.reach(state, allowance) + self.clip_margin
+        return Graph(pp_index, pp_attr, ps_index, _ps_attr(state, ps_index, clip), allowance)
 
     def allowance(self, state, moving: torch.Tensor | None = None) -> torch.Tensor:
         """Motion allowance ``a_i`` of every sphere, float64 ``[N]``; ``moving [N]`` (bool):
@@ -137,61 +154,41 @@ class GraphBuilder:
         gap = (p[i] - p[j]).norm(dim=-1) - r[i] - r[j]
         return (batch[i] == batch[j]) & (gap <= allowance[i] + allowance[j] + self.epsilon)
 
-    def _pp_edges(self, state, batch, allowance) -> tuple[torch.Tensor, torch.Tensor]:
-        pos = state.pos
-        on = state.effects[:, _SPHERE_CONTACT][batch]
-        nodes = torch.nonzero(on).flatten()
-        if nodes.numel() < 2:
-            return _empty_index(pos.device), pos.new_zeros(0, 4)
+    def _pair_candidates(self, state, batch, allowance, spheres) -> tuple[torch.Tensor, ...]:
+        """Candidate pairs ``(i, j)``, ``i < j``, sorted: every pair of each scene while there
+        are at most ``ALL_PAIRS_MAX`` of them (or ``ALL_PAIRS_PER_SPHERE`` per sphere), else
+        a radius search (:func:`~physgnn.graph.neighbors.radius_pairs`, reads sizes back)."""
+        n = state.pos.shape[0]
+        total = sum(c * (c - 1) // 2 for c in spheres)
+        if total <= max(ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE * n):
+            return scene_pairs(spheres, state.pos.device)
         radius = state.radius.to(torch.float64)
-        reach = 2 * float(radius[nodes].max()) + 2 * float(allowance[nodes].max()) + self.epsilon
-        local = radius_pairs(pos[nodes], reach * (1 + 1e-9), batch[nodes], self.backend)
-        src, dst = nodes[local[0]], nodes[local[1]]
-        keep = self.pair_within_reach(state, src, dst, allowance)
-        src, dst = src[keep], dst[keep]
-        rel = pos[dst] - pos[src]
-        attr = torch.cat([rel, torch.linalg.vector_norm(rel, dim=-1, keepdim=True)], dim=-1)
-        index = torch.cat([torch.stack([src, dst]), torch.stack([dst, src])], dim=1)
-        rev = torch.cat([-attr[:, :3], attr[:, 3:]], dim=-1)
-        return index, torch.cat([attr, rev], dim=0)
+        reach = 2 * float(radius.max()) + 2 * float(allowance.max()) + self.epsilon
+        pairs = radius_pairs(state.pos, reach * (1 + 1e-9), batch, self.backend)
+        return pairs[0], pairs[1]
+
+    def _pp_rule(self, state, batch, allowance, src, dst) -> torch.Tensor:
+        """``[P]`` bool: pairs of scenes with sphere contact that satisfy the pp rule."""
+        on = state.effects[batch[src], _SPHERE_CONTACT]
+        return on & self.pair_within_reach(state, src, dst, allowance)
 
     def reach(self, state, allowance: torch.Tensor) -> torch.Tensor:
         """``ρ_i = r_i + a_i + ε``, float64 ``[N]``: the farthest plane a sphere may touch."""
         return state.radius.to(torch.float64) + allowance + self.epsilon
 
-    def _ps_edges(self, state, batch, allowance) -> tuple[torch.Tensor, torch.Tensor]:
-        ground = _ground_edges(state, batch)
-        bounded = self._bounded_plane_edges(state, batch, allowance)
-        n = state.pos.shape[0]
-        key = torch.cat([ground[0] * n + ground[1], bounded[0] * n + bounded[1]])
-        key = torch.sort(key).values
-        index = torch.stack([key // max(n, 1), key % max(n, 1)])
-        clip = self.reach(state, allowance) + self.clip_margin
-        return index, _ps_attr(state, index, clip)
-
-    def _bounded_plane_edges(self, state, batch, allowance) -> torch.Tensor:
-        """Edges from walls/static planes to spheres within reach, ``[2, F']``."""
-        planes, device = state.planes, state.pos.device
-        plane_batch = state.plane_batch.long()
-        active = (state.plane_kind != GROUND) & state.effects[plane_batch, _SURFACE_CONTACT]
-        plane_ids = torch.nonzero(active).flatten()
-        if plane_ids.numel() == 0 or state.pos.shape[0] == 0:
-            return _empty_index(device)
-        # Every (plane, sphere of the plane's scene) candidate, without a loop over planes.
-        order = torch.argsort(batch, stable=True)
-        counts = torch.bincount(batch, minlength=state.dt.shape[0])
-        first = torch.cumsum(counts, 0) - counts
-        per_plane = counts[plane_batch[plane_ids]]
-        plane = torch.repeat_interleave(plane_ids, per_plane)
-        offset = torch.arange(plane.numel(), device=device)
-        offset = offset - torch.repeat_interleave(torch.cumsum(per_plane, 0) - per_plane, per_plane)
-        sphere = order[first[plane_batch[plane]] + offset]
-        offset = rectangle_offset(state.pos[sphere], planes[plane])
+    def _ps_rule(self, state, batch, allowance, plane, sphere) -> torch.Tensor:
+        """``[Q]`` bool for (plane, sphere) candidates of one scene: the ground of a scene with
+        gravity or surface contact; a wall or static plane of a scene with surface contact
+        whose rectangle is within ``a_i + ε`` of the sphere's surface and which the centre is
+        not more than ``r_i`` behind (planes are one-sided)."""
+        effects = state.effects[batch[sphere]]
+        ground = state.plane_kind[plane] == GROUND
+        offset = rectangle_offset(state.pos[sphere], state.planes[plane])
         radius = state.radius.to(torch.float64)[sphere]
-        height = (offset * planes[plane, 3:6].to(torch.float64)).sum(-1)
+        height = (offset * state.planes[plane, 3:6].to(torch.float64)).sum(-1)
         near = offset.norm(dim=-1) - radius <= allowance[sphere] + self.epsilon
-        keep = near & (height > -radius)
-        return torch.stack([plane[keep], sphere[keep]])
+        bounded = ~ground & effects[:, _SURFACE_CONTACT] & near & (height > -radius)
+        return (ground & (effects[:, _GRAVITY] | effects[:, _SURFACE_CONTACT])) | bounded
 
 
 def build_graph(state, cfg: Mapping) -> Graph:
@@ -204,27 +201,32 @@ def _velocity(state) -> torch.Tensor:
     return state.vel[:, 0] if state.vel.dim() == 3 else state.vel
 
 
-def _empty_index(device) -> torch.Tensor:
-    return torch.empty(2, 0, dtype=torch.long, device=device)
+def _paired(pos, src, dst) -> tuple[torch.Tensor, torch.Tensor]:
+    """pp index ``[2, E]`` in the paired layout and its features ``[E, 4]`` (class Graph)."""
+    rel = pos[dst] - pos[src]
+    attr = torch.cat([rel, torch.linalg.vector_norm(rel, dim=-1, keepdim=True)], dim=-1)
+    index = torch.cat([torch.stack([src, dst]), torch.stack([dst, src])], dim=1)
+    rev = torch.cat([-attr[:, :3], attr[:, 3:]], dim=-1)
+    return index, torch.cat([attr, rev], dim=0)
 
 
-def _ground_edges(state, batch) -> torch.Tensor:
-    """One edge from its scene's ground to every sphere of a scene with gravity or surfaces."""
+def checks_on() -> bool:
+    """Checks that read values back to the host (``PHYSGNN_CHECKS=1``; off by default, so
+    that a GPU step never waits for them)."""
+    return os.environ.get("PHYSGNN_CHECKS", "") == "1"
+
+
+def _check_ground(state, batch) -> None:
+    """Every scene with a sphere that needs a ground edge has exactly one ground plane."""
     effects = state.effects
-    on = (effects[:, _GRAVITY] | effects[:, _SURFACE_CONTACT])[batch]
-    spheres = torch.nonzero(on).flatten()
-    if spheres.numel() == 0:
-        return _empty_index(state.pos.device)
-    grounds = torch.nonzero(state.plane_kind == GROUND).flatten()
-    scene_of_ground = state.plane_batch.long()[grounds]
-    per_scene = torch.bincount(scene_of_ground, minlength=effects.shape[0])
-    needed = torch.unique(batch[spheres])
-    if bool((per_scene[needed] != 1).any()):
-        bad = int(needed[per_scene[needed] != 1][0])
-        raise ValueError(f"scene {bad} of the batch must have exactly one ground plane (kind 0)")
-    ground_of = torch.full_like(per_scene, -1)
-    ground_of[scene_of_ground] = grounds
-    return torch.stack([ground_of[batch[spheres]], spheres])
+    grounds = (state.plane_kind == GROUND).long()
+    per_scene = torch.zeros_like(effects[:, 0], dtype=torch.long)
+    per_scene.scatter_add_(0, state.plane_batch.long(), grounds)
+    needed = torch.zeros_like(effects[:, 0]).index_fill_(0, batch, True)
+    needed &= effects[:, _GRAVITY] | effects[:, _SURFACE_CONTACT]
+    bad = (needed & (per_scene != 1)).nonzero().flatten().tolist()
+    if bad:
+        raise ValueError(f"scene {bad[0]} of the batch must have exactly one ground plane (kind 0)")
 
 
 def _ps_attr(state, index: torch.Tensor, reach: torch.Tensor) -> torch.Tensor:
@@ -232,11 +234,7 @@ def _ps_attr(state, index: torch.Tensor, reach: torch.Tensor) -> torch.Tensor:
     ``reach [N]`` float64 is ``ρ_i``."""
     planes = state.planes[index[0]].to(torch.float64)
     pos = state.pos[index[1]].to(torch.float64)
-    height = ((pos - planes[:, 0:3]) * planes[:, 3:6]).sum(-1, keepdim=True)
-    offset = height * planes[:, 3:6]  # the ground: an infinite plane
-    bounded = state.plane_kind[index[0]] != GROUND
-    if bool(bounded.any()):
-        offset[bounded] = rectangle_offset(pos[bounded], planes[bounded])
+    offset = rectangle_offset(pos, planes)  # the ground's infinite half lengths: its plane
     dist = offset.norm(dim=-1, keepdim=True)
     rho = reach[index[1], None]
     offset = offset * torch.where(dist > rho, rho / dist, torch.ones_like(dist))

@@ -33,22 +33,18 @@ Loss of a batch of state pairs:
 
 from __future__ import annotations
 
+import random
+
 import lightning as L
 import torch
 
 from physgnn.data.state import scene_of_sphere
-from physgnn.errors import PhysgnnError
 from physgnn.models.learned import LearnedSimulator
 from physgnn.physics import quaternion as Q
 from physgnn.physics.energy import scene_energy, scene_weight
 from physgnn.physics.integrator import euler_step, step
 from physgnn.training.contacts import contact_penalty, perturb_contacts
-
-
-class NonFiniteLossError(PhysgnnError, RuntimeError):
-    """The training loss became NaN or infinite (the model exploded)."""
-
-    exit_code = 1
+from physgnn.training.finite import FiniteWatch, NonFiniteLossError  # noqa: F401 (its home)
 
 
 def add_noise(state, simulator: LearnedSimulator, std: float, generator=None):
@@ -195,8 +191,8 @@ class LitSimulator(L.LightningModule):
         self.contact_noise_prob = float(contact_noise_prob)
         if compile:
             simulator.network.compile(dynamic=True)
-        self.pairs_seen = 0
-        self.nodes_seen = 0
+        self.pairs_seen = self.nodes_seen = 0
+        self._finite = FiniteWatch()
 
     def losses(self, state) -> dict[str, torch.Tensor]:
         """``{"loss", "loss_mse", "loss_energy", "energy_share", "loss_contact"}`` of a batch
@@ -236,16 +232,17 @@ class LitSimulator(L.LightningModule):
         generator = torch.Generator(device=self.device)
         return generator.manual_seed(self.seed * 1_000_003 + self.global_step)
 
-    def _unroll_length(self, generator: torch.Generator) -> int:
+    def _unroll_length(self) -> int:
         """Push-forward steps of this batch, ``U{0..K}`` (0 before ``pushforward_after``; K
-        grown as the class doc says)."""
+        grown as the class doc says), drawn on the host from (seed, global step): no value of
+        the device is read for it."""
         if self.pushforward_steps == 0 or self.global_step < self.pushforward_after:
             return 0
         high = self.pushforward_steps + 1
         if self.pushforward_growth > 0:
             grown = 2 + (self.global_step - self.pushforward_after) // self.pushforward_growth
             high = min(high, grown)
-        return int(torch.randint(high, (1,), generator=generator, device=generator.device))
+        return random.Random(self.seed * 1_000_003 + self.global_step).randrange(high)
 
     def training_step(self, batch, batch_idx: int) -> torch.Tensor:
         generator = self._noise_generator()
@@ -256,16 +253,13 @@ class LitSimulator(L.LightningModule):
             depth, touch = (scale * x for x in self.contact_noise)
             graph = self.simulator.graph_builder(batch)
             batch = perturb_contacts(batch, graph, depth, touch, self.contact_noise_prob, generator)
-        steps = self._unroll_length(generator)
+        steps = self._unroll_length()
         if steps > 0:
             batch = push_forward(batch, self.simulator, steps)
         losses = self.losses(batch)
         loss = losses["loss"]
-        if not torch.isfinite(loss):
-            raise NonFiniteLossError(
-                f"non-finite training loss ({loss.item()}) at epoch {self.current_epoch}, "
-                f"step {self.global_step}: the model exploded, training stopped"
-            )
+        last = self._trainer is not None and self.trainer.is_last_batch
+        self._finite.update(loss, self.current_epoch, self.global_step, last)
         self.pairs_seen += batch.num_graphs
         self.nodes_seen += batch.num_nodes
         self._log_all("train", losses, batch.num_graphs)
