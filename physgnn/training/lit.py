@@ -44,6 +44,7 @@ from physgnn.physics import quaternion as Q
 from physgnn.physics.energy import scene_energy, scene_weight
 from physgnn.physics.integrator import euler_step, step
 from physgnn.training.contacts import contact_penalty, perturb_contacts
+from physgnn.training.epoch_means import EpochMeans
 from physgnn.training.finite import FiniteWatch, NonFiniteLossError  # noqa: F401 (its home)
 
 
@@ -192,7 +193,7 @@ class LitSimulator(L.LightningModule):
         if compile:
             simulator.network.compile(dynamic=True)
         self.pairs_seen = self.nodes_seen = 0
-        self._finite = FiniteWatch()
+        self._finite, self._train_means = FiniteWatch(), EpochMeans()
 
     def losses(self, state) -> dict[str, torch.Tensor]:
         """``{"loss", "loss_mse", "loss_energy", "energy_share", "loss_contact"}`` of a batch
@@ -262,9 +263,18 @@ class LitSimulator(L.LightningModule):
         self._finite.update(loss, self.current_epoch, self.global_step, last)
         self.pairs_seen += batch.num_graphs
         self.nodes_seen += batch.num_nodes
-        self._log_all("train", losses, batch.num_graphs)
-        self.log("train/loss_step", loss, batch_size=batch.num_graphs, on_step=True, on_epoch=False)
+        self._train_means.add(losses, batch.num_graphs)
+        if (
+            self._trainer is not None
+            and (self.global_step + 1) % self.trainer.log_every_n_steps == 0
+        ):
+            self.log("train/loss_step", loss, batch_size=batch.num_graphs, on_step=True)
         return loss
+
+    def on_train_epoch_end(self) -> None:
+        """The epoch means of the training losses (:mod:`physgnn.training.epoch_means`)."""
+        for name, value in self._train_means.pop().items():
+            self.log(f"train/{name}", value, prog_bar=name == "loss", sync_dist=True)
 
     def validation_step(self, batch, batch_idx: int) -> None:
         self._log_all("val", self.losses(batch), batch.num_graphs)

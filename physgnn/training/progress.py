@@ -17,6 +17,7 @@ import os
 import signal
 import threading
 import time
+import weakref
 from pathlib import Path
 
 import lightning as L
@@ -27,6 +28,10 @@ from physgnn.errors import replaceable, signal_name
 log = logging.getLogger(__name__)
 
 
+# (step, epoch) of the last.ckpt that save_last wrote, per checkpoint callback: saved once
+_saved_at: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 def save_last(trainer: L.Trainer, always: bool = False) -> Path | None:
     """Save ``last.ckpt`` beside the checkpoint callback's files when training moved on since
     its last save (time limit mid-epoch, a signal), or ``always``; returns the file (None
@@ -35,9 +40,11 @@ def save_last(trainer: L.Trainer, always: bool = False) -> Path | None:
     if ckpt is None or not ckpt.dirpath or trainer.fast_dev_run:
         return None
     last = Path(ckpt.dirpath) / "last.ckpt"
-    if always or getattr(ckpt, "_last_global_step_saved", -1) != trainer.global_step:
+    saved = {getattr(ckpt, "_last_global_step_saved", -1), _saved_at.get(ckpt)}
+    if always or (trainer.global_step, trainer.current_epoch) not in saved:
         trainer.save_checkpoint(last)
         ckpt.last_model_path = str(last)
+        _saved_at[ckpt] = (trainer.global_step, trainer.current_epoch)
     return last if last.exists() else None
 
 
@@ -153,11 +160,6 @@ class StopOnSignal(L.Callback):
 
     def on_train_start(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         self.install()  # again: Lightning set its own SIGTERM handler when fit started
-
-    def on_train_epoch_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
-        # Lightning refreshes last.ckpt only with a new best; a killed run (no signal to
-        # catch) would restart from that epoch. Runs before ModelCheckpoint's own hook.
-        save_last(trainer)
 
     def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx) -> None:
         if not trainer.strategy.reduce_boolean_decision(self.signum is not None, all=False):
