@@ -16,6 +16,7 @@ import physgnn.graph.builder as builder_module
 from physgnn.benchmark.gpu_readiness import rollout_frame_counts, training_step_counts
 from physgnn.benchmark.syncs import counting
 from physgnn.data.dataset import read_split
+from physgnn.data.pairs import PairDataset
 from physgnn.graph.builder import GraphBuilder
 from physgnn.graph.candidates import compact, scene_pairs, scene_plane_pairs
 from physgnn.physics.scene import WALL
@@ -170,3 +171,13 @@ def test_a_rollout_is_the_same_with_either_candidate_path(tiny_dataset, bench_cf
     searched = rollout(simulator, trajectories, n_frames=12)
     for a, b in zip(fast, searched, strict=True):
         assert (a.pos == b.pos).all() and (a.vel == b.vel).all()
+
+
+def test_a_pair_dataset_on_another_device_gathers_there(tiny_dataset):
+    pairs = PairDataset(read_split(tiny_dataset / "train.h5"), H=2, future=2)
+    index = torch.tensor([3, 0, 7])
+    here = pairs.batch(index)
+    moved = pairs.to("meta").batch(index)  # no computation: any tensor left behind would fail
+    assert moved.host_sizes == here.host_sizes
+    for key in ("pos", "vel", "planes", "future_pos", "batch", "plane_batch", "ptr"):
+        assert moved[key].device.type == "meta" and moved[key].shape == here[key].shape, key

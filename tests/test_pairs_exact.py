@@ -73,7 +73,10 @@ def reference_loaders(data_dir, seed: int, future: int) -> tuple[PygLoader, PygL
 
 
 def assert_same_batch(new, old) -> None:
-    assert sorted(new.keys()) == sorted(old.keys())
+    spheres, planes = new.host_sizes  # the layout kept on the host: the reference's sizes
+    assert list(spheres) == old.ptr.diff().tolist()
+    assert list(planes) == torch.bincount(old.plane_batch, minlength=old.num_graphs).tolist()
+    assert sorted(k for k in new.keys() if k != "host_sizes") == sorted(old.keys())
     for key in old.keys():
         assert new[key].dtype == old[key].dtype, key
         assert torch.equal(new[key], old[key]), key

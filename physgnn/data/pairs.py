@@ -44,6 +44,21 @@ class PairDataset(Dataset):
         pairs = [(i, t) for i, f in enumerate(frames) for t in range(self.H, f.n_frames - last)]
         self.pairs = torch.tensor(pairs, dtype=torch.long).reshape(-1, 2)
         self._stack(frames)
+        # host copies: a batch's layout is read here, whatever device the tables are on
+        self.device = torch.device("cpu")
+        self.host = {"pairs": self.pairs, "n_spheres": self.n_spheres, "n_planes": self.n_planes}
+
+    _ON_DEVICE = ("pairs", "n_spheres", "n_planes", "frame_start", "sphere_start", "plane_start",
+                  "dt", "effects")  # fmt: skip
+
+    def to(self, device) -> PairDataset:
+        """Keep the tables on ``device`` (in place): a batch is then a few gathers there, with
+        no copy from the host but its pair indices (the layout stays on the host)."""
+        self.device = torch.device(device)
+        for key in self._ON_DEVICE:
+            setattr(self, key, getattr(self, key).to(self.device))
+        self.tables = {k: v.to(self.device) for k, v in self.tables.items()}
+        return self
 
     def _stack(self, frames: list[TrajectoryFrames]) -> None:
         """Flat tables: ``pos``, ``quat``, ``vel``, ``angvel`` ``[Σ T_i N_i, ·]`` (row of
@@ -74,41 +89,49 @@ class PairDataset(Dataset):
         return self.batch(torch.as_tensor(ks, dtype=torch.long))
 
     def batch(self, index: torch.Tensor) -> Batch:
-        """The batched :class:`SceneState` of the pairs ``index [B]``, in that order
-        (``num_graphs`` from ``ptr``; it keeps no per-pair slices for ``to_data_list``)."""
-        traj, t = self.pairs[index].unbind(1)
-        node_graph, local, ptr = _segments(self.n_spheres[traj])
+        """The batched :class:`SceneState` of the pairs ``index [B]`` (on the host), in that
+        order, on the tables' device (``num_graphs`` from ``ptr``; it keeps no per-pair slices
+        for ``to_data_list``; ``host_sizes`` holds its layout as host ints)."""
+        traj_host = self.host["pairs"][index, 0]
+        sizes = (
+            tuple(self.host["n_spheres"][traj_host].tolist()),
+            tuple(self.host["n_planes"][traj_host].tolist()),
+        )
+        device = self.device
+        traj, t = self.pairs[index.to(device, non_blocking=True)].unbind(1)
+        node_graph, local, ptr = _segments(self.n_spheres[traj], sum(sizes[0]))
         n = self.n_spheres[traj][node_graph][:, None]  # [N, 1] spheres of the node's scene
         base = self.frame_start[traj][node_graph][:, None] + local[:, None]  # frame 0 rows
         frame = t[node_graph][:, None]
-        now, back = base + frame * n, torch.arange(self.H + 1)
+        now, back = base + frame * n, torch.arange(self.H + 1, device=device)
         history = base + (frame - back) * n  # [N, H+1] rows of t, t−1, …, t−H
         tab = self.tables
         fields = {"pos": tab["pos"][now[:, 0]], "quat": tab["quat"][now[:, 0]]}
         fields["vel"], fields["angvel"] = tab["vel"][history], tab["angvel"][history]
         sphere = self.sphere_start[traj][node_graph] + local
         fields |= {key: tab[key][sphere] for key in _SPHERE}
-        plane_graph, plane_local, _ = _segments(self.n_planes[traj])
+        plane_graph, plane_local, _ = _segments(self.n_planes[traj], sum(sizes[1]))
         plane = self.plane_start[traj][plane_graph] + plane_local
         fields |= {"planes": tab["planes"][plane], "plane_kind": tab["plane_kind"][plane]}
         fields |= {"plane_batch": plane_graph, "dt": self.dt[traj], "effects": self.effects[traj]}
         after = now[:, 0] + n[:, 0]  # frame t + 1
         fields["target_vel"], fields["target_angvel"] = tab["vel"][after], tab["angvel"][after]
         if self.future > 0:
-            ahead = base + (frame + 1 + torch.arange(self.future + 1)) * n  # [N, K+1]
+            ahead = base + (frame + 1 + torch.arange(self.future + 1, device=device)) * n
             fields["future_pos"], fields["future_angvel"] = tab["pos"][ahead], tab["angvel"][ahead]
         batch = Batch(_base_cls=SceneState, **fields, batch=node_graph, ptr=ptr)
-        # the layout, read here on the host, saves each graph build a read-back from the device
-        batch.host_sizes = tuple(self.n_spheres[traj].tolist()), tuple(self.n_planes[traj].tolist())
+        batch.host_sizes = sizes  # graph builds then read no size back
         return batch
 
 
-def _segments(counts: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Rows of consecutive segments of ``counts [B]`` rows: ``(segment of each row [R],
-    position within its segment [R], ptr [B + 1])``."""
+def _segments(counts: torch.Tensor, total: int) -> tuple[torch.Tensor, ...]:
+    """Rows of consecutive segments of ``counts [B]`` rows, ``total`` in all (a host int):
+    ``(segment of each row [R], position within its segment [R], ptr [B + 1])``."""
+    device = counts.device
     ptr = torch.cat([counts.new_zeros(1), torch.cumsum(counts, 0)])
-    segment = torch.repeat_interleave(torch.arange(counts.numel()), counts)
-    return segment, torch.arange(segment.numel()) - ptr[segment], ptr
+    segment = torch.arange(counts.numel(), device=device)
+    segment = torch.repeat_interleave(segment, counts, output_size=total)
+    return segment, torch.arange(total, device=device) - ptr[segment], ptr
 
 
 def _as_is(batch: Batch) -> Batch:

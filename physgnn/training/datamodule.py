@@ -104,7 +104,16 @@ class StatePairDataModule(L.LightningDataModule):
             len(self.train_set), self.pairs_per_epoch, self.seed, rank, world,
             self.batch_size, self._batches_done,
         )  # fmt: skip
-        return pair_loader(self.train_set, self.batch_size, sampler, self.num_workers)
+        return pair_loader(
+            self._on_device(self.train_set), self.batch_size, sampler, self.num_workers
+        )
+
+    def _on_device(self, pairs: PairDataset) -> PairDataset:
+        """``pairs`` with its tables on the training device when batches are made in this
+        process (``num_workers`` 0): a batch is then gathered there, not copied from the host."""
+        if self.trainer is not None and self.num_workers == 0:
+            pairs.to(self.trainer.strategy.root_device)
+        return pairs
 
     def _batches_done(self) -> int:
         """Batches this process has trained on so far (the trainer's step count; 0 without a
@@ -120,5 +129,5 @@ class StatePairDataModule(L.LightningDataModule):
         generator = torch.Generator().manual_seed(self.val_seed + 1)
         n = min(self.val_pairs, len(self.val_set))
         index = torch.randperm(len(self.val_set), generator=generator)[:n].sort().values
-        subset = torch.utils.data.Subset(self.val_set, index.tolist())
+        subset = torch.utils.data.Subset(self._on_device(self.val_set), index.tolist())
         return pair_loader(subset, self.batch_size, num_workers=self.num_workers)
