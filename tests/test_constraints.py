@@ -84,6 +84,24 @@ def test_a_stack_stays_put_and_loses_energy():
     assert float((v**2).sum()) <= float((v_hat**2).sum())
 
 
+def test_a_sphere_pressed_into_the_ground_by_a_pair_is_lifted_within_the_iteration():
+    pos = [[0.0, 0.0, 0.5], [0.0, 0.0, 1.5]]  # resting, one on the other
+    nxt = [[0.0, 0.0, 0.5], [0.0, 0.0, 1.1]]  # the top one sinks 0.4 into the lower one
+    x = project(pos, nxt, [0.5, 0.5], [1.0, 1.0], pairs=[[0], [1]], ps=[[0, 0], [0, 1]])
+    assert float(x[0, 2]) == 0.5  # the pair pushed it 0.2 down, the ground put it back
+    assert_close(float(x[1, 2]), 1.3)  # its pair correction: half of the 0.4
+
+
+def test_an_inactive_plane_edge_constrains_nothing():
+    pos, nxt = T([[1.0, 2.0, 1.0]], dtype=F64), T([[1.5, 2.5, -2.0]], dtype=F64)
+    one = T([0.5], dtype=F64)
+    args = (NO_PAIRS, GROUND_ROW, T([GROUND]), T([[0], [0]]), 3)
+    x = project_contacts(pos, nxt, one, one, *args, ps_active=T([False]))
+    assert torch.equal(x, nxt)
+    x = project_contacts(pos, nxt, one, one, *args, ps_active=T([True]))
+    assert_close(x[0], T([1.5, 2.5, 0.5], dtype=F64))
+
+
 def test_energy_never_rises_on_random_falls():
     gen = torch.Generator().manual_seed(0)
     for _ in range(20):

@@ -68,12 +68,10 @@ class ConstrainedSimulator(nn.Module):
         dt = state.scene_dt[:, None].to(vel.dtype)
         pos_next = state.pos + dt * vel
         pairs = graph.pp_index[:, : graph.pp_index.shape[1] // 2]
-        plane, sphere = graph.ps_index
-        surfaces = state.effects[scene_of_sphere(state)[sphere], SURFACE_CONTACT]
-        ps_index = graph.ps_index[:, surfaces]
+        surfaces = state.effects[scene_of_sphere(state)[graph.ps_index[1]], SURFACE_CONTACT]
         x = project_contacts(
             state.pos, pos_next, state.radius, state.mass, pairs, state.planes,
-            state.plane_kind, ps_index, self.iterations,
+            state.plane_kind, graph.ps_index, self.iterations, ps_active=surfaces,
         )  # fmt: skip
         moved = (x != pos_next).any(1, keepdim=True)
         return torch.where(moved, (x - state.pos) / dt, vel)

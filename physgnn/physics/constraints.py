@@ -2,9 +2,11 @@
 
 :func:`project_contacts` moves the predicted next positions ``x`` (``p_t + dt·v̂``) of spheres
 so that, on the given pp pairs and ps edges, no pair overlaps more than it does now and no
-sphere reaches further into a plane than it does now (position-based dynamics, Jacobi style:
-every violated constraint proposes a correction, each sphere moves by the mean of its
-proposals, ``iterations`` times):
+sphere reaches further into a plane than it does now (position-based dynamics). Each of the
+``iterations`` runs one Jacobi pass over the pairs (every violated pair proposes a correction,
+each sphere moves by the mean of its proposals), then one over the plane edges (each sphere
+put back on the allowed side of its planes), so that every iteration ends with the planes
+kept: a pile pushed into the ground by its pairs is lifted at once, not by halves.
 
 - pair (i, j), ``C = |x_i − x_j| − min(r_i + r_j, |p_i − p_j|)``; when ``C < 0``,
   ``Δx_i = −w_i/(w_i + w_j)·C·n̂`` and ``Δx_j = +w_j/(w_i + w_j)·C·n̂`` with ``w = 1/m`` and
@@ -32,7 +34,6 @@ from __future__ import annotations
 
 import torch
 
-from physgnn.physics.geometry import rectangle_offset
 from physgnn.physics.scene import GROUND
 
 
@@ -46,12 +47,14 @@ def project_contacts(
     plane_kind: torch.Tensor,
     ps_index: torch.Tensor,
     iterations: int,
+    ps_active: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Corrected predicted positions ``[N, 3]`` (module doc).
 
     pos ``[N, 3]`` (now), pos_next ``[N, 3]`` (predicted), radius, mass ``[N]``, pairs ``[2, P]``
     (each unordered pair once), planes ``[S, 11]``, plane_kind ``[S]``, ps_index ``[2, F]``
-    (row 0 plane, row 1 sphere).
+    (row 0 plane, row 1 sphere), ``ps_active [F]`` (bool, default all): the ps edges that
+    count (a mask, not a compaction: nothing is read back).
     """
     x = pos_next.clone()
     if iterations < 1 or pos.shape[0] == 0:
@@ -59,42 +62,75 @@ def project_contacts(
     i, j = pairs
     pair_target = torch.minimum(radius[i] + radius[j], (pos[i] - pos[j]).norm(dim=1))
     share = (1.0 / mass[i]) / (1.0 / mass[i] + 1.0 / mass[j])  # [P] w_i / (w_i + w_j)
+    ends, weight = torch.cat([i, j]), torch.cat([-share, 1 - share])[:, None]  # [2P]
     plane, sphere = ps_index
-    rows = planes[plane].to(pos.dtype)
-    dist_now, _ = _plane_distance(pos[sphere], rows, plane_kind[plane])
-    front = ((pos[sphere] - rows[:, 0:3]) * rows[:, 3:6]).sum(1) >= 0  # of the infinite plane
+    frames = _PlaneFrames(planes[plane], plane_kind[plane])
+    dist_now, _ = frames.distance(pos[sphere])
+    front = frames.in_front(pos[sphere])  # of the infinite plane
+    if ps_active is not None:
+        front = front & ps_active
     plane_target = torch.minimum(radius[sphere], dist_now)
     for _ in range(iterations):
-        shift, count = torch.zeros_like(x), x.new_zeros(x.shape[0])
-        d = x[i] - x[j]
-        length = d.norm(dim=1)
-        c = length - pair_target
-        bad = (c < 0) & (length > 0)
-        normal = d / length.clamp_min(1e-12)[:, None]
-        step = torch.where(bad, c, torch.zeros_like(c))[:, None] * normal
-        shift.index_add_(0, i, -share[:, None] * step).index_add_(0, j, (1 - share)[:, None] * step)
-        count.index_add_(0, i, bad.to(x.dtype)).index_add_(0, j, bad.to(x.dtype))
-        dist, direction = _plane_distance(x[sphere], rows, plane_kind[plane])
-        c = dist - plane_target
-        bad = front & (c < 0)
-        shift.index_add_(0, sphere, -torch.where(bad, c, torch.zeros_like(c))[:, None] * direction)
-        count.index_add_(0, sphere, bad.to(x.dtype))
-        x = x + shift / count.clamp_min(1.0)[:, None]  # + 0 where nothing is violated: exact
+        x = _pair_pass(x, i, j, ends, weight, pair_target)
+        x = _plane_pass(x, sphere, frames, front, plane_target)
     return x
 
 
-def _plane_distance(
-    points: torch.Tensor, planes: torch.Tensor, kind: torch.Tensor
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """``(dist [F], direction [F, 3])`` of points to their planes (module doc): the signed
-    height along the normal over the rectangle (the ground: everywhere), else the distance to
-    the rectangle and the unit direction from it to the point."""
-    normal = planes[:, 3:6]
-    offset = rectangle_offset(points, planes).to(points.dtype)  # the ground: along its normal
-    height = (offset * normal).sum(1)
-    beside = offset - height[:, None] * normal
-    over = (kind == GROUND) | (beside.norm(dim=1) <= 1e-6)
-    length = offset.norm(dim=1)
-    dist = torch.where(over, height, length)
-    direction = torch.where(over[:, None], normal, offset / length.clamp_min(1e-12)[:, None])
-    return dist, direction
+def _pair_pass(x, i, j, ends, weight, target) -> torch.Tensor:
+    """One Jacobi pass over the pairs: each sphere moves by the mean of its pairs' proposals."""
+    d = x[i] - x[j]
+    length = d.norm(dim=1)
+    c = length - target
+    bad = (c < 0) & (length > 0)
+    normal = d / length.clamp_min(1e-12)[:, None]
+    step = torch.where(bad, c, torch.zeros_like(c))[:, None] * normal
+    moves = torch.cat([step.repeat(2, 1) * weight, bad.repeat(2)[:, None].to(x.dtype)], 1)
+    acc = x.new_zeros(x.shape[0], 4).index_add_(0, ends, moves)
+    return x + acc[:, :3] / acc[:, 3:].clamp_min(1.0)  # + 0 where nothing is violated: exact
+
+
+def _plane_pass(x, sphere, frames, front, target) -> torch.Tensor:
+    """Every violated plane edge puts its sphere back on the allowed side (planes do not
+    move; a sphere with several, the mean of their proposals)."""
+    dist, direction = frames.distance(x[sphere])
+    c = dist - target
+    bad = front & (c < 0)
+    moves = torch.where(bad, -c, torch.zeros_like(c))[:, None] * direction
+    moves = torch.cat([moves, bad[:, None].to(x.dtype)], 1)
+    acc = x.new_zeros(x.shape[0], 4).index_add_(0, sphere, moves)
+    return x + acc[:, :3] / acc[:, 3:].clamp_min(1.0)
+
+
+class _PlaneFrames:
+    """The rows of ``F`` plane edges, kept in float64 with their in-plane axes, for the
+    distances of points to them (:func:`~physgnn.physics.geometry.rectangle_offset`)."""
+
+    def __init__(self, rows: torch.Tensor, kind: torch.Tensor):
+        rows = rows.to(torch.float64)
+        self.centre, self.normal, self.ref = rows[:, 0:3], rows[:, 3:6], rows[:, 6:9]
+        self.other = torch.linalg.cross(self.normal, self.ref)
+        self.half_u, self.half_w = rows[:, 9], rows[:, 10]
+        self.ground = kind == GROUND
+
+    def in_front(self, points: torch.Tensor) -> torch.Tensor:
+        """``[F]`` bool: centres on the front side of the infinite plane."""
+        return ((points.to(torch.float64) - self.centre) * self.normal).sum(1) >= 0
+
+    def distance(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(dist [F], direction [F, 3])``: the signed height along the normal over the
+        rectangle (the ground: everywhere), else the distance to the rectangle and the unit
+        direction from it to the point (in ``points``' dtype)."""
+        rel = points.to(torch.float64) - self.centre
+        u, w = (rel * self.ref).sum(-1), (rel * self.other).sum(-1)
+        h = (rel * self.normal).sum(-1)
+        du = u - torch.clamp(u, -self.half_u, self.half_u)
+        dw = w - torch.clamp(w, -self.half_w, self.half_w)
+        offset = du[:, None] * self.ref + dw[:, None] * self.other + h[:, None] * self.normal
+        offset, normal = offset.to(points.dtype), self.normal.to(points.dtype)
+        height = (offset * normal).sum(1)
+        beside = offset - height[:, None] * normal
+        over = self.ground | (beside.norm(dim=1) <= 1e-6)
+        length = offset.norm(dim=1)
+        dist = torch.where(over, height, length)
+        direction = torch.where(over[:, None], normal, offset / length.clamp_min(1e-12)[:, None])
+        return dist, direction
