@@ -54,6 +54,9 @@ study: ## The ablation study: every unique sweep configuration x 3 seeds, result
 eval: ## Evaluate every finished run under outputs/ and write outputs/report/ (ARGS: runs=PATH ...)
 	$(PY) -m physgnn.eval $(ARGS)
 
+ship: ## Export a run's best weights as the shipped model run=pretrained loads (RUN=<run folder> [OUT=<folder>])
+	$(PY) -m physgnn.training.export $(RUN) $(OUT)
+
 bench: ## Accuracy versus time: outputs/bench/bench.{json,md} (ARGS: e.g. quick=true threads=1)
 	$(PY) -m physgnn.bench $(ARGS)
 

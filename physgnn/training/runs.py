@@ -13,12 +13,28 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
+from physgnn.errors import PhysgnnError
 from physgnn.files import write_json
 from physgnn.models.learned import LearnedSimulator
 
 RUN_JSON = "run.json"
+# The trained simulator shipped with physgnn, a run folder of weights only
+# (physgnn/training/export.py); ``run=pretrained`` names it wherever a run folder is taken.
+PRETRAINED = "pretrained"
+PRETRAINED_DIR = Path(__file__).resolve().parents[1] / "pretrained"
+# The layout of an exported run's weights; a run of another layout is refused in one line.
+WEIGHTS_FORMAT = 1
 # Model targets of runs trained before the package was split into subpackages.
 MOVED_TARGETS = {"physgnn.simulator.LearnedSimulator": "physgnn.models.learned.LearnedSimulator"}
+
+
+class RunError(PhysgnnError, ValueError):
+    """A run folder's weights cannot be loaded by this physgnn (one-line message)."""
+
+
+def resolve_run(run: str | Path) -> Path:
+    """The run folder ``run`` names: the shipped weights for ``pretrained``, else the path."""
+    return PRETRAINED_DIR if str(run) == PRETRAINED else Path(run)
 
 
 def write_run_json(run_dir: str | Path, info: dict) -> Path:
@@ -54,13 +70,16 @@ def checkpoint_of(run_dir: Path) -> Path:
 
 
 def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
-    """``(simulator, cfg, info)`` of a finished run: the simulator from ``.hydra/config.yaml``
-    and the best (else last) checkpoint, in eval mode on the CPU; ``info`` is run.json (plus
-    ``checkpoint``, the file loaded)."""
-    run_dir = Path(run_dir)
+    """``(simulator, cfg, info)`` of a finished run (or ``pretrained``): the simulator from
+    ``.hydra/config.yaml`` and the best (else last) checkpoint, in eval mode on the CPU;
+    ``info`` is run.json (plus ``checkpoint``, the file loaded). Weights of another format or
+    that do not fit the model this physgnn builds from the config are refused in one line."""
+    run_dir = resolve_run(run_dir)
     config = run_dir / ".hydra" / "config.yaml"
     if not config.exists():
         raise FileNotFoundError(f"{run_dir} is not a training run (no .hydra/config.yaml)")
+    info = read_run_json(run_dir)
+    _check_format(run_dir, info.get("weights_format", WEIGHTS_FORMAT))
     cfg = OmegaConf.load(config)
     cfg.run_dir = str(run_dir)
     target = OmegaConf.select(cfg, "model._target_")
@@ -72,8 +91,22 @@ def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
         k.removeprefix("simulator."): v for k, v in state.items() if k.startswith("simulator.")
     }
     simulator = instantiate(cfg.model, stats=LearnedSimulator.stats_from_state_dict(state))
-    simulator.load_state_dict(state)
+    try:
+        simulator.load_state_dict(state)
+    except RuntimeError as err:
+        reason = str(err).split("\n\t")[1].strip() if "\n\t" in str(err) else str(err)
+        raise RunError(
+            f"{path} does not fit the model this physgnn builds from {config} ({reason[:160]}): "
+            "it was trained by another version; train it again or use weights of this version"
+        ) from err
     simulator.eval()
-    info = read_run_json(run_dir)
     info["checkpoint"] = str(path)
     return simulator, cfg, info
+
+
+def _check_format(run_dir: Path, found) -> None:
+    if found != WEIGHTS_FORMAT:
+        raise RunError(
+            f"{run_dir} holds weights of format {found}; this physgnn reads format "
+            f"{WEIGHTS_FORMAT}: export the run again with this version (make ship RUN=...)"
+        )
