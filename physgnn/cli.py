@@ -163,15 +163,23 @@ def command(
     )
 
 
-def check_outputs_env() -> None:
-    """``PHYSGNN_OUTPUTS``, where set, is not a file: Hydra makes its output folder under it
-    before any command runs, and would fail with a traceback."""
+def check_outputs_env(argv: list[str] | None = None) -> None:
+    """``PHYSGNN_OUTPUTS``, where set, and ``paths.outputs=`` on the command line are not
+    files: Hydra makes its output folder under them before any command runs, and would fail
+    with a traceback."""
     outputs = os.environ.get("PHYSGNN_OUTPUTS")
     if outputs and os.path.exists(outputs) and not os.path.isdir(outputs):
         raise ConfigError(
             f"PHYSGNN_OUTPUTS={outputs} is a file: set it to a folder (physgnn writes its data, "
             "runs and reports there), or unset it to write into ./outputs"
         )
+    for arg in sys.argv[1:] if argv is None else argv:
+        key, _, value = arg.lstrip("+").partition("=")
+        if key == "paths.outputs" and os.path.exists(value) and not os.path.isdir(value):
+            raise ConfigError(
+                f"paths.outputs={value} is a file: give a folder (physgnn writes its data, "
+                "runs and reports there), or leave it out to write into ./outputs"
+            )
 
 
 def _outputs_checked(hydra_main: Callable) -> Callable:

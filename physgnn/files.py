@@ -9,11 +9,14 @@ import csv
 import json
 import math
 import os
+import socket
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
+from datetime import datetime
 from pathlib import Path
 
 from physgnn import __version__
+from physgnn.errors import PhysgnnError
 
 # Written into every output folder physgnn makes (simulate's out, eval's report_dir): the
 # proof that physgnn may write over the files it holds.
@@ -121,3 +124,69 @@ def claim_folder(folder: str | Path, key: str, overwrite: bool = False, ours: bo
         )
     write_json(folder / OUTPUT_MARKER, {"physgnn_version": __version__})
     return folder
+
+
+class InUseError(PhysgnnError, RuntimeError):
+    """Another process writes where this one would (one line naming it and the way out)."""
+
+
+def process_alive(pid) -> bool:
+    """Whether process ``pid`` of this host is alive (and not this process)."""
+    if not isinstance(pid, int) or pid <= 0 or pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+@contextmanager
+def exclusive(lock: str | Path, what: str, way_out: str) -> Iterator[Path]:
+    """Hold the file ``lock`` while the block runs: it is created exclusively and names this
+    process (pid, host, since when). A live holder makes :class:`InUseError` (``what`` is in
+    use ..., then ``way_out``); the lock of a dead process of this host is taken over. The
+    lock is removed at the end, whatever happened."""
+    lock = Path(lock)
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    mine = {"pid": os.getpid(), "host": socket.gethostname(),
+            "since": datetime.now().isoformat(timespec="seconds")}  # fmt: skip
+    for _ in range(3):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            _refuse_or_clear(lock, what, way_out)
+            continue
+        with os.fdopen(fd, "w") as f:
+            json.dump(mine, f)
+        break
+    else:
+        raise InUseError(f"{what} is in use (lock {lock} keeps changing hands): {way_out}")
+    try:
+        yield lock
+    finally:
+        if _holder(lock).get("pid") == mine["pid"]:
+            lock.unlink(missing_ok=True)
+
+
+def _holder(lock: Path) -> dict:
+    try:
+        return json.loads(lock.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _refuse_or_clear(lock: Path, what: str, way_out: str) -> None:
+    """A lock held by a live process (or one of another host) is refused; a dead one's, or
+    an unreadable one (its writer died at once), is removed."""
+    holder = _holder(lock)
+    here = holder.get("host") == socket.gethostname()
+    if holder and (not here or process_alive(holder.get("pid"))):
+        raise InUseError(
+            f"{what} is in use: pid {holder.get('pid')} on {holder.get('host')} writes there "
+            f"since {holder.get('since')} (lock {lock}): {way_out}"
+            + ("" if here else f"; remove {lock} if that process is gone")
+        )
+    lock.unlink(missing_ok=True)

@@ -43,9 +43,9 @@ def test_missing_dataset_names_the_command(tmp_path):
     dm = StatePairDataModule(data_dir=str(tmp_path / "nothing"), preset="tiny")
     with pytest.raises(DatasetError) as info:
         dm.stats()
-    message = str(info.value)
-    assert "`make data PRESET=tiny`" in message
-    assert "`python -m physgnn.generate data=tiny`" in message and "\n" not in message
+    message = str(info.value)  # the folder is not the preset's own: data.dir= says where
+    assert f"`python -m physgnn.generate data=tiny data.dir={tmp_path / 'nothing'}`" in message
+    assert "make data" not in message and "\n" not in message
 
 
 def test_epoch_size_batch_size_and_seeded_stream(data_dir):

@@ -18,7 +18,7 @@ import h5py
 import numpy as np
 import torch
 
-from physgnn import __version__
+from physgnn import CONF_DIR, __version__
 from physgnn.errors import PhysgnnError
 from physgnn.files import atomic_path, write_json
 from physgnn.physics.kinematics import finite_difference_velocities
@@ -40,13 +40,29 @@ class DatasetError(PhysgnnError, RuntimeError):
 
 
 def _generate_hint(path: Path) -> str:
-    preset = path.parent.name
-    return f"run `make data PRESET={preset}` or `python -m physgnn.generate data={preset}`"
+    return generate_hint(Path(path).parent)
 
 
-def generate_hint(folder: str | Path) -> str:
-    """How to make the dataset folder ``folder`` (its name is the preset)."""
-    return _generate_hint(Path(folder) / "stats.json")
+def generate_hint(folder: str | Path, preset: str | None = None) -> str:
+    """How to (re)make the dataset folder ``folder``: ``run `make data PRESET=x` or `...``
+    when its name is a preset of conf/data/, else the generate command with ``data.dir=``
+    (``preset``, else the one its marker names, else small); with ``overwrite=true`` when it
+    exists."""
+    folder = Path(folder)
+    again = " overwrite=true" if folder.is_dir() and any(folder.iterdir()) else ""
+    if (Path(CONF_DIR) / "data" / f"{folder.name}.yaml").is_file():
+        make = f"make data PRESET={folder.name}" + (f" ARGS={again.strip()}" if again else "")
+        return f"run `{make}` or `python -m physgnn.generate data={folder.name}{again}`"
+    preset = preset or dataset_preset(folder) or "small"
+    return f"run `python -m physgnn.generate data={preset} data.dir={folder}{again}`"
+
+
+def dataset_preset(folder: str | Path) -> str | None:
+    """The preset a dataset folder was generated from (its marker), None when unknown."""
+    try:
+        return str(json.loads((Path(folder) / DATASET_MARKER).read_text())["preset"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def write_marker(folder: str | Path, preset: str) -> Path:
@@ -162,8 +178,7 @@ def read_split(path) -> list[Trajectory]:
             if version is None or int(version) != SCHEMA_VERSION:
                 raise DatasetError(
                     f"{path} has schema version {version}, this physgnn reads "
-                    f"{SCHEMA_VERSION}: regenerate it ({_generate_hint(path)} "
-                    "overwrite=true)"
+                    f"{SCHEMA_VERSION}: regenerate it ({_generate_hint(path)})"
                 )
             return [_read_traj(path, name, f[name]) for name in sorted(f.keys())]
     except DatasetError:
@@ -171,7 +186,7 @@ def read_split(path) -> list[Trajectory]:
     except (OSError, KeyError, ValueError) as e:
         first = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise DatasetError(
-            f"{path} is truncated or corrupt ({first}): {_generate_hint(path)} overwrite=true"
+            f"{path} is truncated or corrupt ({first}): {_generate_hint(path)}"
         ) from None
 
 
@@ -247,5 +262,5 @@ def _check_std(path: Path, key: str, entry) -> None:
     if not np.all(np.isfinite(std)) or np.any(std <= 0):
         raise DatasetError(
             f"{path}: {key}.std must be positive and finite (got {np.asarray(std).tolist()}); "
-            f"regenerate the dataset ({_generate_hint(path)} overwrite=true)"
+            f"regenerate the dataset ({_generate_hint(path)})"
         )

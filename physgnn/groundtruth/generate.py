@@ -32,6 +32,7 @@ from physgnn.data.dataset import (
     write_stats,
 )
 from physgnn.errors import ConfigError, Interrupted, interrupt_signal, signal_name
+from physgnn.files import exclusive
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.scenefile import write_scene
@@ -213,6 +214,14 @@ def generate(cfg: DictConfig) -> Path:
         engine = OmegaConf.to_container(cfg.get("engine") or {}, resolve=True)
         return export_scenes(plan(data, engine), Path(cfg.export_scene))
     out = Path(data.dir)
+    way_out = "wait for it to end, or choose another data.dir (paths.outputs)"
+    with exclusive(out.with_name(out.name + ".lock"), f"data.dir {out}", way_out):
+        return _generate_into(out, cfg)
+
+
+def _generate_into(out: Path, cfg: DictConfig) -> Path:
+    """:func:`generate`'s work once it holds the dataset's lock."""
+    data = cfg.data
     _check_target(out, bool(cfg.overwrite))
     workers = check_workers(cfg.workers)
     engine = OmegaConf.to_container(cfg.get("engine") or {}, resolve=True)

@@ -5,7 +5,6 @@ feed, the step budget, the checkpoint to resume from and whether it fits the mod
 from __future__ import annotations
 
 import inspect
-import os
 import socket
 import types
 import typing
@@ -17,6 +16,7 @@ from lightning.pytorch.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
+from physgnn.files import process_alive
 from physgnn.training.runs import RUN_JSON, read_run_json, run_status
 
 HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
@@ -109,19 +109,6 @@ def check_budget(trainer_cfg: DictConfig) -> None:
             )
 
 
-def _alive(pid) -> bool:
-    """Whether process ``pid`` (of this host) is alive, and not this process."""
-    if not isinstance(pid, int) or pid <= 0 or pid == os.getpid():
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    return True
-
-
 def check_not_running(run_dir: Path) -> None:
     """A ``run_dir`` whose run.json says ``running`` for a process alive on this host is in
     use: refused in one line naming it. A ``running`` record of a dead process (a run killed
@@ -129,7 +116,7 @@ def check_not_running(run_dir: Path) -> None:
     if rank_zero_only.rank != 0:  # DDP's other processes: rank 0 holds the folder for them
         return
     info = read_run_json(run_dir) if run_status(run_dir) == "running" else {}
-    if info.get("host") == socket.gethostname() and _alive(info.get("pid")):
+    if info.get("host") == socket.gethostname() and process_alive(info.get("pid")):
         raise ConfigError(
             f"run_dir {run_dir} is in use: a training started {info.get('started')} runs there "
             f"(pid {info['pid']} on {info['host']}): wait for it to end, stop it (kill "

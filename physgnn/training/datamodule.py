@@ -18,7 +18,14 @@ from pathlib import Path
 import lightning as L
 import torch
 
-from physgnn.data.dataset import DatasetError, read_split, read_stats
+from physgnn.data.dataset import (
+    DATASET_MARKER,
+    DatasetError,
+    dataset_preset,
+    generate_hint,
+    read_split,
+    read_stats,
+)
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 
 
@@ -65,10 +72,20 @@ class StatePairDataModule(L.LightningDataModule):
         path = self.data_dir / name
         if not path.exists():
             raise DatasetError(
-                f"dataset '{self.preset}' not found ({path} is missing): run `make data "
-                f"PRESET={self.preset}` or `python -m physgnn.generate data={self.preset}`"
+                f"dataset '{self.preset}' not found ({path} is missing): "
+                + generate_hint(self.data_dir, self.preset)
             )
         return path
+
+    def _check_preset(self) -> None:
+        """The dataset in ``data_dir`` is of the configured preset (its marker says which)."""
+        found = dataset_preset(self.data_dir)
+        if found is not None and found != self.preset:
+            raise DatasetError(
+                f"data.dir {self.data_dir} holds the '{found}' dataset (its "
+                f"{DATASET_MARKER}), not '{self.preset}' (data={self.preset}): train with "
+                f"data={found}, or set data.dir to a '{self.preset}' dataset"
+            )
 
     def stats(self) -> dict:
         """The training split's normalisation statistics (``stats.json``)."""
@@ -77,6 +94,7 @@ class StatePairDataModule(L.LightningDataModule):
 
     def setup(self, stage: str | None = None) -> None:
         if self.train_set is None:
+            self._check_preset()
             self.train_set = self._load("train.h5", self.pushforward_steps)
             self.val_set = self._load("val.h5")
 

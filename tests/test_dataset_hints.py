@@ -1,0 +1,52 @@
+"""A dataset error's fix names a command that makes that folder, and names the preset only
+where the folder is a preset's; a dataset of another preset is refused in one line."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+from physgnn.cli import check_outputs_env
+from physgnn.data.dataset import DatasetError, generate_hint
+from physgnn.errors import ConfigError
+from physgnn.training.datamodule import StatePairDataModule
+
+
+def test_a_preset_folder_is_named_by_its_preset_with_overwrite_when_it_exists(tmp_path):
+    assert generate_hint(tmp_path / "small") == (
+        "run `make data PRESET=small` or `python -m physgnn.generate data=small`"
+    )
+    (tmp_path / "small").mkdir()
+    (tmp_path / "small" / "train.h5").write_text("x")
+    assert generate_hint(tmp_path / "small") == (
+        "run `make data PRESET=small ARGS=overwrite=true` or "
+        "`python -m physgnn.generate data=small overwrite=true`"
+    )
+
+
+def test_another_folder_is_named_by_data_dir_and_its_markers_preset(tiny_dataset, tmp_path):
+    trunc = tmp_path / "trunc"
+    shutil.copytree(tiny_dataset, trunc)
+    assert generate_hint(trunc) == (
+        f"run `python -m physgnn.generate data=tiny data.dir={trunc} overwrite=true`"
+    )
+    assert "PRESET=trunc" not in generate_hint(tmp_path / "fresh")
+
+
+def test_a_dataset_of_another_preset_is_refused(tiny_dataset):
+    dm = StatePairDataModule(data_dir=str(tiny_dataset), preset="small", H=2)
+    with pytest.raises(DatasetError) as err:
+        dm.setup()
+    message = str(err.value)
+    assert "\n" not in message
+    assert f"data.dir {tiny_dataset} holds the 'tiny' dataset" in message
+    assert "not 'small' (data=small): train with data=tiny" in message
+
+
+def test_paths_outputs_naming_a_file_is_one_line(tmp_path):
+    a_file = tmp_path / "outputs"
+    a_file.write_text("not a folder")
+    with pytest.raises(ConfigError, match=f"paths.outputs={a_file} is a file: give a folder"):
+        check_outputs_env(["data=tiny", f"paths.outputs={a_file}"])
+    check_outputs_env(["data=tiny", f"paths.outputs={tmp_path}"])  # a folder: fine

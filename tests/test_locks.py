@@ -1,0 +1,83 @@
+"""Exclusive writers: a dataset being generated is locked; a second writer gets one line naming
+the holder, and the lock of a dead process is taken over."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+
+import pytest
+from test_faults import ROOT, start, wait_for
+
+from physgnn.files import InUseError, exclusive
+
+
+def dead_pid() -> int:
+    proc = subprocess.Popen(["true"])
+    proc.wait()
+    return proc.pid
+
+
+def write_lock(path, pid: int, host: str | None = None) -> None:
+    holder = {"pid": pid, "host": host or socket.gethostname(), "since": "2026-11-23T10:00:00"}
+    path.write_text(json.dumps(holder))
+
+
+def test_a_live_holder_is_named_and_its_lock_kept(tmp_path):
+    lock = tmp_path / "data.lock"
+    sleeper = subprocess.Popen(["sleep", "30"])
+    try:
+        write_lock(lock, sleeper.pid)
+        with pytest.raises(InUseError) as err, exclusive(lock, "data.dir X", "wait for it"):
+            pass
+        message = str(err.value)
+        assert "\n" not in message and f"pid {sleeper.pid} on {socket.gethostname()}" in message
+        assert "since 2026-11-23T10:00:00" in message and message.endswith("wait for it")
+        assert json.loads(lock.read_text())["pid"] == sleeper.pid
+    finally:
+        sleeper.kill()
+
+
+@pytest.mark.parametrize("stale", ["dead", "unreadable"])
+def test_a_dead_or_unreadable_lock_is_taken_over_and_released(tmp_path, stale):
+    lock = tmp_path / "data.lock"
+    if stale == "dead":
+        write_lock(lock, dead_pid())
+    else:
+        lock.write_text("")
+    with exclusive(lock, "data.dir X", "wait"):
+        assert json.loads(lock.read_text())["pid"] == os.getpid()
+    assert not lock.exists()
+
+
+def test_a_lock_of_another_host_is_refused_with_the_way_to_free_it(tmp_path):
+    lock = tmp_path / "data.lock"
+    write_lock(lock, 12345, host="elsewhere")
+    with pytest.raises(InUseError, match=f"remove {lock} if that process is gone"):
+        with exclusive(lock, "data.dir X", "wait"):
+            pass
+
+
+def test_two_generates_into_one_folder_one_writes_the_other_is_refused(tmp_path):
+    outputs = tmp_path / "outputs"
+    common = ["data=tiny", f"paths.outputs={outputs}", "progress=false", "workers=1"]
+    first = start(["physgnn.generate", *common, "data.splits.train=400",
+                   f"hydra.run.dir={tmp_path}/a"])  # fmt: skip
+    lock = outputs / "data" / "tiny.lock"
+    wait_for(lock, first)
+    second = subprocess.run(
+        [sys.executable, "-m", "physgnn.generate", *common, "data.seed=7",
+         f"hydra.run.dir={tmp_path}/b"],
+        cwd=ROOT, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    first.send_signal(signal.SIGTERM)
+    first.communicate(timeout=60)
+    lines = second.stderr.strip().splitlines()
+    assert second.returncode == 2 and len(lines) == 1, second.stderr[-2000:]
+    assert lines[0].startswith(f"error: data.dir {outputs / 'data' / 'tiny'} is in use: ")
+    assert f"pid {first.pid} on {socket.gethostname()}" in lines[0]
+    assert not lock.exists()  # the first released it when it stopped
