@@ -27,6 +27,8 @@ Hydra would read the ``scene`` config group).
 from __future__ import annotations
 
 import dataclasses
+import sys
+import time
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
@@ -35,14 +37,15 @@ from physgnn import CONF_DIR, metrics
 from physgnn.data.dataset import write_split
 from physgnn.errors import PhysgnnError
 from physgnn.evaluation import rerun_log
+from physgnn.evaluation.ood import outside
 from physgnn.evaluation.video3d import render_side_by_side
-from physgnn.files import claim_folder, write_json
+from physgnn.files import claim_folder, portable, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.groundtruth.scenefile import load_scene
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
-from physgnn.training.runs import load_run
+from physgnn.training.runs import load_run, resolve_run
 
 KEYS = {
     "scene": None,
@@ -102,16 +105,24 @@ def rollout_prediction(simulator, truth: Trajectory) -> Trajectory:
     return rollout(simulator, [truth])[0]
 
 
-def learned(run_dir: str, truth: Trajectory, constraints: int = 0) -> tuple[Trajectory, str]:
+def learned(run_dir: str, truth: Trajectory, constraints: int = 0) -> tuple[Trajectory, dict]:
     """Roll the run's simulator out on ``truth`` (with ``constraints`` > 0, followed by the
-    constraint stage, :mod:`physgnn.models.constrained`); returns the prediction and its
-    checkpoint."""
-    if not Path(run_dir).is_dir():
+    constraint stage, :mod:`physgnn.models.constrained`); returns the prediction and where it
+    came from: ``{"checkpoint", "run", "H", "constraints", "ms_per_frame", "cfg"}``."""
+    folder = resolve_run(run_dir)
+    if not folder.is_dir():
         raise SimulateError(f"run folder {run_dir} does not exist")
-    simulator, _, info = load_run(run_dir)
+    simulator, cfg, info = load_run(folder)
+    history = int(simulator.H)
     if constraints > 0:
         simulator = ConstrainedSimulator(simulator, constraints)
-    return rollout_prediction(simulator, truth), str(info.get("checkpoint", run_dir))
+    start = time.perf_counter()
+    pred = rollout_prediction(simulator, truth)
+    steps = max(pred.n_frames - history - 1, 1)
+    source = {"checkpoint": str(info.get("checkpoint", run_dir)), "run": portable(folder)}
+    source |= {"H": history, "constraints": constraints, "cfg": cfg}
+    source["ms_per_frame"] = 1000 * (time.perf_counter() - start) / steps
+    return pred, source
 
 
 def iterations(args: DictConfig | dict) -> int:
@@ -123,12 +134,16 @@ def iterations(args: DictConfig | dict) -> int:
 
 
 def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dict:
-    """Prediction vs truth (``pred``), or the truth's own physics (``pred`` None)."""
+    """Prediction vs truth (``pred``), or the truth's own physics (``pred`` None). A diverged
+    prediction has no metrics (None) but ``diverged_at``: its finite prefix would read as a
+    good rollout."""
     mine = pred if pred is not None else truth.with_finite_velocities()
     m = metrics.trajectory_metrics(mine, truth, tol=tol, horizon=20)
     keys = (*METRIC_KEYS, *metrics.PENETRATION_KEYS) if pred is not None else (
         "energy_gain", *metrics.PENETRATION_KEYS)  # fmt: skip
     out = {k: m.get(k) for k in keys}
+    if pred is not None and pred.diverged_at is not None:
+        out = dict.fromkeys(keys) | {"diverged_at": pred.diverged_at}
     return {k: (None if v is None else float(v)) for k, v in out.items()}
 
 
@@ -142,32 +157,50 @@ def simulate(args: DictConfig | dict) -> dict:
         scene.n_frames = int(args["frames"])
     out = Path(args["out"] or outputs_root(args) / "simulate" / scene.name)
     claim_folder(out, "out", overwrite=flag(args, "overwrite"), ours=not args["out"])
+    start = time.perf_counter()
     truth = engine_simulate(scene)
     truth.attrs.update(
-        group="truth", scene=scene.name, scene_config=Path(args["scene"]).read_text()
-    )
-    pred, source = (None, "") if not args["run"] else learned(args["run"], truth, steps)
-    trajs = [truth]
-    if pred is not None:
-        attrs = {**truth.attrs, "group": "prediction", "diverged_at": pred.diverged_at}
-        attrs["constraints"] = steps
-        trajs.append(dataclasses.replace(pred, attrs=attrs))
+        group="truth", scene=scene.name, scene_config=Path(args["scene"]).read_text(),
+        velocity="the engine's (pybullet)", ms_per_frame=1000 * (time.perf_counter() - start)
+        / max(scene.n_frames - 1, 1),
+    )  # fmt: skip
+    pred, source = (None, {}) if not args["run"] else learned(args["run"], truth, steps)
+    warnings = outside(scene, source.get("cfg")) if pred is not None else []
+    if warnings:
+        lines = "; ".join(warnings)
+        print(f"warning: {scene.name} lies outside what the run was trained on: {lines}; its "
+              "rollout is extrapolation", file=sys.stderr)  # fmt: skip
+    trajs = [truth] if pred is None else [truth, with_provenance(pred, truth, source)]
     h5 = write_split(out / "simulate.h5", trajs, {"split": "simulate", "preset": scene.name})
     result = {
-        "scene": scene.name,
-        "n_spheres": scene.n_spheres,
-        "n_frames": scene.n_frames,
-        "run": source or None,
-        "constraints": steps,
+        "scene": scene.name, "n_spheres": scene.n_spheres, "n_frames": scene.n_frames,
+        "run": source.get("checkpoint"), "constraints": steps, "warnings": warnings,
+        "ms_per_frame": {"pybullet": truth.attrs["ms_per_frame"],
+                         "learned": source.get("ms_per_frame")},
         "metrics": scene_metrics(truth, pred, float(args["tol"])),
         "files": {"hdf5": str(h5)},
-    }
+    }  # fmt: skip
     if flag(args, "video"):
         result["files"].update(write_videos(out, truth, pred, bool(source)))
     if args["rerun"]:
         result["files"]["rerun"] = str(rerun_log.log_rerun(args["rerun"], truth, pred))
     write_json(out / "metrics.json", result)
     return result
+
+
+def with_provenance(pred: Trajectory, truth: Trajectory, source: dict) -> Trajectory:
+    """The prediction with attributes that say what made it (not the truth's engine's):
+    the run, its checkpoint, H, the constraint iterations, ``diverged_at`` (-1: it did not),
+    how its velocities were obtained and ms per frame."""
+    attrs = {"group": "prediction", "scene": truth.attrs.get("scene", truth.name),
+             "scene_config": truth.attrs.get("scene_config", ""),
+             "made_by": "physgnn learned simulator", "run": source.get("run", ""),
+             "checkpoint": Path(source.get("checkpoint", "")).name, "H": source.get("H", -1),
+             "constraints": source.get("constraints", 0),
+             "diverged_at": -1 if pred.diverged_at is None else int(pred.diverged_at),
+             "velocity": "finite differences of the predicted positions",
+             "ms_per_frame": source.get("ms_per_frame", -1.0)}  # fmt: skip
+    return dataclasses.replace(pred, attrs=attrs)
 
 
 run = simulate
@@ -180,8 +213,13 @@ def write_videos(out: Path, truth: Trajectory, pred: Trajectory | None, learned:
 
 
 def summary(result: dict) -> str:
-    """What ``python -m physgnn.simulate`` prints: the metrics, then the files."""
-    m = ", ".join(f"{k} {v:.3g}" for k, v in result["metrics"].items() if v is not None)
+    """What ``python -m physgnn.simulate`` prints: the metrics (or the frame a prediction
+    diverged at), then the files."""
+    metrics_ = result["metrics"]
+    m = ", ".join(f"{k} {v:.3g}" for k, v in metrics_.items() if v is not None)
+    if metrics_.get("diverged_at") is not None:
+        m = (f"the prediction DIVERGED at frame {int(metrics_['diverged_at'])}: no metrics "
+             "(its frames before that would read as a good rollout)")  # fmt: skip
     lines = [f"{result['scene']}: {result['n_spheres']} spheres, {result['n_frames']} frames; {m}"]
     lines += [f"  {kind}: {path}" for kind, path in result["files"].items()]
     return "\n".join(lines)
