@@ -9,7 +9,6 @@ import pytest
 import torch
 from torch_geometric.data import Batch
 
-import physgnn.graph.builder as graph_module
 from physgnn.data.state import SceneState
 from physgnn.graph.builder import Graph, GraphBuilder, build_graph
 from physgnn.physics.scene import GROUND, STATIC, WALL, ground_plane, make_plane

@@ -13,6 +13,7 @@ import sys
 import pytest
 from test_faults import ROOT, start, wait_for
 
+from physgnn.evaluation.runs import EvalError, find_runs
 from physgnn.files import InUseError, exclusive
 
 
@@ -81,3 +82,19 @@ def test_two_generates_into_one_folder_one_writes_the_other_is_refused(tmp_path)
     assert lines[0].startswith(f"error: data.dir {outputs / 'data' / 'tiny'} is in use: ")
     assert f"pid {first.pid} on {socket.gethostname()}" in lines[0]
     assert not lock.exists()  # the first released it when it stopped
+
+
+def test_evaluating_a_run_still_training_is_refused_in_one_line(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    trainer = subprocess.Popen(["sleep", "30"])  # stands for the training process
+    info = {"status": "running", "pid": trainer.pid, "host": socket.gethostname(),
+            "started": "2026-11-23T10:00:00"}  # fmt: skip
+    (run / "run.json").write_text(json.dumps(info))
+    try:
+        with pytest.raises(EvalError) as err:
+            find_runs(str(run), tmp_path)
+    finally:
+        trainer.kill()
+    assert f"is still training (pid {trainer.pid} on {socket.gethostname()}" in str(err.value)
+    assert "evaluate it when it has finished" in str(err.value) and "\n" not in str(err.value)

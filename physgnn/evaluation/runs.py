@@ -5,6 +5,7 @@ the test and OOD trajectories of their datasets."""
 from __future__ import annotations
 
 import dataclasses
+import socket
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,6 +15,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.data.dataset import DatasetError, read_split
 from physgnn.errors import PhysgnnError
+from physgnn.files import process_alive
 from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.trajectory import Trajectory
@@ -47,7 +49,7 @@ def all_runs(target: str | None, outputs: Path) -> list[Path]:
     if target is None:
         roots = [outputs / "runs", outputs / "multirun"]
     else:
-        root = Path(target)
+        root = training_runs.resolve_run(target)
         if not root.is_dir():
             raise EvalError(f"run folder {target} does not exist")
         if (root / "run.json").exists():
@@ -65,14 +67,24 @@ def find_runs(target: str | None, outputs: Path) -> list[Path]:
     error."""
     runs = [p for p in all_runs(target, outputs) if training_runs.run_status(p) in EVALUATED]
     if target is not None and not runs:
-        if (Path(target) / "run.json").exists():
-            status = training_runs.run_status(Path(target))
+        folder = training_runs.resolve_run(target)
+        status = training_runs.run_status(folder) if (folder / "run.json").exists() else None
+        info = training_runs.read_run_json(folder) if status == "running" else {}
+        if info.get("host") == socket.gethostname() and process_alive(info.get("pid")):
+            raise EvalError(
+                f"run {target} is still training (pid {info.get('pid')} on {info.get('host')}, "
+                f"started {info.get('started')}): its checkpoints are mid-run; evaluate it "
+                "when it has finished"
+            )
+        if status is not None:
             raise EvalError(f"run {target} has not finished (run.json status is '{status}')")
         raise EvalError(f"no finished run (run.json with status 'finished') under {target}")
     return runs
 
 
 def run_name(run_dir: Path, outputs: Path) -> str:
+    if Path(run_dir).resolve() == training_runs.PRETRAINED_DIR.resolve():
+        return training_runs.PRETRAINED
     try:
         return run_dir.resolve().relative_to(outputs.resolve()).as_posix()
     except ValueError:
