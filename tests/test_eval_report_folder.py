@@ -1,0 +1,55 @@
+"""A report folder holds one eval: a second eval replaces the first's outputs whole, and an
+interrupted eval leaves the previous report as it was."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from omegaconf import OmegaConf
+from test_eval import Exploding, Falling, eval_cfg, evaluate_fake_runs
+
+import physgnn.evaluation.evaluate as ev
+import physgnn.training.runs
+
+
+def evaluate_again(outputs: Path, *overrides: str) -> Path:
+    """:func:`evaluate_fake_runs` once more on the outputs it made."""
+    sims = {"baseline": Falling(), "ablation_M": Exploding()}
+    data = outputs / "data" / "hand"
+
+    def fake_load_run(run_dir):
+        experiment = json.loads((Path(run_dir) / "run.json").read_text())["experiment"]
+        return sims[experiment], OmegaConf.create({"datamodule": {"data_dir": str(data)}}), {}
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(physgnn.training.runs, "load_run", fake_load_run)
+        return ev.evaluate(eval_cfg(f"paths.outputs={outputs}", *overrides))
+
+
+def test_a_second_eval_without_videos_links_none_of_the_first(tmp_path):
+    outputs = tmp_path / "outputs"
+    first = evaluate_fake_runs(outputs, "video_frames=3")
+    videos = outputs / "report" / "videos"
+    assert any(videos.glob("*.gif")) and "videos/" in first.read_text()
+    (outputs / "report" / "notes.txt").write_text("mine")  # not an eval output: kept
+    second = evaluate_again(outputs, "videos=false")
+    assert not videos.exists() and "videos/" not in second.read_text()
+    assert (outputs / "report" / "notes.txt").read_text() == "mine"
+    assert not (outputs / "report.partial").exists()
+
+
+def test_an_interrupted_eval_leaves_the_last_report(tmp_path, monkeypatch):
+    outputs = tmp_path / "outputs"
+    report = evaluate_fake_runs(outputs, "videos=false")
+    before = {p.name: p.read_bytes() for p in report.parent.iterdir() if p.is_file()}
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ev, "write_report", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        evaluate_again(outputs, "videos=false")
+    after = {p.name: p.read_bytes() for p in report.parent.iterdir() if p.is_file()}
+    assert after == before and not (outputs / "report.partial").exists()
