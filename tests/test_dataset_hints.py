@@ -6,11 +6,14 @@ from __future__ import annotations
 import shutil
 
 import pytest
+import torch
+from omegaconf import OmegaConf
 
 from physgnn.cli import check_outputs_env
 from physgnn.data.dataset import DatasetError, generate_hint
 from physgnn.errors import ConfigError
 from physgnn.training.datamodule import StatePairDataModule
+from physgnn.training.train import check_trainer_config
 
 
 def test_a_preset_folder_is_named_by_its_preset_with_overwrite_when_it_exists(tmp_path):
@@ -50,3 +53,10 @@ def test_paths_outputs_naming_a_file_is_one_line(tmp_path):
     with pytest.raises(ConfigError, match=f"paths.outputs={a_file} is a file: give a folder"):
         check_outputs_env(["data=tiny", f"paths.outputs={a_file}"])
     check_outputs_env(["data=tiny", f"paths.outputs={tmp_path}"])  # a folder: fine
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="a GPU is there")
+def test_trainer_gpu_without_a_gpu_is_one_line_with_the_fix():
+    with pytest.raises(ConfigError, match="trainer.accelerator=gpu needs a CUDA GPU") as err:
+        check_trainer_config(OmegaConf.create({"accelerator": "gpu"}))
+    assert "trainer=cpu" in str(err.value) and "\n" not in str(err.value)

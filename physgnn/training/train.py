@@ -53,6 +53,12 @@ def check_trainer_config(trainer_cfg: DictConfig) -> None:
         value = trainer_cfg.get(key)
         if value is not None and not isinstance(value, int | float):
             raise ConfigError(f"trainer.{key} must be a number, got {value!r}")
+    if trainer_cfg.get("accelerator") in ("gpu", "cuda") and not torch.cuda.is_available():
+        raise ConfigError(
+            f"trainer.accelerator={trainer_cfg.accelerator} needs a CUDA GPU and torch sees "
+            "none (torch.cuda.is_available() is False): train on the CPU (trainer=cpu, the "
+            "default), or on a machine with a GPU and a CUDA build of torch"
+        )
 
 
 def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
