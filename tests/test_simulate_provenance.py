@@ -10,6 +10,7 @@ import h5py
 from test_simulate import SCENE
 
 import physgnn.evaluation.simulate as S
+from physgnn.groundtruth.scenefile import load_scene
 from physgnn.simulate import main
 
 HUGE = SCENE.replace("radius: 0.5", "radius: 500").replace("[1.5, 0, 0.5]", "[1500, 0, 500]")
@@ -63,3 +64,16 @@ def test_a_diverged_prediction_reports_no_metrics(tmp_path, monkeypatch, capsys)
     assert "DIVERGED at frame 3: no metrics" in printed and "mse 0" not in printed
     with h5py.File(out / "simulate.h5") as f:
         assert json.loads(f["prediction"].attrs["diverged_at"]) == 3
+
+
+def test_a_long_simulation_reports_its_frames(tmp_path, monkeypatch):
+    seen = []
+    real = S.engine_simulate
+    monkeypatch.setattr(S, "LONG", 0)  # every simulation counts as long
+
+    def watched(scene, on_frame=None):
+        return real(scene, on_frame=lambda done: (seen.append(done), on_frame(done)))
+
+    monkeypatch.setattr(S, "engine_simulate", watched)
+    truth = S.simulate_with_progress(load_scene(write(tmp_path, SCENE)))
+    assert seen == list(range(2, truth.n_frames + 1))

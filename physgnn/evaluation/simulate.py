@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from physgnn import CONF_DIR, metrics
 from physgnn.data.dataset import write_split
@@ -116,6 +117,9 @@ def learned(run_dir: str, truth: Trajectory, constraints: int = 0) -> tuple[Traj
     history = int(simulator.H)
     if constraints > 0:
         simulator = ConstrainedSimulator(simulator, constraints)
+    if truth.n_spheres * truth.n_frames >= LONG:
+        print(f"rolling the learned simulator out: {truth.n_spheres} spheres, {truth.n_frames} "
+              "frames ...", file=sys.stderr, flush=True)  # fmt: skip
     start = time.perf_counter()
     pred = rollout_prediction(simulator, truth)
     steps = max(pred.n_frames - history - 1, 1)
@@ -158,7 +162,7 @@ def simulate(args: DictConfig | dict) -> dict:
     out = Path(args["out"] or outputs_root(args) / "simulate" / scene.name)
     claim_folder(out, "out", overwrite=flag(args, "overwrite"), ours=not args["out"])
     start = time.perf_counter()
-    truth = engine_simulate(scene)
+    truth = simulate_with_progress(scene)
     truth.attrs.update(
         group="truth", scene=scene.name, scene_config=Path(args["scene"]).read_text(),
         velocity="the engine's (pybullet)", ms_per_frame=1000 * (time.perf_counter() - start)
@@ -186,6 +190,20 @@ def simulate(args: DictConfig | dict) -> dict:
         result["files"]["rerun"] = str(rerun_log.log_rerun(args["rerun"], truth, pred))
     write_json(out / "metrics.json", result)
     return result
+
+
+# Above this many sphere-frames a simulation shows its progress (it takes more than seconds).
+LONG = 100_000
+
+
+def simulate_with_progress(scene) -> Trajectory:
+    """pybullet's run of ``scene``, with a progress bar on the terminal when it is long."""
+    if scene.n_spheres * scene.n_frames < LONG:
+        return engine_simulate(scene)
+    columns = (TextColumn("pybullet"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with Progress(*columns, transient=True) as bar:
+        task = bar.add_task("frames", total=scene.n_frames)
+        return engine_simulate(scene, on_frame=lambda done: bar.update(task, completed=done))
 
 
 def with_provenance(pred: Trajectory, truth: Trajectory, source: dict) -> Trajectory:

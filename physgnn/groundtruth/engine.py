@@ -193,7 +193,7 @@ def _filter_contacts(scene: Scene, spheres: list[int], planes: list[int], cid: i
                 p.setCollisionFilterPair(a, b, -1, -1, 0, physicsClientId=cid)
 
 
-def _run(scene: Scene, s: EngineSettings, cid: int) -> tuple[np.ndarray, ...]:
+def _run(scene: Scene, s: EngineSettings, cid: int, on_frame=None) -> tuple[np.ndarray, ...]:
     _configure(scene, s, cid)
     planes = _add_planes(scene, s, cid)
     ids = _add_spheres(scene, s, cid)
@@ -206,11 +206,16 @@ def _run(scene: Scene, s: EngineSettings, cid: int) -> tuple[np.ndarray, ...]:
             if not scene.effects.rotation:
                 _lock_rotation(ids, _read(ids, cid)[0], quat0, cid)
         frames.append(_read(ids, cid))
+        if on_frame is not None:
+            on_frame(len(frames))
     return tuple(np.stack(a) for a in zip(*frames, strict=True))
 
 
-def simulate(scene: Scene, engine_cfg: Mapping | EngineSettings | None = None) -> Trajectory:
-    """Run ``scene`` in pybullet for ``scene.n_frames`` frames (frame 0 = initial state).
+def simulate(
+    scene: Scene, engine_cfg: Mapping | EngineSettings | None = None, on_frame=None
+) -> Trajectory:
+    """Run ``scene`` in pybullet for ``scene.n_frames`` frames (frame 0 = initial state);
+    ``on_frame(frames done)`` after each frame (a progress display).
 
     Returns a trajectory with pos, vel, angvel ``[T, N, 3]`` (engine velocities, world frame)
     and quat ``[T, N, 4]`` (w, x, y, z), float32.
@@ -219,7 +224,7 @@ def simulate(scene: Scene, engine_cfg: Mapping | EngineSettings | None = None) -
     scene.validate()
     cid = p.connect(p.DIRECT)
     try:
-        pos, quat, vel, angvel = _run(scene, s, cid)
+        pos, quat, vel, angvel = _run(scene, s, cid, on_frame)
     finally:
         p.disconnect(cid)
     quat = Q.from_xyzw(torch.from_numpy(quat)).numpy()
