@@ -25,6 +25,7 @@ Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instea
 
 from __future__ import annotations
 
+import errno
 import functools
 import math
 import os
@@ -60,6 +61,23 @@ USER_ERRORS = (
     FileNotFoundError,
     FileExistsError,
 )
+
+
+# A disk that is full or not writable is the user's to fix, not a bug.
+DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM)
+
+
+def disk_problem(err: BaseException) -> bool:
+    """``err`` is an OSError of a full, read-only or forbidden place to write."""
+    return isinstance(err, OSError) and err.errno in DISK_ERRNOS
+
+
+def disk_error(err: OSError) -> ConfigError:
+    """The one line of a :func:`disk_problem`: what, where, and the way out."""
+    return ConfigError(
+        f"{err.strerror}: {err.filename or 'the outputs folder'}; free space, or choose a "
+        "writable paths.outputs (or PHYSGNN_OUTPUTS)"
+    )
 
 
 def fail(err: BaseException) -> NoReturn:
@@ -149,6 +167,8 @@ def command(
                 return None
             if isinstance(err, USER_ERRORS):
                 fail(err)
+            if disk_problem(err):
+                fail(disk_error(err))
             raise
         if done is not None:
             print(done(result))

@@ -3,13 +3,15 @@ where the folder is a preset's; a dataset of another preset is refused in one li
 
 from __future__ import annotations
 
+import errno
+import os
 import shutil
 
 import pytest
 import torch
 from omegaconf import OmegaConf
 
-from physgnn.cli import check_outputs_env
+from physgnn.cli import check_outputs_env, command
 from physgnn.data.dataset import DatasetError, generate_hint
 from physgnn.errors import ConfigError
 from physgnn.training.datamodule import StatePairDataModule
@@ -60,3 +62,25 @@ def test_trainer_gpu_without_a_gpu_is_one_line_with_the_fix():
     with pytest.raises(ConfigError, match="trainer.accelerator=gpu needs a CUDA GPU") as err:
         check_trainer_config(OmegaConf.create({"accelerator": "gpu"}))
     assert "trainer=cpu" in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("code", [errno.ENOSPC, errno.EROFS, errno.EACCES])
+def test_a_full_or_read_only_disk_is_one_line_naming_the_file(capsys, code):
+    def writes(cfg):
+        raise OSError(code, os.strerror(code), "outputs/data/tiny.partial/train.h5")
+
+    with pytest.raises(SystemExit) as exit_info:
+        command("generate", writes).__wrapped__(OmegaConf.create())
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err == (
+        f"error: {os.strerror(code)}: outputs/data/tiny.partial/train.h5; free space, or choose "
+        "a writable paths.outputs (or PHYSGNN_OUTPUTS)\n"
+    )
+
+
+def test_other_os_errors_keep_their_traceback():
+    def broken(cfg):
+        raise OSError(errno.EIO, "Input/output error")
+
+    with pytest.raises(OSError, match="Input/output"):
+        command("generate", broken).__wrapped__(OmegaConf.create())
