@@ -1,4 +1,5 @@
-"""Every conf/experiment/*.yaml composes as a multirun and every job of it instantiates."""
+"""Every sweep of conf/experiment/ composes as a multirun and every job of it instantiates;
+the single-run experiments compose with their budget."""
 
 from __future__ import annotations
 
@@ -14,7 +15,9 @@ from omegaconf import OmegaConf
 from physgnn.training.train import build
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
-EXPERIMENTS = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml"))
+# Experiments of one run (not sweeps), with their optimiser-step budget.
+SINGLE = {"long": 22_500}
+EXPERIMENTS = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml") if p.stem not in SINGLE)
 RUNS = {
     "ablation_H": 15,
     "ablation_M": 15,
@@ -48,7 +51,21 @@ def sweep_jobs(params) -> list[list[str]]:
 
 
 def test_every_experiment_is_listed():
-    assert EXPERIMENTS == sorted(RUNS)
+    files = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml"))
+    assert files == sorted([*RUNS, *SINGLE])
+
+
+def test_the_long_run_is_ten_default_budgets_with_milestones(tiny_dataset, tmp_path):
+    base = ["data=tiny", f"paths.outputs={Path(tiny_dataset).parents[1]}", f"run_dir={tmp_path}"]
+    cfg = compose_train(["+experiment=long", "model.hidden=8", *base])
+    assert cfg.hydra.mode != RunMode.MULTIRUN and cfg.experiment_name == "long"
+    steps = cfg.trainer.max_epochs * cfg.datamodule.pairs_per_epoch // cfg.datamodule.batch_size
+    assert steps == SINGLE["long"] == 10 * 2250
+    # the default's decay over 90 epochs (0.97^90), spread over the 900
+    assert cfg.lit.scheduler.gamma**900 == pytest.approx(0.97**90, rel=5e-3)
+    _, _, trainer = build(cfg)
+    kept = [c for c in trainer.callbacks if getattr(c, "dirpath", "").endswith("milestones")]
+    assert len(kept) == 1 and kept[0]._every_n_train_steps == 2250 and kept[0].save_top_k == -1
 
 
 @pytest.mark.parametrize("name", EXPERIMENTS)
