@@ -33,6 +33,7 @@ from physgnn.errors import PhysgnnError
 from physgnn.graph.builder import GraphBuilder
 from physgnn.models import contact_inputs
 from physgnn.nn.epd import EncodeProcessDecode
+from physgnn.nn.padding import pad_graph
 from physgnn.physics.scene import EFFECT_NAMES
 
 ROTATION = EFFECT_NAMES.index("rotation")
@@ -72,7 +73,9 @@ class LearnedSimulator(nn.Module):
     = ``6·(H+1) + 2`` numbers, plus 4 with ``material_features``, plus 6 with
     ``boundary_features`` (:meth:`boundary_features`, ``boundary_radius`` R in metres);
     absolute position and orientation are masked. ``contact_features``, ``gravity_prior``: see
-    the module doc; ``layer_norm``: see :class:`~physgnn.nn.epd.EncodeProcessDecode`.
+    the module doc; ``layer_norm``: see :class:`~physgnn.nn.epd.EncodeProcessDecode`;
+    ``pad_to_buckets``: the network sees graphs padded to capacity buckets (opt-in capture
+    path, :mod:`physgnn.nn.padding`).
     """
 
     def __init__(
@@ -97,12 +100,12 @@ class LearnedSimulator(nn.Module):
         material_features: bool = False,
         gravity_prior: bool = False,
         layer_norm: bool = False,
+        pad_to_buckets: bool = False,
     ):
         super().__init__()
         _check_sizes(H, M, boundary_radius)
-        self.H, self.M = int(H), int(M)
-        self.use_boundary = bool(boundary_features)
-        self.boundary_radius = float(boundary_radius)
+        self.H, self.M, self.pad_to_buckets = int(H), int(M), bool(pad_to_buckets)
+        self.use_boundary, self.boundary_radius = bool(boundary_features), float(boundary_radius)
         self.contact_features = bool(contact_features)
         self.material_features = bool(material_features)
         self.gravity_prior = bool(gravity_prior)
@@ -236,10 +239,11 @@ class LearnedSimulator(nn.Module):
         graph = self.graph_builder(state)
         pp_attr, ps_attr = self.edge_features(graph, state)
         material = state.material if self.num_materials > 0 else None
-        pred = self.network(
-            self.node_features(state), graph.pp_index, pp_attr, graph.ps_index, ps_attr, material
-        )
-        return pred, graph
+        args = (self.node_features(state), graph.pp_index, pp_attr, graph.ps_index, ps_attr)
+        if self.pad_to_buckets:  # fixed shapes for a captured step (physgnn/nn/padding.py)
+            padded, n = pad_graph(*args, material)
+            return self.network(*padded)[:n], graph
+        return self.network(*args, material), graph
 
     def normalized_target(self, state) -> torch.Tensor:
         """``[N, 6]``: the normalised change from the state's (possibly noisy) ``v_t, ω_t`` to

@@ -139,8 +139,8 @@ class LitSimulator(L.LightningModule):
     pushes contacts within ``contact_touch`` in by up to ``contact_noise_depth`` with
     probability ``contact_noise_prob`` (0: off); all three lengths in units of the simulator's
     ``length_scale`` (:mod:`physgnn.training.contacts`).
-    ``compile``: the network is compiled in place (``torch.compile``, dynamic shapes) for
-    every call, training, validation and rollouts alike; the weights and checkpoints are
+    ``compile``: the network is compiled in place (``torch.compile``, dynamic shapes; fixed
+    ones when the simulator pads to buckets) for every call, training, validation and rollouts alike; the weights and checkpoints are
     the same as without (docs/PERFORMANCE.md has what it gains and costs).
     """
 
@@ -190,8 +190,8 @@ class LitSimulator(L.LightningModule):
         self.contact_tol = float(contact_tol)
         self.contact_noise = (float(contact_noise_depth), float(contact_touch))
         self.contact_noise_prob = float(contact_noise_prob)
-        if compile:
-            simulator.network.compile(dynamic=True)
+        if compile:  # padded to buckets: a few fixed shapes, compiled each once
+            simulator.network.compile(dynamic=not getattr(simulator, "pad_to_buckets", False))
         self.pairs_seen = self.nodes_seen = 0
         self._finite, self._train_means = FiniteWatch(), EpochMeans()
 

@@ -1,0 +1,76 @@
+"""The capture path: graphs padded to capacity buckets give the unpadded outputs, in a few
+fixed shapes."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from simdata import STATS
+from test_contacts import scene
+from torch.testing import assert_close
+
+from physgnn.models.learned import LearnedSimulator
+from physgnn.nn.epd import EncodeProcessDecode
+from physgnn.nn.padding import bucket, pad_graph
+
+
+def test_buckets_cover_every_size_with_at_most_a_fifth_of_padding():
+    sizes = [bucket(n) for n in range(0, 5000)]
+    assert all(b >= n for n, b in enumerate(sizes))
+    assert all(b <= max(8, 1.19 * n + 1) for n, b in enumerate(sizes))
+    assert len(set(sizes[1000:2000])) <= 5  # a doubling of sizes: 4 or 5 shapes
+
+
+def random_graph(n: int, pairs: int, f: int, seed: int = 0):
+    gen = torch.Generator().manual_seed(seed)
+    x = torch.randn(n, 5, generator=gen)
+    i = torch.randint(0, n, (pairs,), generator=gen)
+    j = (i + 1 + torch.randint(0, n - 1, (pairs,), generator=gen)) % n
+    attr = torch.randn(pairs, 4, generator=gen)
+    pp_index = torch.cat([torch.stack([i, j]), torch.stack([j, i])], 1)
+    pp_attr = torch.cat([attr, attr * torch.tensor([-1.0, -1, -1, 1])])
+    ps_index = torch.stack(
+        [torch.zeros(f, dtype=torch.long), torch.randint(0, n, (f,), generator=gen)]
+    )
+    return x, pp_index, pp_attr, ps_index, torch.randn(f, 10, generator=gen)
+
+
+@pytest.mark.parametrize("n, pairs, f", [(5, 4, 5), (37, 60, 40), (100, 0, 100)])
+def test_a_padded_graph_gives_the_network_the_same_outputs(n, pairs, f):
+    torch.manual_seed(1)
+    net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=16, M=2).eval()
+    graph = random_graph(n, pairs, f)
+    padded, real = pad_graph(*graph)
+    assert real == n and padded[0].shape[0] == bucket(n + 1)
+    assert padded[1].shape[1] == 2 * bucket(pairs) and padded[3].shape[1] == bucket(f)
+    half = padded[1].shape[1] // 2  # the paired layout holds
+    assert torch.equal(padded[1][:, half:], padded[1][:, :half].flip(0))
+    with torch.no_grad():
+        assert_close(net(*padded)[:n], net(*graph), rtol=1e-5, atol=1e-5)
+
+
+def test_the_padded_simulator_predicts_as_the_plain_one():
+    torch.manual_seed(0)
+    plain = LearnedSimulator(STATS, H=1, M=2, hidden=16, gravity_prior=True).eval()
+    padded = LearnedSimulator(STATS, H=1, M=2, hidden=16, gravity_prior=True, pad_to_buckets=True)
+    padded.load_state_dict(plain.state_dict())
+    state = scene(
+        [[0, 0, 0.5], [0.9, 0, 0.5], [3, 0, 2.0]],
+        [[1, 0, 0], [-1, 0, 0], [0, 0, -2]],
+        [0.5, 0.5, 0.5],
+    )
+    with torch.no_grad():
+        for a, b in zip(plain(state), padded.eval()(state), strict=True):
+            assert_close(a, b, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_the_compiled_padded_network_equals_eager_and_keeps_its_shapes():
+    torch.manual_seed(1)
+    net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=16, M=2).eval()
+    compiled = torch.compile(net, dynamic=False)
+    with torch.no_grad():
+        for n, pairs in ((30, 40), (31, 42)):  # the same buckets: one compiled graph
+            graph = random_graph(n, pairs, n)
+            padded, _ = pad_graph(*graph)
+            assert_close(compiled(*padded)[:n], net(*graph), rtol=1e-4, atol=1e-5)
