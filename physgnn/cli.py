@@ -202,6 +202,16 @@ def check_outputs_env(argv: list[str] | None = None) -> None:
             )
 
 
+def run_dir_is_hydras(argv: list[str]) -> list[str]:
+    """``argv`` with ``hydra.run.dir=X`` added where ``run_dir=X`` is given without it: Hydra's
+    own folder is then the run's (else it makes a stray ``runs/<experiment>/<now>/`` with an
+    empty log beside the run being trained)."""
+    given = dict(arg.lstrip("+").split("=", 1) for arg in argv if "=" in arg)
+    if "run_dir" in given and "hydra.run.dir" not in given:
+        return [*argv, f"hydra.run.dir={given['run_dir']}"]
+    return argv
+
+
 def _outputs_checked(hydra_main: Callable) -> Callable:
     """``hydra_main`` after :func:`check_outputs_env` (its error printed as one line)."""
 
@@ -211,6 +221,7 @@ def _outputs_checked(hydra_main: Callable) -> Callable:
             check_outputs_env()
         except ConfigError as err:
             fail(err)
+        sys.argv[1:] = run_dir_is_hydras(sys.argv[1:])
         return hydra_main(*args, **kwargs)
 
     main.__wrapped__ = hydra_main.__wrapped__  # the body, as documented in :func:`command`

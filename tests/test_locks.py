@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -13,6 +14,7 @@ import sys
 import pytest
 from test_faults import ROOT, start, wait_for
 
+import physgnn.train as train_command
 from physgnn.evaluation.runs import EvalError, find_runs
 from physgnn.files import InUseError, exclusive
 
@@ -98,3 +100,16 @@ def test_evaluating_a_run_still_training_is_refused_in_one_line(tmp_path):
         trainer.kill()
     assert f"is still training (pid {trainer.pid} on {socket.gethostname()}" in str(err.value)
     assert "evaluate it when it has finished" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_run_dir_leaves_no_stray_hydra_folder(tiny_dataset, tmp_path, monkeypatch):
+    outputs = tmp_path / "outputs"
+    shutil.copytree(tiny_dataset, outputs / "data" / "tiny")
+    run_dir = tmp_path / "run"
+    args = ["data=tiny", f"paths.outputs={outputs}", f"run_dir={run_dir}", "model.hidden=8",
+            "model.M=1", "trainer.max_epochs=1", "datamodule.pairs_per_epoch=8",
+            "trainer.enable_progress_bar=false"]  # fmt: skip
+    monkeypatch.setattr(sys, "argv", ["physgnn.train", *args])
+    train_command.main()
+    assert sorted(p.name for p in outputs.iterdir()) == ["data"]  # no runs/<experiment>/<now>/
+    assert (run_dir / ".hydra" / "config.yaml").is_file() and (run_dir / "train.log").stat().st_size
