@@ -65,3 +65,10 @@ def test_the_export_command_refuses_a_folder_it_did_not_write(tiny_run, tmp_path
     assert "did not write" in capsys.readouterr().err
     assert (mine / "notes.txt").read_text() == "keep me"
     assert main([str(tmp_path / "nowhere")]) == 2
+
+
+def test_pretrained_without_shipped_weights_is_one_line(tmp_path, monkeypatch):
+    monkeypatch.setattr(runs_module, "PRETRAINED_DIR", tmp_path / "none")
+    with pytest.raises(RunError, match="ships no trained weights yet") as err:
+        load_run("pretrained")
+    assert "\n" not in str(err.value)

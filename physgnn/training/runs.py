@@ -33,8 +33,16 @@ class RunError(PhysgnnError, ValueError):
 
 
 def resolve_run(run: str | Path) -> Path:
-    """The run folder ``run`` names: the shipped weights for ``pretrained``, else the path."""
-    return PRETRAINED_DIR if str(run) == PRETRAINED else Path(run)
+    """The run folder ``run`` names: the shipped weights for ``pretrained`` (a one-line error
+    where this checkout has none), else the path."""
+    if str(run) != PRETRAINED:
+        return Path(run)
+    if not (PRETRAINED_DIR / RUN_JSON).is_file():
+        raise RunError(
+            "run=pretrained: this checkout ships no trained weights yet (physgnn/pretrained is "
+            "empty); train a model (make train) and pass run=<its run folder>"
+        )
+    return PRETRAINED_DIR
 
 
 def write_run_json(run_dir: str | Path, info: dict) -> Path:
