@@ -140,8 +140,9 @@ class LitSimulator(L.LightningModule):
     probability ``contact_noise_prob`` (0: off); all three lengths in units of the simulator's
     ``length_scale`` (:mod:`physgnn.training.contacts`).
     ``compile``: the network is compiled in place (``torch.compile``, dynamic shapes; fixed
-    ones when the simulator pads to buckets) for every call, training, validation and rollouts alike; the weights and checkpoints are
-    the same as without (docs/PERFORMANCE.md has what it gains and costs).
+    ones when the simulator pads to buckets) for every call, training, validation and
+    rollouts alike; the weights and checkpoints are the same as without (docs/PERFORMANCE.md
+    has what it gains and costs).
     """
 
     def __init__(
