@@ -57,6 +57,9 @@ eval: ## Evaluate every finished run under outputs/ and write outputs/report/ (A
 ship: ## Export a run's best weights as the shipped model run=pretrained loads (RUN=<run folder> [OUT=<folder>])
 	$(PY) -m physgnn.training.export $(RUN) $(OUT)
 
+learning-curve: ## Learning curve of a run's checkpoints evaluated together (REPORT=<eval report folder> [OUT=<folder>])
+	$(PY) -m physgnn.report.learning_curve $(REPORT) $(OUT)
+
 bench: ## Accuracy versus time: outputs/bench/bench.{json,md} (ARGS: e.g. quick=true threads=1)
 	$(PY) -m physgnn.bench $(ARGS)
 
