@@ -54,8 +54,8 @@ study: ## The ablation study: every unique sweep configuration x 3 seeds, result
 eval: ## Evaluate every finished run under outputs/ and write outputs/report/ (ARGS: runs=PATH ...)
 	$(PY) -m physgnn.eval $(ARGS)
 
-ship: ## Export a run's best weights as the shipped model run=pretrained loads (RUN=<run folder> [OUT=<folder>])
-	$(PY) -m physgnn.training.export $(RUN) $(OUT)
+ship: ## Export a run's best weights as the shipped model run=pretrained loads (RUN=<run folder> [OUT=<folder>] [CHECKPOINT=<file>])
+	$(PY) -m physgnn.training.export $(RUN) $(OUT) $(CHECKPOINT)
 
 learning-curve: ## Learning curve of a run's checkpoints evaluated together (REPORT=<eval report folder> [OUT=<folder>])
 	$(PY) -m physgnn.report.learning_curve $(REPORT) $(OUT)
