@@ -55,7 +55,7 @@ eval: ## Evaluate every finished run under outputs/ and write outputs/report/ (A
 	$(PY) -m physgnn.eval $(ARGS)
 
 ship: ## Export a run's best weights as the shipped model run=pretrained loads (RUN=<run folder> [OUT=<folder>] [CHECKPOINT=<file>])
-	$(PY) -m physgnn.training.export $(RUN) $(OUT) $(CHECKPOINT)
+	$(PY) -m physgnn.training.export $(RUN) $(or $(OUT),physgnn/pretrained) $(CHECKPOINT)
 
 learning-curve: ## Learning curve of a run's checkpoints evaluated together (REPORT=<eval report folder> [OUT=<folder>])
 	$(PY) -m physgnn.report.learning_curve $(REPORT) $(OUT)
