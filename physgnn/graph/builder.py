@@ -121,7 +121,7 @@ class GraphBuilder:
         src, dst = self._pair_candidates(state, batch, allowance, spheres)
         pp_mask = self._pp_rule(state, batch, allowance, src, dst)
         plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long())
-        ps_mask = self._ps_rule(state, batch, allowance, plane, sphere)
+        ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere)
         n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
         keep = compact(pp_mask, n_pp)
         pp_index, pp_attr = _paired(state.pos, src[keep], dst[keep])
@@ -130,7 +130,8 @@ class GraphBuilder:
         if checks_on():
             _check_ground(state, batch)
         clip = self.reach(state, allowance) + self.clip_margin
-        return Graph(pp_index, pp_attr, ps_index, _ps_attr(state, ps_index, clip), allowance)
+        ps_attr = _ps_attr(state, ps_index, offset[keep], clip)
+        return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance)
 
     def allowance(self, state, moving: torch.Tensor | None = None) -> torch.Tensor:
         """Motion allowance ``a_i`` of every sphere, float64 ``[N]``; ``moving [N]`` (bool):
@@ -176,8 +177,9 @@ class GraphBuilder:
         """``ρ_i = r_i + a_i + ε``, float64 ``[N]``: the farthest plane a sphere may touch."""
         return state.radius.to(torch.float64) + allowance + self.epsilon
 
-    def _ps_rule(self, state, batch, allowance, plane, sphere) -> torch.Tensor:
-        """``[Q]`` bool for (plane, sphere) candidates of one scene: the ground of a scene with
+    def _ps_rule(self, state, batch, allowance, plane, sphere) -> tuple[torch.Tensor, ...]:
+        """``([Q] bool, offsets [Q, 3] float64)`` for (plane, sphere) candidates of one scene
+        (the offsets from each rectangle, kept for the edge features): the ground of a scene with
         gravity or surface contact; a wall or static plane of a scene with surface contact
         whose rectangle is within ``a_i + ε`` of the sphere's surface and which the centre is
         not more than ``r_i`` behind (planes are one-sided)."""
@@ -188,7 +190,8 @@ class GraphBuilder:
         height = (offset * state.planes[plane, 3:6].to(torch.float64)).sum(-1)
         near = offset.norm(dim=-1) - radius <= allowance[sphere] + self.epsilon
         bounded = ~ground & effects[:, _SURFACE_CONTACT] & near & (height > -radius)
-        return (ground & (effects[:, _GRAVITY] | effects[:, _SURFACE_CONTACT])) | bounded
+        keep = (ground & (effects[:, _GRAVITY] | effects[:, _SURFACE_CONTACT])) | bounded
+        return keep, offset
 
 
 def build_graph(state, cfg: Mapping) -> Graph:
@@ -229,12 +232,10 @@ def _check_ground(state, batch) -> None:
         raise ValueError(f"scene {bad[0]} of the batch must have exactly one ground plane (kind 0)")
 
 
-def _ps_attr(state, index: torch.Tensor, reach: torch.Tensor) -> torch.Tensor:
+def _ps_attr(state, index: torch.Tensor, offset: torch.Tensor, reach: torch.Tensor) -> torch.Tensor:
     """``[v_i, n_s, clip(δ_is), clip(h_is)]`` of ps edges, ``[F, 10]`` (see the module doc);
-    ``reach [N]`` float64 is ``ρ_i``."""
+    ``offset [F, 3]`` (float64) is δ before the clip, ``reach [N]`` float64 is ``ρ_i``."""
     planes = state.planes[index[0]].to(torch.float64)
-    pos = state.pos[index[1]].to(torch.float64)
-    offset = rectangle_offset(pos, planes)  # the ground's infinite half lengths: its plane
     dist = offset.norm(dim=-1, keepdim=True)
     rho = reach[index[1], None]
     offset = offset * torch.where(dist > rho, rho / dist, torch.ones_like(dist))
