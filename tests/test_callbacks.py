@@ -49,6 +49,7 @@ def test_logs_every_key_with_the_oracle_mse():
     values = callback_with(val, ood).log_rollouts(module, data_dir=None)
     assert set(module.logged) == {
         "val/rollout_mse",
+        "val/energy_gain",
         "val/rollout_score",
         "val/max_depth",
         "val/tunnelled",
@@ -77,7 +78,7 @@ def test_ood_off_logs_validation_only():
     module = FakeModule()
     callback_with([trajectory(2, 8)], [trajectory(2, 8)], ood=False).log_rollouts(module, None)
     assert set(module.logged) == {
-        "val/rollout_mse", "val/rollout_score", "val/chamfer", "rollout/fps",
+        "val/rollout_mse", "val/rollout_score", "val/chamfer", "val/energy_gain", "rollout/fps",
         "val/max_depth", "val/tunnelled", "val/rest_drift",
     }  # fmt: skip
 

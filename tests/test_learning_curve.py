@@ -20,9 +20,15 @@ def test_rows_per_step_in_order_with_the_measures_of_each_checkpoint(tmp_path):
     hard = [hard_row("m/step002250", "ood_cubes", max_pen_sphere=0.7),
             hard_row("m/step002250", "resting_pile", rest_drift=27.0),
             hard_row("m/step004500", "ood_cubes", max_pen_sphere=0.6)]  # fmt: skip
-    rows = curve_rows(metrics, hard)
+    fall = [
+        {"run": "m/step002250", "z_error_pct": -2.0},
+        {"run": "m/step002250", "z_error_pct": 4.0},
+    ]
+    rows = curve_rows(metrics, hard, fall)
     assert [r["step"] for r in rows] == [2250, 4500]  # a run without a step is left out
     assert rows[0]["test_mse"] == 9.0 and rows[1]["test_mse"] == 3.0
+    assert rows[0]["ood_mse"] == 99.0 and rows[1]["ood_mse"] is None
+    assert rows[0]["freefall_pct"] == 3.0 and rows[1]["freefall_pct"] is None
     assert rows[0]["cubes_depth"] == 0.7 and rows[0]["pile_drift"] == 27.0
     assert rows[1]["pile_drift"] is None and rows[1]["tight_depth"] is None
     assert plot_curve(rows, tmp_path / "curve.png").stat().st_size > 0

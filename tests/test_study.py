@@ -5,10 +5,12 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
+from scipy import stats
 from simdata import trajectory
 from torch import nn
 
@@ -54,8 +56,12 @@ def test_the_five_sweeps_are_17_configurations_the_baseline_shared():
         "model.material_features=False model.third_law=False model.use_surfaces=False"
     ]  # the GNS-style model has the report's inputs
     jobs = study_jobs(configs, [0, 1, 2])
-    assert len(jobs) == 51 and [j.seed for j in jobs[:17]] == [0] * 17
-    assert {j.config.key for j in jobs[:17]} == set(keys)
+    assert len(jobs) == 51
+    table2 = [c.key for c in configs if next(iter(c.points)) == "ablation_components"]
+    assert len(table2) == 8  # Table 2's rows first, every seed, seed by seed
+    assert [(j.config.key, j.seed) for j in jobs[:24]] == [
+        (k, s) for s in (0, 1, 2) for k in table2]  # fmt: skip
+    assert {j.config.key for j in jobs[24:]} == set(keys) - set(table2)
 
 
 def test_budget_is_steps_in_whole_epochs():
@@ -87,6 +93,8 @@ def rec(key, seed, ood, test=None, share=None):
     def rows(items):
         return [{"mse": None if d is not None else m, "chamfer": None if d is not None else m,
                  "energy_gain": None if d is not None else 0.1 * m, "diverged_at": d,
+                 "energy_error": None if d is not None else abs(0.1 * m - 0.05),
+                 "max_depth_sphere": None if d is not None else 0.01 * m,
                  "energy_gain_truth": 0.05, "fps": 10.0} for m, d in items]  # fmt: skip
 
     logged = {"train/energy_share": share} if share is not None else {}
@@ -106,20 +114,30 @@ def test_a_diverged_rollout_makes_its_seed_infinite_never_a_prefix_average():
 
 
 def test_verdicts_follow_their_stated_rules():
-    base = [rec("baseline", s, [(2.0, None), (2.0, None)]) for s in range(3)]
-    diverging = [rec("m", s, [(1.0, 5 if s == 0 else None), (1.0, None)]) for s in range(3)]
-    stable = [rec("m", s, [(9.0, None), (9.0, None)]) for s in range(3)]
-    assert verdicts.diverges(diverging, base) == "reproduced"
-    assert verdicts.diverges(stable, base).startswith("not reproduced: no OOD rollout")
-    assert verdicts.diverges(diverging, diverging).startswith("not reproduced: diverged no more")
-    assert verdicts.worse(stable, base) == "reproduced"
-    assert verdicts.worse(base, stable) == "not reproduced: both lower"
-    assert verdicts.worse(diverging, base).startswith("not comparable")
-    groups = {"baseline": base, "m": stable, "d": diverging}
-    assert verdicts.best(groups, {"baseline": "baseline", "m1": "m", "h0": "d"}) == "reproduced"
-    lower = [rec("l", s, [(1.0, None), (1.0, None)]) for s in range(3)]
-    groups["l"] = lower
-    assert verdicts.best(groups, {"baseline": "baseline", "no_noise": "l"}).endswith("no_noise")
+    base = [rec("baseline", s, [(2.0 + 0.1 * s, None), (2.0, None)]) for s in range(3)]
+    many = [rec("m", s, [(1.0, 5), (1.0, 7 if s else None)]) for s in range(3)]  # 5 of 6
+    one = [rec("m", s, [(1.0, 5 if s == 0 else None), (1.0, None)]) for s in range(3)]
+    stable = [rec("m", s, [(9.0 + s, None), (9.0, None)]) for s in range(3)]
+    assert verdicts.diverges(many, base).startswith("reproduced (5/6 diverged vs 0/6, p = ")
+    assert verdicts.diverges(one, base).startswith("inconclusive at this budget: 1/6")
+    assert verdicts.diverges(stable, base) == "not reproduced: 0/6 OOD rollouts diverged"
+    assert verdicts.worse(stable, base).startswith("not comparable")
+    # OOD MSE per seed: baseline 2/2.05/2.1, stable 9/9.5/10: Welch's t-test
+    d, p = verdicts.difference(stable, base)
+
+    a, b = [9.0, 9.5, 10.0], [2.0, 2.05, 2.1]
+    assert d == pytest.approx(np.mean(a) - np.mean(b))
+    assert p == pytest.approx(stats.ttest_ind(a, b, equal_var=False).pvalue)
+    groups = {"baseline": base, "m": stable, "d": many}
+    assert verdicts.best(groups, {"baseline": "baseline", "m1": "m", "h0": "d"}).startswith(
+        "reproduced")  # fmt: skip
+    lower = [rec("l", s, [(1.0 + 0.1 * s, None), (1.0, None)]) for s in range(3)]
+    close = [rec("c", s, [(2.0 + 0.3 * (s - 1), None), (2.1, None)]) for s in range(3)]
+    groups |= {"l": lower, "c": close}
+    keys = {"baseline": "baseline", "no_noise": "l"}
+    assert verdicts.best(groups, keys).startswith("not reproduced: lower OOD MSE for no_noise")
+    keys = {"baseline": "baseline", "m1": "m", "h0": "c"}
+    assert verdicts.best(groups, keys).startswith("inconclusive at this budget")
 
 
 class Runaway(nn.Module):
@@ -175,6 +193,12 @@ def test_a_tiny_study_runs_resumes_from_the_registry_and_survives_failures(
         "baseline", "model.connectivity=epsilon", "model.connectivity=vmax"]  # fmt: skip
     assert {r["status"] for r in records} == {"finished"}
     assert all(len(r["splits"]["ood"]) == 4 and r["steps"] == 2 for r in records)
+    assert all(r["curve"] and r["curve"][0]["step"] >= 1 for r in records)  # learning curve
+    assert all(r["checkpoint"]["step"] in (1, 2) and r["checkpoint"]["val_loss"] > 0
+               for r in records)  # the measured checkpoint  # fmt: skip
+    base = next(r for r in records if r["key"] == "baseline")  # measured with the stage too
+    assert len(base["splits_constraints"]["ood"]) == 4
+    assert all("splits_constraints" not in r for r in records if r["key"] != "baseline")
     text = report.read_text()
     assert "3 done" in text and "(report Fig. 17)" in text
     assert (report.parent / "sweep_connectivity.png").stat().st_size > 0
@@ -212,20 +236,44 @@ def test_the_report_is_rebuilt_from_the_registry_alone(tmp_path):
     for seed in range(3):
         for config in configs:
             gone = 7 if config.key == "model.M=1" and seed == 1 else None
-            mse = 4.0 if config.key == "baseline" else 5.0 + seed
-            share = 0.05 if config.key == "lit.lambda_energy=10" else 0.0
-            r = rec(config.key, seed, [(mse, gone), (mse, None)], share=share)
+            mse = 4.0 + 0.01 * seed if config.key == "baseline" else 5.0 + seed
+            lam = float(config.points.get("ablation_lambda", "nan"))
+            r = rec(config.key, seed, [(mse, gone), (mse, None)], share=0.01 if lam else 0.0)
+            r["logged"] |= {"train/loss": 2.0, "train/loss_energy": 0.01 / (1 + (lam or 0))}
             r |= {"budget": budget, "overrides": config.overrides, "threads": 1,
                   "machine": {"cpu": "test cpu", "gpu": None}, "commit": "abc",
-                  "date": "2026-01-01 10:00", "wall_s": 60.0}  # fmt: skip
+                  "date": "2026-01-01 10:00", "wall_s": 60.0,
+                  "checkpoint": {"file": "best-epoch089.ckpt", "step": 2250, "val_loss": 0.5},
+                  "curve": [{"step": 250 * k, "mse": mse / k, "max_depth": 0.1,
+                             "energy_gain": 0.2} for k in (1, 2)]}  # fmt: skip
+            if config.key == "baseline":  # the constraint stage halves its OOD MSE
+                r["splits_constraints"] = rec("", seed, [(mse / 2, None), (mse / 2, None)])[
+                    "splits"
+                ]
             records.append(r)
     text = write_study_report(records, configs, cfg).read_text()
+    lines = text.splitlines()
     assert "**51 done**, 0 failed, 0 left" in text and "test cpu" in text
-    row = next(line for line in text.splitlines() if line.startswith("| M = 1 |"))
+    assert "the report trained ≈ 390 000" in text and "3 seeds per configuration" in text
+    row = next(line for line in lines if line.startswith("| M = 1 |"))
     assert "**∞ (1/3 seeds diverged)**; others 6 ± 1.41" in row
-    assert row.endswith("| 1/6 (median step 7) | diverges | reproduced |")
-    base = next(line for line in text.splitlines() if line.startswith("| Baseline |"))
-    assert "| 4 ± 0 |" in base and base.endswith("| best of the table | reproduced |")
-    assert "λ = 10: 5 %" in text and "λ = 0: 0 %" in text
-    for name in ("sweep_H", "sweep_M", "sweep_connectivity", "sweep_lambda", "fps"):
+    assert row.endswith(
+        "| 1/6 (median step 7) | +∞: diverged more (p = 1) | diverges | inconclusive at this "
+        "budget: 1/6 diverged vs the baseline's 0/6 (p = 0.5) |"
+    )  # fmt: skip
+    base = next(line for line in lines if line.startswith("| Baseline |"))
+    assert (
+        "| 4.01 ± 1.00e-02 |" in base
+        and "| best of the table | inconclusive at this budget" in base
+    )
+    h0 = next(line for line in lines if line.startswith("| H = 0 |"))
+    p = stats.ttest_ind([5, 6, 7], [4, 4.01, 4.02], equal_var=False).pvalue
+    assert f"| +1.99 (p = {p:.2g}) | diverges | not reproduced: 0/6 OOD rollouts diverged |" in h0
+    stage = next(line for line in lines if line.startswith("| learned + constraints |"))
+    assert "| 2 ± 5.00e-03 |" in stage and "| -2 (p = " in stage
+    assert "| 0.5 @ step 2250 |" in text  # the measured checkpoint's validation loss
+    assert "**Rules.**" in text and "Welch" in text
+    # λ = 10: designed share 10 × 0.01 / (2 + 0.1); the penalty fell 11-fold
+    assert "| 10 | 4.8 % | 11× | 1 % |" in text
+    for name in ("sweep_H", "sweep_M", "sweep_connectivity", "sweep_lambda", "fps", "curve_H"):
         assert f"({name}.png)" in text and (tmp_path / "results" / f"{name}.png").exists()

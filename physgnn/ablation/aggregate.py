@@ -32,9 +32,9 @@ class Stat:
 
 def seed_value(record: dict, split: str, metric: str) -> float | None:
     """Mean of ``metric`` over the split's trajectories (inf if one diverged); None when the
-    run has no such split."""
+    run has no such split or did not measure ``metric`` (a record of an older study)."""
     rows = (record.get("splits") or {}).get(split) or []
-    if not rows:
+    if not rows or all(metric not in r for r in rows):
         return None
     values = [r.get(metric) for r in rows]
     if any(r["diverged_at"] is not None for r in rows) or any(v is None for v in values):
@@ -64,6 +64,13 @@ def truth_floor(records: list[dict], split: str) -> float | None:
         if rows:
             return float(np.mean([row["energy_gain_truth"] for row in rows]))
     return None
+
+
+def mean_checkpoint(records: list[dict], name: str) -> float | None:
+    """Mean over seeds of the measured checkpoint's ``name`` (``step``, ``val_loss``)."""
+    values = [r["checkpoint"][name] for r in records
+              if (r.get("checkpoint") or {}).get(name) is not None]  # fmt: skip
+    return float(np.mean(values)) if values else None
 
 
 def mean_logged(records: list[dict], name: str) -> float | None:

@@ -88,3 +88,45 @@ def plot_study_fps(path: Path, labels: list[str], stats: list[Stat], note: str) 
         [s.std or 0.0 for _, s in keep],
         title=f"Rollout FPS, test split ({note})",
     )
+
+
+CURVE_PANELS = (("mse", "validation rollout MSE (m²)"), ("max_depth", "max depth (d)"),
+                ("energy_gain", "energy gain"))  # fmt: skip
+
+
+def plot_study_curves(path: Path, title: str, curves: list[tuple[str, list[dict]]]) -> Path:
+    """One panel per :data:`CURVE_PANELS` metric against the optimiser step, one line per
+    setting (``curves``: ``(label, records)``): the mean over its seeds of the validation
+    rollouts logged during training (each record's ``curve``), at the steps all seeds share."""
+    fig, axes = plt.subplots(1, len(CURVE_PANELS), figsize=(3.3 * len(CURVE_PANELS), 3))
+    for ax, (metric, label) in zip(axes, CURVE_PANELS, strict=True):
+        for name, records in curves:
+            steps, means = mean_curve(records, metric)
+            if steps:
+                ax.plot(steps, means, "o-", ms=3, label=name)
+        ax.set_xlabel("optimiser step", fontsize=7)
+        ax.set_title(label, fontsize=8)
+        ax.tick_params(labelsize=7)
+        if metric == "mse":
+            ax.set_yscale("log")
+    axes[0].legend(fontsize=6)
+    fig.suptitle(title, fontsize=9)
+    return save_figure(fig, path)
+
+
+def mean_curve(records: list[dict], metric: str) -> tuple[list[int], list[float]]:
+    """``(steps, means)``: ``metric`` averaged over the records at each step every record
+    logged with a finite value."""
+    per_seed = [
+        {
+            p["step"]: p[metric]
+            for p in r.get("curve") or []
+            if p.get(metric) is not None and math.isfinite(p[metric])
+        }
+        for r in records
+    ]
+    per_seed = [c for c in per_seed if c]
+    if not per_seed:
+        return [], []
+    steps = sorted(set.intersection(*(set(c) for c in per_seed)))
+    return steps, [float(np.mean([c[s] for c in per_seed])) for s in steps]

@@ -113,9 +113,15 @@ def study_configs(sweeps: list[str]) -> list[Config]:
 
 
 def study_jobs(configs: list[Config], seeds: list[int]) -> list[Job]:
-    """Seed by seed (every configuration at seed 0 first), so that a study cut short has
-    covered every configuration before it repeats any."""
-    return [Job(config, int(seed)) for seed in seeds for config in configs]
+    """Sweep by sweep (a configuration under the first sweep that names it), seed by seed
+    within a sweep: the first sweep's rows (Table 2) have every seed before the next sweep
+    starts, and a study cut short has covered each configuration of a sweep before it repeats
+    any."""
+    order: dict[str, list[Config]] = {}
+    for config in configs:
+        order.setdefault(next(iter(config.points), ""), []).append(config)
+    return [Job(config, int(seed)) for group in order.values() for seed in seeds
+            for config in group]  # fmt: skip
 
 
 def budget_overrides(budget: DictConfig) -> list[str]:

@@ -11,7 +11,12 @@ common horizon, each measured alike for the truth and the rollout.
 - **Divergence.** A sphere faster than ``speed_factor`` × the truth's fastest (at least
   1 m/s), or a non-finite frame (:func:`physgnn.rollout.rollout`).
 - Plane penetration is one-sided (:mod:`physgnn.metrics.penetration`): a sphere that went
-  through a wall counts as deep as it went.
+  through a wall counts as deep as it went; ``max_depth_sphere`` / ``max_depth_plane`` are the
+  deepest intersection of the rollout over the diameter and ``tunnelled`` the spheres whose
+  centre crossed a plane. ``energy_error`` is ``|energy_gain − energy_gain_truth|``: the truth's
+  gain is the target, not a floor (a model that never moves scores 0 gain).
+- With ``constraints`` > 0 the learned step is followed by the constraint stage
+  (:class:`~physgnn.models.constrained.ConstrainedSimulator`, that many iterations).
 """
 
 from __future__ import annotations
@@ -20,12 +25,17 @@ from pathlib import Path
 
 from physgnn import metrics
 from physgnn.evaluation.runs import dataset_of, load_splits
+from physgnn.metrics import max_penetration
+from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
 from physgnn.training.runs import load_run
 
 SPLITS = ("test", "ood")
-FIGURES = ("mse", "chamfer", "energy_gain", "depth_sphere", "depth_ground", "depth_static")
+FIGURES = (
+    "mse", "chamfer", "energy_gain", "energy_error", "depth_sphere", "depth_ground",
+    "depth_static", "pct_sphere", "max_depth_sphere", "max_depth_plane", "tunnelled",
+)  # fmt: skip
 
 
 def measure_trajectory(simulator, traj: Trajectory, speed_factor: float) -> dict:
@@ -45,13 +55,24 @@ def measure_trajectory(simulator, traj: Trajectory, speed_factor: float) -> dict
         record["diverged_at"] = int(pred.diverged_at) - int(pred.start)
         return record | dict.fromkeys(FIGURES)
     m = metrics.trajectory_metrics(pred, traj)
+    deepest = max_penetration(pred.pos, traj.radius, traj.planes, traj.plane_kind)
+    m |= {
+        "energy_error": abs(m["energy_gain"] - truth["energy_gain"]),
+        "max_depth_sphere": deepest["max_pen_sphere"],
+        "max_depth_plane": max(deepest["max_pen_ground"], deepest["max_pen_static"]),
+        "tunnelled": deepest["tunnelled"],
+    }
     return record | {k: m[k] for k in FIGURES}
 
 
-def measure_run(run_dir: str | Path, horizon: int, speed_factor: float) -> dict[str, list]:
+def measure_run(
+    run_dir: str | Path, horizon: int, speed_factor: float, constraints: int = 0
+) -> dict[str, list]:
     """``{split: [record per trajectory]}`` of the run's test and OOD trajectories, each cut to
     ``horizon`` frames (:func:`measure_trajectory`)."""
     simulator, cfg, _ = load_run(run_dir)
+    if constraints > 0:
+        simulator = ConstrainedSimulator(simulator, constraints)
     splits = load_splits(dataset_of(cfg), horizon)
     return {
         split: [measure_trajectory(simulator, t, speed_factor) for t in splits.get(split, [])]

@@ -9,6 +9,7 @@ import csv
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -18,11 +19,12 @@ from pathlib import Path
 
 import torch
 
+from physgnn.ablation.jobs import BASELINE
 from physgnn.ablation.measure import measure_run
 from physgnn.benchmark.machine import cpu_name
 from physgnn.errors import one_line
 from physgnn.files import portable
-from physgnn.training.runs import read_run_json
+from physgnn.training.runs import checkpoint_of, read_run_json
 
 TRAINED = ("finished", "truncated")
 
@@ -71,16 +73,54 @@ def _finite(value):
 
 
 LOGGED = ("train/loss", "train/loss_mse", "train/loss_energy", "train/energy_share", "val/loss")
+# Validation rollout metrics logged every callbacks.rollout.every_n_epochs: the learning curve.
+CURVE = {"mse": "val/rollout_mse", "max_depth": "val/max_depth", "tunnelled": "val/tunnelled",
+         "energy_gain": "val/energy_gain", "score": "val/rollout_score"}  # fmt: skip
+_BEST = re.compile(r"epoch(\d+)")
 
 
-def last_logged(run_dir: Path) -> dict:
-    """The last epoch's value of each :data:`LOGGED` metric in the run's CSV log (the energy
-    term's share of the loss shows whether a λ mattered)."""
-    out = {}
+def _log_rows(run_dir: Path) -> list[dict]:
+    """Every row of the run's CSV logs (all sessions, in order), values as floats."""
+    rows = []
     for path in sorted(run_dir.glob("csv/version_*/metrics.csv")):
         with open(path, newline="") as f:
-            for row in csv.DictReader(f):
-                out |= {k: float(row[k]) for k in LOGGED if row.get(k) not in (None, "")}
+            rows += [{k: float(v) for k, v in row.items() if v not in (None, "")}
+                     for row in csv.DictReader(f)]  # fmt: skip
+    return rows
+
+
+def logged(run_dir: Path) -> dict:
+    """The first and the last epoch's value of each :data:`LOGGED` metric (``first/<name>``
+    and ``<name>``): the energy term's penalty at both ends says by how much training cut it."""
+    out, first = {}, {}
+    for row in _log_rows(run_dir):
+        for k in LOGGED:
+            if k in row:
+                out[k] = row[k]
+                first.setdefault(f"first/{k}", row[k])
+    return first | out
+
+
+def learning_curve(run_dir: Path) -> list[dict]:
+    """``[{"step", "mse", "max_depth", "tunnelled", "energy_gain", "score"}]``: the validation
+    rollouts of every evaluation during training (:data:`CURVE`; a metric not logged is None)."""
+    return [{"step": int(row["step"]) + 1} | {k: row.get(name) for k, name in CURVE.items()}
+            for row in _log_rows(run_dir) if "val/rollout_mse" in row]  # fmt: skip
+
+
+def measured_checkpoint(run_dir: Path) -> dict:
+    """The checkpoint the study measures (best, else last: :func:`checkpoint_of`) with its
+    epoch, step, validation loss and rollout score from the run's log."""
+    path = checkpoint_of(run_dir)
+    found = _BEST.search(path.stem)
+    out = {"file": path.name, "step": None, "val_loss": None, "val_score": None}
+    if not found:
+        return out
+    epoch = int(found.group(1))
+    for row in _log_rows(run_dir):
+        if int(row.get("epoch", -1)) == epoch and "val/loss" in row:
+            out |= {"step": int(row["step"]) + 1, "val_loss": row["val/loss"],
+                    "val_score": row.get("val/rollout_score")}  # fmt: skip
     return out
 
 
@@ -91,7 +131,10 @@ def machine() -> dict:
 
 def run_job(spec: dict) -> dict:
     """Train and measure one job (``spec``: key, overrides, seed, run_dir, common overrides,
-    budget, threads, horizon, speed_factor, commit); returns its registry record."""
+    budget, threads, horizon, speed_factor, constraints, commit); returns its registry record:
+    the figures per trajectory (``splits``; the baseline's also with the constraint stage,
+    ``splits_constraints``), the measured checkpoint, the logged losses and the learning
+    curve."""
     torch.set_num_threads(int(spec["threads"]))
     run_dir = Path(spec["run_dir"])
     start = time.perf_counter()
@@ -114,10 +157,16 @@ def run_job(spec: dict) -> dict:
         "run_dir": portable(run_dir),
     }
     if status in TRAINED:
-        record["logged"] = last_logged(run_dir)
+        record["logged"] = logged(run_dir)
+        record["curve"] = learning_curve(run_dir)
         t0 = time.perf_counter()
         try:
+            record["checkpoint"] = measured_checkpoint(run_dir)
             record["splits"] = measure_run(run_dir, spec["horizon"], spec["speed_factor"])
+            if spec.get("constraints") and spec["key"] == BASELINE:
+                record["splits_constraints"] = measure_run(
+                    run_dir, spec["horizon"], spec["speed_factor"], int(spec["constraints"])
+                )
         except Exception as err:  # recorded, and the study goes on with the next job
             record.update(status="failed", reason=f"measuring failed: {one_line(err)}")
         record["eval_s"] = time.perf_counter() - t0

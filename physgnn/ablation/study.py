@@ -51,6 +51,7 @@ def job_spec(job: Job, cfg: DictConfig, common: list[str], rev: str | None) -> d
         "threads": int(cfg.threads),
         "horizon": int(cfg.horizon),
         "speed_factor": float(cfg.speed_factor),
+        "constraints": int(cfg.constraints),
         "commit": rev,
     }
 
@@ -106,7 +107,7 @@ def run_study(cfg: DictConfig) -> Path | None:
         return None
     if pending:
         _ensure_dataset(cfg, console)
-    failed = _run(console, pending, records, cfg, n_jobs)
+    failed = _run(console, pending, records, cfg, n_jobs, configs)
     report = write_study_report(read_registry(cfg.registry), configs, cfg)
     if failed:
         raise StudyFailed(
@@ -132,8 +133,9 @@ def _ensure_dataset(cfg: DictConfig, console) -> None:
         generate(gen)
 
 
-def _run(console, pending, records, cfg, n_jobs) -> list[str]:
-    """Launch ``pending``, append each record as it comes; returns the failed jobs' names."""
+def _run(console, pending, records, cfg, n_jobs, configs) -> list[str]:
+    """Launch ``pending``, append each record as it comes and rewrite the report with it (a
+    study stopped part-way leaves a page of what is in); returns the failed jobs' names."""
     failed, counts = [], {"finished": 0, "diverged": 0, "failed": 0}
     start = time.perf_counter()
     estimates = {id(s): estimate_s(s, records, cfg) for s in pending}
@@ -145,6 +147,7 @@ def _run(console, pending, records, cfg, n_jobs) -> list[str]:
         specs = {(s["key"], s["seed"]): s for s in pending}
         for record in launch(pending, cfg.launcher, Path(cfg.runs_dir) / "slurm"):
             append_record(cfg.registry, record)
+            write_study_report(read_registry(cfg.registry), configs, cfg)
             status = record["status"] if record["status"] in counts else "finished"
             counts[status] += 1
             name = f"{record['key']} seed={record['seed']}"

@@ -5,8 +5,9 @@ the ``metrics.csv`` and ``stability.csv`` of a ``make eval`` over runs whose nam
 ``step<N>`` (a run's milestone checkpoints exported with ``make ship RUN=<run>
 OUT=outputs/milestones/step<N> CHECKPOINT=<its step<N>.ckpt>``) and writes into ``OUT_DIR``
 (default: the report folder) ``learning_curve.csv``, one row per step, and
-``learning_curve.png``: test MSE, OOD max sphere–sphere depth (cubes, ramps), the resting
-pile's drift and the tight pack's max depth against the optimiser step.
+``learning_curve.png``: test and OOD MSE, OOD max sphere–sphere depth (cubes, ramps), the
+resting pile's drift, the tight pack's max depth and the free-fall error against the optimiser
+step.
 """
 
 from __future__ import annotations
@@ -16,37 +17,46 @@ import sys
 from pathlib import Path
 
 from physgnn.files import write_rows
-from physgnn.report import stability, table
+from physgnn.report import freefall, stability, table
 from physgnn.report.figures import plt, save_figure
 
-COLUMNS = ("step", "run", "test_mse", "cubes_depth", "ramps_depth", "ramps_tunnelled",
-           "pile_drift", "tight_depth")  # fmt: skip
-PANELS = (("test_mse", "test MSE (m²)"), ("cubes_depth", "OOD cubes max depth (d)"),
-          ("ramps_depth", "OOD ramps max depth (d)"), ("pile_drift", "resting pile drift (r)"),
-          ("tight_depth", "tight pack max depth (d)"))  # fmt: skip
+COLUMNS = ("step", "run", "test_mse", "ood_mse", "cubes_depth", "ramps_depth", "ramps_tunnelled",
+           "pile_drift", "tight_depth", "freefall_pct")  # fmt: skip
+PANELS = (("test_mse", "test MSE (m²)"), ("ood_mse", "OOD MSE (m²)"),
+          ("cubes_depth", "OOD cubes max depth (d)"), ("ramps_depth", "OOD ramps max depth (d)"),
+          ("pile_drift", "resting pile drift (r)"), ("tight_depth", "tight pack max depth (d)"),
+          ("freefall_pct", "free fall |error| (% of fall)"))  # fmt: skip
 _STEP = re.compile(r"step0*(\d+)$")
 
 
-def curve_rows(metrics: list[dict], hard: list[dict]) -> list[dict]:
+def curve_rows(metrics: list[dict], hard: list[dict], fall: list[dict] = ()) -> list[dict]:
     """One row per run named ``...step<N>`` (:data:`COLUMNS`), sorted by step; a value a run
-    lacks is None."""
+    lacks is None. OOD MSE is the mean over every OOD trajectory; the free-fall error is the
+    mean |error| over the heights of ``freefall.csv``."""
     rows = []
     for run in sorted({r["run"] for r in metrics} | {r["run"] for r in hard}):
         found = _STEP.search(run)
         if not found:
             continue
-        test = [r["mse"] for r in metrics if r["run"] == run and r["split"] == "test"]
+        ours = [r for r in metrics if r["run"] == run]
         scenes = {r["scene"]: r for r in hard if r["run"] == run}
         rows.append({
             "step": int(found.group(1)), "run": run,
-            "test_mse": sum(test) / len(test) if test else None,
+            "test_mse": _mean(r["mse"] for r in ours if r["split"] == "test"),
+            "ood_mse": _mean(r["mse"] for r in ours if r["split"].startswith("ood")),
             "cubes_depth": _value(scenes, "ood_cubes", "max_pen_sphere"),
             "ramps_depth": _value(scenes, "ood_cubes_ramps", "max_pen_sphere"),
             "ramps_tunnelled": _value(scenes, "ood_cubes_ramps", "tunnelled"),
             "pile_drift": _value(scenes, "resting_pile", "rest_drift"),
             "tight_depth": _value(scenes, "tight_pack", "max_pen_sphere"),
+            "freefall_pct": _mean(abs(r["z_error_pct"]) for r in fall if r["run"] == run),
         })  # fmt: skip
     return sorted(rows, key=lambda r: r["step"])
+
+
+def _mean(values):
+    values = list(values)
+    return sum(values) / len(values) if values else None
 
 
 def _value(scenes: dict, scene: str, key: str):
@@ -55,8 +65,10 @@ def _value(scenes: dict, scene: str, key: str):
 
 def plot_curve(rows: list[dict], path: str | Path) -> Path:
     """The :data:`PANELS` against the step, one point per checkpoint."""
-    fig, axes = plt.subplots(1, len(PANELS), figsize=(3.2 * len(PANELS), 3))
-    for ax, (key, label) in zip(axes, PANELS, strict=True):
+    fig, axes = plt.subplots(2, 4, figsize=(12.8, 6))
+    for ax in axes.flat[len(PANELS) :]:
+        ax.axis("off")
+    for ax, (key, label) in zip(axes.flat, PANELS, strict=False):
         points = [(r["step"], r[key]) for r in rows if r[key] is not None]
         if points:
             ax.plot(*zip(*points, strict=True), "o-")
@@ -75,10 +87,13 @@ def main(argv: list[str]) -> int:
     try:
         metrics = table.read_csv(report / "metrics.csv")
         hard = stability.read_csv(report / "stability.csv")
+        fall = (
+            freefall.read_csv(report / "freefall.csv") if (report / "freefall.csv").exists() else []
+        )
     except FileNotFoundError as err:
         print(f"error: {err.filename} not found: run make eval over the checkpoints first")
         return 2
-    rows = curve_rows(metrics, hard)
+    rows = curve_rows(metrics, hard, fall)
     if not rows:
         print(f"error: no run of {report / 'metrics.csv'} is named ...step<N>")
         return 2

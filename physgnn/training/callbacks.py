@@ -4,9 +4,10 @@ Every ``every_n_epochs`` validation epochs it rolls out, with the module's simul
 (``pl_module.simulator``), the first ``n_val_trajectories`` of ``<data_dir>/val.h5`` and every
 scene of ``<data_dir>/ood.h5`` (``data_dir`` is the datamodule's), each cut to ``max_frames``,
 and logs through ``pl_module.log`` so every logger receives:
-``val/rollout_mse``, ``val/chamfer``, ``ood/mse``, ``ood/chamfer``, ``ood/energy_gain``,
-``ood/depth_sphere``, ``ood/pct_sphere``, ``ood/diverged`` (fraction of rollouts) and
-``rollout/fps``. Means are over trajectories; a diverged rollout counts on its finite prefix.
+``val/rollout_mse``, ``val/chamfer``, ``val/energy_gain``, ``ood/mse``, ``ood/chamfer``,
+``ood/energy_gain``, ``ood/depth_sphere``, ``ood/pct_sphere``, ``ood/diverged`` (fraction of
+rollouts) and ``rollout/fps``. Means are over trajectories; a diverged rollout counts on its
+finite prefix.
 
 ``val/rollout_score`` is what checkpoints are chosen on (``conf/callbacks/default.yaml``):
 position error and physics together, the mean over the validation rollouts of
@@ -38,7 +39,7 @@ from physgnn.data.dataset import read_split
 from physgnn.metrics import max_penetration
 from physgnn.rollout import rollout
 
-VAL_KEYS = {"mse": "val/rollout_mse", "chamfer": "val/chamfer"}
+VAL_KEYS = {"mse": "val/rollout_mse", "chamfer": "val/chamfer", "energy_gain": "val/energy_gain"}
 OOD_KEYS = {k: f"ood/{k}" for k in ("mse", "chamfer", "energy_gain", "depth_sphere", "pct_sphere")}
 
 
