@@ -72,3 +72,16 @@ def test_pretrained_without_shipped_weights_is_one_line(tmp_path, monkeypatch):
     with pytest.raises(RunError, match="ships no trained weights yet") as err:
         load_run("pretrained")
     assert "\n" not in str(err.value)
+
+
+def test_the_shipped_weights_load_and_fall_as_gravity_says():
+    """The committed physgnn/pretrained: its format is read, it fits the model this code builds,
+    and a sphere released at 100 m follows z = h − ½gt² (the gravity prior) for one second."""
+    from physgnn.evaluation.freefall import freefall_rows
+    from physgnn.physics.energy import G
+
+    simulator, cfg, info = load_run("pretrained")
+    assert info["status"] == "finished" and info["global_step"] >= 22_500
+    (row,) = freefall_rows("pretrained", simulator, [100.0], seconds=1.0, dt=cfg.data.scene.dt)
+    assert row["dvz_first"] == pytest.approx(-G * cfg.data.scene.dt, rel=1e-4)
+    assert row["z_error_pct"] < 0.01

@@ -5,12 +5,12 @@ from __future__ import annotations
 from physgnn.report.learning_curve import curve_rows, main, plot_curve
 
 
-def metrics_row(run, split, mse):
-    return {"run": run, "split": split, "mse": mse}
+def metrics_row(run, split, mse, diverged_at=None):
+    return {"run": run, "split": split, "trajectory": "t0", "mse": mse, "diverged_at": diverged_at}
 
 
-def hard_row(run, scene, **values):
-    return {"run": run, "scene": scene, **values}
+def hard_row(run, scene, source="hard", diverged_at=None, **values):
+    return {"run": run, "scene": scene, "source": source, "diverged_at": diverged_at, **values}
 
 
 def test_rows_per_step_in_order_with_the_measures_of_each_checkpoint(tmp_path):
@@ -31,7 +31,22 @@ def test_rows_per_step_in_order_with_the_measures_of_each_checkpoint(tmp_path):
     assert rows[0]["freefall_pct"] == 3.0 and rows[1]["freefall_pct"] is None
     assert rows[0]["cubes_depth"] == 0.7 and rows[0]["pile_drift"] == 27.0
     assert rows[1]["pile_drift"] is None and rows[1]["tight_depth"] is None
+    assert rows[0]["diverged"] == rows[1]["diverged"] == ""
     assert plot_curve(rows, tmp_path / "curve.png").stat().st_size > 0
+
+
+def test_a_diverged_rollout_has_no_mse_and_is_named(tmp_path):
+    metrics = [metrics_row("m/step002250", "test", 2.0),
+               metrics_row("m/step002250", "ood", 1.0, diverged_at=12),
+               metrics_row("m/step002250", "ood", 50.0)]  # fmt: skip
+    hard = [
+        hard_row("m/step002250", "tight_pack", diverged_at=40, max_pen_sphere=0.1),
+        hard_row("m/step002250", "ood_cubes", "ood", diverged_at=12, max_pen_sphere=0.2),
+    ]
+    (row,) = curve_rows(metrics, hard)
+    assert row["test_mse"] == 2.0 and row["ood_mse"] is None  # no average over a prefix
+    assert row["diverged"] == "ood/t0@12 tight_pack@40"  # OOD scenes named once, from metrics
+    assert plot_curve([row], tmp_path / "curve.png").stat().st_size > 0
 
 
 def test_a_report_without_its_tables_is_one_line(tmp_path, capsys):
