@@ -102,7 +102,12 @@ def _header(records, configs, cfg, budget) -> str:
         f"- **Budget of every run:** {budget['steps']} optimiser steps of "
         f"{budget['batch_size']} pairs (the default `make train` is 2 250; the report trained "
         f"{REPORT_STEPS}), the same for every configuration; further overrides "
-        f"{list(budget.get('extra') or [])}. {len(cfg.seeds)} seeds per configuration.",
+        f"{list(budget.get('extra') or [])}. {len(cfg.seeds)} seeds per configuration"
+        + (
+            " (5 would tighten the tests; the time on 2 CPU cores did not allow it)."
+            if len(cfg.seeds) < 5
+            else "."
+        ),
         f"- **Measures:** every test and OOD trajectory rolled out to frame {cfg.horizon}; a "
         f"rollout diverges when a sphere is faster than {cfg.speed_factor:g}× the truth's "
         "fastest; a seed's figure is the mean over trajectories, ∞ when one of its rollouts "
