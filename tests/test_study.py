@@ -9,14 +9,20 @@ import numpy as np
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
-from omegaconf import OmegaConf
 from scipy import stats
 from simdata import trajectory
 from torch import nn
 
 from physgnn import CONF_DIR
 from physgnn.ablation import aggregate, verdicts
-from physgnn.ablation.jobs import StudyError, budget_overrides, study_configs, study_jobs
+from physgnn.ablation.jobs import (
+    StudyError,
+    budget_overrides,
+    defaults_fingerprint,
+    study_budget,
+    study_configs,
+    study_jobs,
+)
 from physgnn.ablation.measure import FIGURES, measure_trajectory
 from physgnn.ablation.registry import append_record, done_ids, read_registry
 from physgnn.ablation.report import write_study_report
@@ -72,6 +78,28 @@ def test_budget_is_steps_in_whole_epochs():
     bad = study_cfg("/tmp/unused", "budget.steps=310")
     with pytest.raises(StudyError, match="multiple of budget.steps_per_epoch"):
         budget_overrides(bad.budget)
+
+
+def test_runs_of_another_default_model_are_not_this_studys(tmp_path, capsys):
+    """The budget a record carries names the default training it changed: a record made
+    before the default model changed is neither skipped as done nor shown."""
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        now = compose("train")
+        other = compose("train", ["model.M=3"])
+    assert defaults_fingerprint(now) == defaults_fingerprint(now.copy())
+    assert defaults_fingerprint(now) != defaults_fingerprint(other)
+    cfg = study_cfg(tmp_path, "dry_run=true", "sweeps=[ablation_connectivity]", "seeds=[0]")
+    budget = study_budget(cfg)
+    assert budget["defaults"] == defaults_fingerprint(now) and budget["steps"] == 2250
+    old = budget | {"defaults": defaults_fingerprint(other)}
+    append_record(tmp_path / "registry.jsonl", rec("baseline", 0, [(1.0, None)]) | {"budget": old})
+    run_study(cfg)
+    assert "0 in " in capsys.readouterr().out  # the old default's baseline is not done
+    append_record(
+        tmp_path / "registry.jsonl", rec("baseline", 0, [(1.0, None)]) | {"budget": budget}
+    )
+    run_study(cfg)
+    assert "1 in " in capsys.readouterr().out
 
 
 def test_registry_keeps_the_latest_line_and_retries_failed_runs(tmp_path):
@@ -185,7 +213,7 @@ def test_a_tiny_study_runs_resumes_from_the_registry_and_survives_failures(
     assert [r["status"] for r in failed] == ["failed"] * 3 and all(r["reason"] for r in failed)
 
     cfg = study_cfg(tmp_path, *tiny)
-    budget = OmegaConf.to_container(cfg.budget, resolve=True)
+    budget = study_budget(cfg)
     append_record(tmp_path / "registry.jsonl", failed[0] | {"budget": budget})  # a failed run
     report = run_study(cfg)  # of this budget: tried again, like the two never run
     records = [r for r in read_registry(tmp_path / "registry.jsonl") if r["budget"] == budget]
@@ -231,7 +259,7 @@ def test_the_slurm_launcher_runs_the_same_jobs(tiny_dataset, tmp_path):
 def test_the_report_is_rebuilt_from_the_registry_alone(tmp_path):
     cfg = study_cfg(tmp_path, "budget.extra=[]")
     configs = study_configs(SWEEPS)
-    budget = OmegaConf.to_container(cfg.budget, resolve=True)
+    budget = study_budget(cfg)
     records = []
     for seed in range(3):
         for config in configs:

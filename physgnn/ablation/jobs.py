@@ -10,7 +10,9 @@ name it. :class:`Config` keeps, per sweep, the value the sweep plots it at.
 
 from __future__ import annotations
 
+import hashlib
 import itertools
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -122,6 +124,21 @@ def study_jobs(configs: list[Config], seeds: list[int]) -> list[Job]:
         order.setdefault(next(iter(config.points), ""), []).append(config)
     return [Job(config, int(seed)) for group in order.values() for seed in seeds
             for config in group]  # fmt: skip
+
+
+def defaults_fingerprint(train_cfg: DictConfig) -> str:
+    """Ten hex digits naming the configuration-making parts of a composed training config: the
+    default model and recipe every study key is a change from. A study's records carry it, so
+    runs of an earlier default are never mistaken for the current one's."""
+    text = json.dumps(_flat(train_cfg), sort_keys=True, default=str)
+    return hashlib.sha1(text.encode()).hexdigest()[:10]
+
+
+def study_budget(cfg: DictConfig) -> dict:
+    """What makes a study's runs comparable, stored in every record: ``cfg.budget`` plus
+    ``defaults`` (:func:`defaults_fingerprint` of this code's default training)."""
+    budget = OmegaConf.to_container(cfg.budget, resolve=True)
+    return budget | {"defaults": defaults_fingerprint(compose_config("train"))}
 
 
 def budget_overrides(budget: DictConfig) -> list[str]:

@@ -9,8 +9,6 @@ from __future__ import annotations
 from datetime import datetime, timedelta
 from pathlib import Path
 
-from omegaconf import OmegaConf
-
 from physgnn.ablation.aggregate import (
     by_config,
     divergence,
@@ -21,7 +19,7 @@ from physgnn.ablation.aggregate import (
     truth_floor,
 )
 from physgnn.ablation.figures import plot_study_curves, plot_study_fps, plot_study_sweep
-from physgnn.ablation.jobs import Config
+from physgnn.ablation.jobs import Config, study_budget
 from physgnn.ablation.registry import DONE, budget_id
 from physgnn.ablation.verdicts import RULES, table2
 from physgnn.files import portable, write_text
@@ -65,8 +63,8 @@ def div_cell(records: list[dict], split: str) -> str:
 def write_study_report(records: list[dict], configs: list[Config], cfg) -> Path:
     """Write README.md and the figures into ``cfg.results_dir`` from ``records``."""
     out = Path(cfg.results_dir)
-    budget = {k: v for k, v in dict(cfg.budget).items()}
-    mine = [r for r in records if budget_id(r["budget"]) == budget_id(_plain(cfg.budget))]
+    budget = study_budget(cfg)
+    mine = [r for r in records if budget_id(r["budget"]) == budget_id(budget)]
     groups = by_config(mine)
     parts = [
         _header(mine, configs, cfg, budget),
@@ -76,10 +74,6 @@ def write_study_report(records: list[dict], configs: list[Config], cfg) -> Path:
         _footer(out, cfg),
     ]
     return write_text(out / "README.md", "\n\n".join(p for p in parts if p) + "\n")
-
-
-def _plain(node) -> dict:
-    return OmegaConf.to_container(node, resolve=True)
 
 
 def _header(records, configs, cfg, budget) -> str:
@@ -102,7 +96,9 @@ def _header(records, configs, cfg, budget) -> str:
         f"- **Budget of every run:** {budget['steps']} optimiser steps of "
         f"{budget['batch_size']} pairs (the default `make train` is 2 250; the report trained "
         f"{REPORT_STEPS}), the same for every configuration; further overrides "
-        f"{list(budget.get('extra') or [])}. {len(cfg.seeds)} seeds per configuration"
+        f"{list(budget.get('extra') or [])}; the default training `{budget['defaults']}` "
+        "(fingerprint of conf/train.yaml's model and recipe: records of another default are "
+        f"kept in the registry, not shown). {len(cfg.seeds)} seeds per configuration"
         + (
             " (5 would tighten the tests; the time on 2 CPU cores did not allow it)."
             if len(cfg.seeds) < 5

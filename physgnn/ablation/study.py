@@ -7,11 +7,11 @@ import subprocess
 import time
 from pathlib import Path
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
-from physgnn.ablation.jobs import Job, budget_overrides, study_configs, study_jobs
+from physgnn.ablation.jobs import Job, budget_overrides, study_budget, study_configs, study_jobs
 from physgnn.ablation.launch import launch
 from physgnn.ablation.registry import append_record, budget_id, done_ids, read_registry
 from physgnn.ablation.report import write_study_report
@@ -39,15 +39,17 @@ def commit() -> str | None:
     return rev + ("+" if dirty else "")
 
 
-def job_spec(job: Job, cfg: DictConfig, common: list[str], rev: str | None) -> dict:
+def job_spec(job: Job, cfg: DictConfig, common: list[str], rev: str | None, budget: dict) -> dict:
+    """A job's spec (:func:`~physgnn.ablation.runner.run_job`); it trains in
+    ``<runs_dir>/<defaults fingerprint>/<configuration>/seed<N>``."""
     folder = job.config.key.replace(" ", "__").replace("=", "-")
     return {
         "key": job.config.key,
         "overrides": job.config.overrides,
         "seed": job.seed,
-        "run_dir": str(Path(cfg.runs_dir) / folder / f"seed{job.seed}"),
+        "run_dir": str(Path(cfg.runs_dir) / budget["defaults"] / folder / f"seed{job.seed}"),
         "common": common,
-        "budget": OmegaConf.to_container(cfg.budget, resolve=True),
+        "budget": budget,
         "threads": int(cfg.threads),
         "horizon": int(cfg.horizon),
         "speed_factor": float(cfg.speed_factor),
@@ -90,8 +92,8 @@ def run_study(cfg: DictConfig) -> Path | None:
     jobs = study_jobs(configs, list(cfg.seeds))
     common = budget_overrides(cfg.budget) + [f"data={cfg.preset}",
                                              f"paths.outputs={cfg.paths.outputs}"]  # fmt: skip
-    rev = commit()
-    specs = [job_spec(job, cfg, common, rev) for job in jobs]
+    rev, budget = commit(), study_budget(cfg)
+    specs = [job_spec(job, cfg, common, rev, budget) for job in jobs]
     records = read_registry(cfg.registry)
     done = done_ids(records)
     pending = [s for s in specs if (s["key"], s["seed"], budget_id(s["budget"])) not in done]
