@@ -143,6 +143,28 @@ def test_the_wrapped_step_keeps_spheres_out_of_the_ground():
     assert float(z_next.min()) >= 0.5 - 1e-5
 
 
+def test_a_sphere_sent_beyond_its_graphs_reach_still_meets_a_plane():
+    """The prediction may move a sphere further than the graph's reach (its edges are drawn
+    from the state's speed): the stage still keeps it out of every plane of its scene."""
+    sim = make_sim()
+
+    class Plunge(torch.nn.Module):
+        H = 2
+
+        def predict(self, state):
+            vel, angvel, graph = sim.predict(state)
+            return torch.zeros_like(vel) + T([0.0, 0.0, -100.0]), angvel, graph
+
+    table = make_plane((0, 0, 2), (0, 0, 1), (1, 0, 0), 5.0, 5.0)
+    state = ballistic(scene([[0, 0, 10.0], [0, 0, 40.0]], [[0, 0, 0], [0, 0, 0]], [0.5, 0.5],
+                            planes=[ground_plane(), table], kinds=[GROUND, STATIC]))  # fmt: skip
+    _, _, graph = sim.predict(state)
+    assert not (state.plane_kind[graph.ps_index[0]] == STATIC).any()  # no edge to the table
+    vel, _ = ConstrainedSimulator(Plunge(), 3)(state)
+    z_next = state.pos[:, 2] + DT * vel[:, 2]
+    assert_close(z_next, T([2.5, 40.0 - 10.0], dtype=z_next.dtype))  # on the table; in the air
+
+
 def test_constraints_need_a_learned_simulator():
     class Still(torch.nn.Module):
         H = 1

@@ -2,13 +2,15 @@
 
 After each learned prediction ``v̂``, the predicted positions ``p + dt·v̂`` are projected
 (:func:`physgnn.physics.constraints.project_contacts`, ``iterations`` Jacobi passes) on the
-prediction's own graph: its pp pairs and its ps edges (those of scenes with surface contact),
-no second neighbour search. The velocity returned is the one that reaches the corrected
-position, ``(x − p)/dt``, so the semi-implicit Euler step of the rollout lands on it and
-position and velocity stay consistent (as position-based dynamics does); a sphere that no
-constraint moved keeps ``v̂`` bit for bit, and ω is never changed. Opt-in everywhere
-(``rollout.constraints=N`` in ``make eval``, ``constraints=N`` in ``physgnn.simulate``) and
-always reported as its own variant beside the pure learned model.
+prediction's own pp pairs (no second neighbour search) and on every plane of each sphere's
+scene (of scenes with surface contact): planes are few, and a sphere the network sends
+further than its graph's reach (a fall sped up by the prediction) must still meet them. The
+velocity returned is the one that reaches the corrected position, ``(x − p)/dt``, so the
+semi-implicit Euler step of the rollout lands on it and position and velocity stay
+consistent (as position-based dynamics does); a sphere that no constraint moved keeps ``v̂``
+bit for bit, and ω is never changed. Opt-in everywhere (``rollout.constraints=N`` in ``make
+eval``, ``constraints=N`` in ``physgnn.simulate``) and always reported as its own variant
+beside the pure learned model.
 """
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from physgnn.data.state import scene_of_sphere
+from physgnn.data.state import host_sizes, scene_of_sphere
+from physgnn.graph.candidates import scene_plane_pairs
 from physgnn.physics.constraints import project_contacts
 from physgnn.physics.scene import EFFECT_NAMES
 
@@ -68,10 +71,12 @@ class ConstrainedSimulator(nn.Module):
         dt = state.scene_dt[:, None].to(vel.dtype)
         pos_next = state.pos + dt * vel
         pairs = graph.pp_index[:, : graph.pp_index.shape[1] // 2]
-        surfaces = state.effects[scene_of_sphere(state)[graph.ps_index[1]], SURFACE_CONTACT]
+        spheres, planes = host_sizes(state)
+        plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long())
+        surfaces = state.effects[scene_of_sphere(state)[sphere], SURFACE_CONTACT]
         x = project_contacts(
             state.pos, pos_next, state.radius, state.mass, pairs, state.planes,
-            state.plane_kind, graph.ps_index, self.iterations, ps_active=surfaces,
+            state.plane_kind, torch.stack([plane, sphere]), self.iterations, ps_active=surfaces,
         )  # fmt: skip
         moved = (x != pos_next).any(1, keepdim=True)
         return torch.where(moved, (x - state.pos) / dt, vel)
