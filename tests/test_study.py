@@ -165,7 +165,9 @@ def test_verdicts_follow_their_stated_rules():
     keys = {"baseline": "baseline", "no_noise": "l"}
     assert verdicts.best(groups, keys).startswith("not reproduced: lower OOD MSE for no_noise")
     keys = {"baseline": "baseline", "m1": "m", "h0": "c"}
-    assert verdicts.best(groups, keys).startswith("inconclusive at this budget")
+    assert verdicts.best(groups, keys).startswith("inconclusive at this budget: no difference")
+    one = {"baseline": base[:1], "m": stable[:1]}
+    assert verdicts.best(one, {"baseline": "baseline", "m1": "m"}).endswith("too few seeds to test")
 
 
 class Runaway(nn.Module):

@@ -111,6 +111,8 @@ def best(groups: dict[str, list[dict]], keys: dict[str, str]) -> str:
     if all(d > 0 and p < ALPHA for d, p in tests.values()):
         return "reproduced (every other row significantly higher)"
     p_min = min((p for _, p in tests.values() if not math.isnan(p)), default=math.nan)
+    if math.isnan(p_min):
+        return "inconclusive at this budget: too few seeds to test"
     return f"inconclusive at this budget: no difference significant (smallest p = {p_min:.2g})"
 
 
