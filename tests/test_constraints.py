@@ -73,6 +73,20 @@ def test_a_sphere_crossing_a_tilted_plane_in_one_frame_ends_on_its_front_face():
     assert_close(x[0], T(under, dtype=F64))
 
 
+def test_a_sphere_from_behind_a_ramp_meets_its_edge_and_is_not_lifted():
+    ramp = make_plane((0, 0, 2), (0, 0, 1), (1, 0, 0), 5.0, 5.0)  # a table: edge at x = 5
+    planes = T(np.stack([ground_plane(), ramp]), dtype=F64)
+    # from below the table's plane, beside it, up into its edge (0.2 from it)
+    x = project([[6.0, 0.0, 1.0]], [[5.2, 0.0, 2.0]], [0.5], [1.0], planes=planes,
+                kinds=(GROUND, STATIC), ps=[[1], [0]])  # fmt: skip
+    assert_close(float(x[0, 0]), 5.5)  # pushed off the edge, along the edge normal
+    assert_close(float(x[0, 2]), 2.0)
+    # from below, beside it, to under its footprint just behind it: kept r away, behind
+    x = project([[6.0, 0.0, 1.0]], [[4.0, 0.0, 1.8]], [0.5], [1.0], planes=planes,
+                kinds=(GROUND, STATIC), ps=[[1], [0]])  # fmt: skip
+    assert_close(x[0], T([4.0, 0.0, 1.5], dtype=F64))
+
+
 def test_a_stack_stays_put_and_loses_energy():
     pos = [[0.0, 0.0, 0.5], [0.0, 0.0, 1.5]]  # resting on the ground, one on the other
     fall = -9.81 * DT * DT

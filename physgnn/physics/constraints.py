@@ -18,7 +18,10 @@ kept: a pile pushed into the ground by its pairs is lifted at once, not by halve
   face) and the distance to the rectangle's nearest edge point otherwise (direction from that
   point to the centre); when ``C < 0``, ``Δx_i = −C·direction`` (planes do not move). The
   ground is an infinite plane. "In front" is judged on the infinite plane, so a sphere that
-  comes from behind a ramp, beside its edge, is never lifted onto it.
+  comes from behind a ramp, beside its edge, is never lifted onto it: such a sphere (behind
+  the infinite plane, beside the rectangle now) meets the rectangle's edge alone, ``dist``
+  the unsigned distance to the rectangle wherever the prediction takes it (as the
+  penetration metric counts it), so it is kept off the edge without being put in front.
 
 Every iteration runs whatever the violations (no value is read back to the host); one with
 nothing violated adds exact zeros.
@@ -65,14 +68,17 @@ def project_contacts(
     ends, weight = torch.cat([i, j]), torch.cat([-share, 1 - share])[:, None]  # [2P]
     plane, sphere = ps_index
     frames = _PlaneFrames(planes[plane], plane_kind[plane])
-    dist_now, _ = frames.distance(pos[sphere])
     front = frames.in_front(pos[sphere])  # of the infinite plane
+    dist_now, _, over = frames.distance(pos[sphere])
+    frames.unsigned = ~front & ~over  # behind the plane, beside the rectangle: its edge only
+    dist_now, _, _ = frames.distance(pos[sphere])
+    active = front | frames.unsigned
     if ps_active is not None:
-        front = front & ps_active
+        active = active & ps_active
     plane_target = torch.minimum(radius[sphere], dist_now)
     for _ in range(iterations):
         x = _pair_pass(x, i, j, ends, weight, pair_target)
-        x = _plane_pass(x, sphere, frames, front, plane_target)
+        x = _plane_pass(x, sphere, frames, active, plane_target)
     return x
 
 
@@ -89,12 +95,12 @@ def _pair_pass(x, i, j, ends, weight, target) -> torch.Tensor:
     return x + acc[:, :3] / acc[:, 3:].clamp_min(1.0)  # + 0 where nothing is violated: exact
 
 
-def _plane_pass(x, sphere, frames, front, target) -> torch.Tensor:
+def _plane_pass(x, sphere, frames, active, target) -> torch.Tensor:
     """Every violated plane edge puts its sphere back on the allowed side (planes do not
     move; a sphere with several, the mean of their proposals)."""
-    dist, direction = frames.distance(x[sphere])
+    dist, direction, _ = frames.distance(x[sphere])
     c = dist - target
-    bad = front & (c < 0)
+    bad = active & (c < 0)
     moves = torch.where(bad, -c, torch.zeros_like(c))[:, None] * direction
     moves = torch.cat([moves, bad[:, None].to(x.dtype)], 1)
     acc = x.new_zeros(x.shape[0], 4).index_add_(0, sphere, moves)
@@ -111,15 +117,17 @@ class _PlaneFrames:
         self.other = torch.linalg.cross(self.normal, self.ref)
         self.half_u, self.half_w = rows[:, 9], rows[:, 10]
         self.ground = kind == GROUND
+        self.unsigned = torch.zeros_like(self.ground)  # [F] bool: distance to the rectangle only
 
     def in_front(self, points: torch.Tensor) -> torch.Tensor:
         """``[F]`` bool: centres on the front side of the infinite plane."""
         return ((points.to(torch.float64) - self.centre) * self.normal).sum(1) >= 0
 
-    def distance(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(dist [F], direction [F, 3])``: the signed height along the normal over the
-        rectangle (the ground: everywhere), else the distance to the rectangle and the unit
-        direction from it to the point (in ``points``' dtype)."""
+    def distance(self, points: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """``(dist [F], direction [F, 3], over [F] bool)``: the signed height along the normal
+        over the rectangle (the ground: everywhere), else, and wherever ``unsigned``, the
+        distance to the rectangle and the unit direction from it to the point (in ``points``'
+        dtype); ``over``: the point is over the rectangle's footprint."""
         rel = points.to(torch.float64) - self.centre
         u, w = (rel * self.ref).sum(-1), (rel * self.other).sum(-1)
         h = (rel * self.normal).sum(-1)
@@ -130,7 +138,9 @@ class _PlaneFrames:
         height = (offset * normal).sum(1)
         beside = offset - height[:, None] * normal
         over = self.ground | (beside.norm(dim=1) <= 1e-6)
+        signed = over & ~self.unsigned
         length = offset.norm(dim=1)
-        dist = torch.where(over, height, length)
-        direction = torch.where(over[:, None], normal, offset / length.clamp_min(1e-12)[:, None])
-        return dist, direction
+        dist = torch.where(signed, height, length)
+        away = offset / length.clamp_min(1e-12)[:, None]
+        direction = torch.where(signed[:, None], normal, away)
+        return dist, direction, over
