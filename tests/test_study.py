@@ -64,9 +64,9 @@ def test_the_five_sweeps_are_17_configurations_the_baseline_shared():
     jobs = study_jobs(configs, [0, 1, 2])
     assert len(jobs) == 51
     table2 = [c.key for c in configs if next(iter(c.points)) == "ablation_components"]
-    assert len(table2) == 8  # Table 2's rows first, every seed, seed by seed
-    assert [(j.config.key, j.seed) for j in jobs[:24]] == [
-        (k, s) for s in (0, 1, 2) for k in table2]  # fmt: skip
+    assert len(table2) == 8  # the baseline's seeds, then Table 2's rows, seed by seed
+    assert [(j.config.key, j.seed) for j in jobs[:24]] == [("baseline", s) for s in (0, 1, 2)] + [
+        (k, s) for s in (0, 1, 2) for k in table2[1:]]  # fmt: skip
     assert {j.config.key for j in jobs[24:]} == set(keys) - set(table2)
 
 

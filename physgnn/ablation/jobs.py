@@ -115,15 +115,17 @@ def study_configs(sweeps: list[str]) -> list[Config]:
 
 
 def study_jobs(configs: list[Config], seeds: list[int]) -> list[Job]:
-    """Sweep by sweep (a configuration under the first sweep that names it), seed by seed
-    within a sweep: the first sweep's rows (Table 2) have every seed before the next sweep
-    starts, and a study cut short has covered each configuration of a sweep before it repeats
-    any."""
+    """The baseline's seeds first (every verdict compares to them), then sweep by sweep (a
+    configuration under the first sweep that names it), seed by seed within a sweep: the first
+    sweep's rows (Table 2) have every seed before the next sweep starts, and a study cut short
+    has covered each configuration of a sweep before it repeats any."""
     order: dict[str, list[Config]] = {}
     for config in configs:
-        order.setdefault(next(iter(config.points), ""), []).append(config)
-    return [Job(config, int(seed)) for group in order.values() for seed in seeds
-            for config in group]  # fmt: skip
+        if config.key != BASELINE:
+            order.setdefault(next(iter(config.points), ""), []).append(config)
+    baseline = [Job(c, int(seed)) for seed in seeds for c in configs if c.key == BASELINE]
+    return baseline + [Job(config, int(seed)) for group in order.values() for seed in seeds
+                       for config in group]  # fmt: skip
 
 
 def defaults_fingerprint(train_cfg: DictConfig) -> str:
