@@ -63,19 +63,25 @@ def project_contacts(
     if iterations < 1 or pos.shape[0] == 0:
         return x
     i, j = pairs
-    pair_target = torch.minimum(radius[i] + radius[j], (pos[i] - pos[j]).norm(dim=1))
-    share = (1.0 / mass[i]) / (1.0 / mass[i] + 1.0 / mass[j])  # [P] w_i / (w_i + w_j)
+    pos_i, pos_j = pos.index_select(0, i), pos.index_select(0, j)
+    reach = radius.index_select(0, i) + radius.index_select(0, j)
+    pair_target = torch.minimum(reach, (pos_i - pos_j).norm(dim=1))
+    w_i, w_j = 1.0 / mass.index_select(0, i), 1.0 / mass.index_select(0, j)
+    share = w_i / (w_i + w_j)  # [P]
     ends, weight = torch.cat([i, j]), torch.cat([-share, 1 - share])[:, None]  # [2P]
     plane, sphere = ps_index
-    frames = _PlaneFrames(planes[plane], plane_kind[plane])
-    front = frames.in_front(pos[sphere])  # of the infinite plane
-    dist_now, _, over = frames.distance(pos[sphere])
+    frames = _PlaneFrames(
+        planes.index_select(0, plane), plane_kind.index_select(0, plane), pos.dtype
+    )
+    centres = pos.index_select(0, sphere)
+    front = frames.in_front(centres)  # of the infinite plane
+    _, _, over = frames.distance(centres)
     frames.unsigned = ~front & ~over  # behind the plane, beside the rectangle: its edge only
-    dist_now, _, _ = frames.distance(pos[sphere])
+    dist_now, _, _ = frames.distance(centres)
     active = front | frames.unsigned
     if ps_active is not None:
         active = active & ps_active
-    plane_target = torch.minimum(radius[sphere], dist_now)
+    plane_target = torch.minimum(radius.index_select(0, sphere), dist_now)
     for _ in range(iterations):
         x = _pair_pass(x, i, j, ends, weight, pair_target)
         x = _plane_pass(x, sphere, frames, active, plane_target)
@@ -84,13 +90,13 @@ def project_contacts(
 
 def _pair_pass(x, i, j, ends, weight, target) -> torch.Tensor:
     """One Jacobi pass over the pairs: each sphere moves by the mean of its pairs' proposals."""
-    d = x[i] - x[j]
+    d = x.index_select(0, i) - x.index_select(0, j)
     length = d.norm(dim=1)
     c = length - target
     bad = (c < 0) & (length > 0)
-    normal = d / length.clamp_min(1e-12)[:, None]
-    step = torch.where(bad, c, torch.zeros_like(c))[:, None] * normal
-    moves = torch.cat([step.repeat(2, 1) * weight, bad.repeat(2)[:, None].to(x.dtype)], 1)
+    step = torch.where(bad, c / length.clamp_min(1e-12), 0.0)[:, None] * d  # C·n̂
+    moves = torch.cat([step, bad[:, None].to(x.dtype)], 1).repeat(2, 1)
+    moves[:, :3] *= weight
     acc = x.new_zeros(x.shape[0], 4).index_add_(0, ends, moves)
     return x + acc[:, :3] / acc[:, 3:].clamp_min(1.0)  # + 0 where nothing is violated: exact
 
@@ -98,49 +104,43 @@ def _pair_pass(x, i, j, ends, weight, target) -> torch.Tensor:
 def _plane_pass(x, sphere, frames, active, target) -> torch.Tensor:
     """Every violated plane edge puts its sphere back on the allowed side (planes do not
     move; a sphere with several, the mean of their proposals)."""
-    dist, direction, _ = frames.distance(x[sphere])
+    dist, direction, _ = frames.distance(x.index_select(0, sphere))
     c = dist - target
     bad = active & (c < 0)
-    moves = torch.where(bad, -c, torch.zeros_like(c))[:, None] * direction
-    moves = torch.cat([moves, bad[:, None].to(x.dtype)], 1)
+    moves = torch.cat([torch.where(bad, -c, 0.0)[:, None] * direction, bad[:, None].to(x.dtype)], 1)
     acc = x.new_zeros(x.shape[0], 4).index_add_(0, sphere, moves)
     return x + acc[:, :3] / acc[:, 3:].clamp_min(1.0)
 
 
 class _PlaneFrames:
-    """The rows of ``F`` plane edges, kept in float64 with their in-plane axes, for the
-    distances of points to them (:func:`~physgnn.physics.geometry.rectangle_offset`)."""
+    """The rows of ``F`` plane edges with their in-plane axes, in the points' dtype, for the
+    distances of points to them (as :func:`~physgnn.physics.geometry.rectangle_offset`, in a
+    form of few operations: it runs in every iteration)."""
 
-    def __init__(self, rows: torch.Tensor, kind: torch.Tensor):
-        rows = rows.to(torch.float64)
-        self.centre, self.normal, self.ref = rows[:, 0:3], rows[:, 3:6], rows[:, 6:9]
-        self.other = torch.linalg.cross(self.normal, self.ref)
-        self.half_u, self.half_w = rows[:, 9], rows[:, 10]
+    def __init__(self, rows: torch.Tensor, kind: torch.Tensor, dtype: torch.dtype):
+        rows = rows.to(dtype)
+        self.centre, self.normal, ref = rows[:, 0:3], rows[:, 3:6], rows[:, 6:9]
+        other = torch.linalg.cross(self.normal, ref)
+        self.basis = torch.stack([ref, other, self.normal], 1)  # [F, 3, 3]: rows u, w, n
+        self.half = torch.stack([rows[:, 9], rows[:, 10], torch.zeros_like(rows[:, 9])], 1)
         self.ground = kind == GROUND
         self.unsigned = torch.zeros_like(self.ground)  # [F] bool: distance to the rectangle only
 
     def in_front(self, points: torch.Tensor) -> torch.Tensor:
         """``[F]`` bool: centres on the front side of the infinite plane."""
-        return ((points.to(torch.float64) - self.centre) * self.normal).sum(1) >= 0
+        return ((points - self.centre) * self.normal).sum(1) >= 0
 
     def distance(self, points: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """``(dist [F], direction [F, 3], over [F] bool)``: the signed height along the normal
         over the rectangle (the ground: everywhere), else, and wherever ``unsigned``, the
-        distance to the rectangle and the unit direction from it to the point (in ``points``'
-        dtype); ``over``: the point is over the rectangle's footprint."""
-        rel = points.to(torch.float64) - self.centre
-        u, w = (rel * self.ref).sum(-1), (rel * self.other).sum(-1)
-        h = (rel * self.normal).sum(-1)
-        du = u - torch.clamp(u, -self.half_u, self.half_u)
-        dw = w - torch.clamp(w, -self.half_w, self.half_w)
-        offset = du[:, None] * self.ref + dw[:, None] * self.other + h[:, None] * self.normal
-        offset, normal = offset.to(points.dtype), self.normal.to(points.dtype)
-        height = (offset * normal).sum(1)
-        beside = offset - height[:, None] * normal
-        over = self.ground | (beside.norm(dim=1) <= 1e-6)
+        distance to the rectangle and the unit direction from it to the point; ``over``: the
+        point is over the rectangle's footprint."""
+        local = (self.basis * (points - self.centre)[:, None, :]).sum(-1)  # [F, 3]: u, w, h
+        local = local - torch.clamp(local, -self.half, self.half)  # from the nearest point
+        over = self.ground | (local[:, :2].norm(dim=1) <= 1e-6)
         signed = over & ~self.unsigned
-        length = offset.norm(dim=1)
-        dist = torch.where(signed, height, length)
-        away = offset / length.clamp_min(1e-12)[:, None]
-        direction = torch.where(signed[:, None], normal, away)
+        length = local.norm(dim=1)
+        dist = torch.where(signed, local[:, 2], length)
+        away = (local[:, :, None] * self.basis).sum(1) / length.clamp_min(1e-12)[:, None]
+        direction = torch.where(signed[:, None], self.normal, away)
         return dist, direction, over
