@@ -73,6 +73,16 @@ def test_a_sphere_crossing_a_tilted_plane_in_one_frame_ends_on_its_front_face():
     assert_close(x[0], T(under, dtype=F64))
 
 
+def test_a_contact_grazed_by_rounding_does_not_halve_a_deep_one():
+    wall = make_plane((3, 0, 5), (-1, 0, 0), (0, 1, 0), 5.0, 5.0)  # faces -x at x = 3
+    planes = T(np.stack([ground_plane(), wall]), dtype=F64)
+    # resting on the ground (a graze of 1e-9 predicted) and sent 0.2 into the wall in one frame
+    x = project([[2.0, 0.0, 0.5]], [[2.7, 0.0, 0.5 - 1e-9]], [0.5], [1.0], planes=planes,
+                kinds=(GROUND, STATIC), ps=[[0, 1], [0, 0]])  # fmt: skip
+    assert_close(float(x[0, 0]), 2.5, atol=1e-8, rtol=0)  # back on the wall in one pass
+    assert float(x[0, 2]) >= 0.5 - 1e-8
+
+
 def test_a_sphere_from_behind_a_ramp_meets_its_edge_and_is_not_lifted():
     ramp = make_plane((0, 0, 2), (0, 0, 1), (1, 0, 0), 5.0, 5.0)  # a table: edge at x = 5
     planes = T(np.stack([ground_plane(), ramp]), dtype=F64)

@@ -3,10 +3,14 @@
 :func:`project_contacts` moves the predicted next positions ``x`` (``p_t + dt·v̂``) of spheres
 so that, on the given pp pairs and ps edges, no pair overlaps more than it does now and no
 sphere reaches further into a plane than it does now (position-based dynamics). Each of the
-``iterations`` runs one Jacobi pass over the pairs (every violated pair proposes a correction,
-each sphere moves by the mean of its proposals), then one over the plane edges (each sphere
-put back on the allowed side of its planes), so that every iteration ends with the planes
-kept: a pile pushed into the ground by its pairs is lifted at once, not by halves.
+``iterations`` runs one Jacobi pass over the pairs (every violated pair proposes a correction),
+then one over the plane edges (each sphere put back on the allowed side of its planes), so
+that every iteration ends with the planes kept: a pile pushed into the ground by its pairs is
+lifted at once, not by halves. A sphere moves by the mean of its proposals weighted by their
+squared lengths, ``Σ|Δ|²Δ / Σ|Δ|²``: never further than its longest proposal (as the plain
+mean), but its deepest violation leads, and contacts grazed by rounding do not halve it (the
+plain mean leaves a sphere pressed into a wall and resting on the ground halfway in after a
+pass, and needs about twice the iterations for the same depth in the OOD cube scenes).
 
 - pair (i, j), ``C = |x_i − x_j| − min(r_i + r_j, |p_i − p_j|)``; when ``C < 0``,
   ``Δx_i = −w_i/(w_i + w_j)·C·n̂`` and ``Δx_j = +w_j/(w_i + w_j)·C·n̂`` with ``w = 1/m`` and
@@ -89,27 +93,35 @@ def project_contacts(
 
 
 def _pair_pass(x, i, j, ends, weight, target) -> torch.Tensor:
-    """One Jacobi pass over the pairs: each sphere moves by the mean of its pairs' proposals."""
+    """One Jacobi pass over the pairs: every violated pair proposes its correction to both
+    spheres (:func:`_combine`)."""
     d = x.index_select(0, i) - x.index_select(0, j)
     length = d.norm(dim=1)
     c = length - target
     bad = (c < 0) & (length > 0)
     step = torch.where(bad, c / length.clamp_min(1e-12), 0.0)[:, None] * d  # C·n̂
-    moves = torch.cat([step, bad[:, None].to(x.dtype)], 1).repeat(2, 1)
-    moves[:, :3] *= weight
-    acc = x.new_zeros(x.shape[0], 4).index_add_(0, ends, moves)
-    return x + acc[:, :3] / acc[:, 3:].clamp_min(1.0)  # + 0 where nothing is violated: exact
+    return _combine(x, ends, step.repeat(2, 1) * weight)
 
 
 def _plane_pass(x, sphere, frames, active, target) -> torch.Tensor:
-    """Every violated plane edge puts its sphere back on the allowed side (planes do not
-    move; a sphere with several, the mean of their proposals)."""
+    """Every violated plane edge proposes to put its sphere back on the allowed side (planes
+    do not move; :func:`_combine`)."""
     dist, direction, _ = frames.distance(x.index_select(0, sphere))
     c = dist - target
     bad = active & (c < 0)
-    moves = torch.cat([torch.where(bad, -c, 0.0)[:, None] * direction, bad[:, None].to(x.dtype)], 1)
-    acc = x.new_zeros(x.shape[0], 4).index_add_(0, sphere, moves)
-    return x + acc[:, :3] / acc[:, 3:].clamp_min(1.0)
+    return _combine(x, sphere, torch.where(bad, -c, 0.0)[:, None] * direction)
+
+
+def _combine(x, index, proposals) -> torch.Tensor:
+    """``x`` moved by the proposals ``[K, 3]`` for spheres ``index [K]``: each sphere by their
+    mean weighted by their squared lengths, ``Σ|Δ|²Δ / Σ|Δ|²`` (a zero proposal counts
+    nothing; a sphere with none is left exactly as it is)."""
+    weight = (proposals * proposals).sum(1, keepdim=True)
+    acc = x.new_zeros(x.shape[0], 4).index_add_(
+        0, index, torch.cat([proposals * weight, weight], 1)
+    )
+    total = acc[:, 3:]
+    return x + torch.where(total > 0, acc[:, :3] / total.clamp_min(1e-30), 0.0)
 
 
 class _PlaneFrames:
