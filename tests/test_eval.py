@@ -19,6 +19,7 @@ from physgnn import eval as eval_command
 from physgnn.data.dataset import read_split, write_split
 from physgnn.evaluation import evaluate as ev
 from physgnn.evaluation import runs as eval_runs
+from physgnn.evaluation import video3d
 from physgnn.evaluation.data_report import split_summary
 from physgnn.evaluation.rerun_log import RerunMissing
 from physgnn.models.baselines import GravityOnlySimulator
@@ -305,6 +306,15 @@ def test_tiny_run_logs_rollouts_then_make_eval_reports_it(tiny_dataset, tmp_path
     assert "| baseline: default |" in text and "### `baseline`" in text
     assert len(list((outputs / "report" / "videos").glob("*.gif"))) == 4
     assert len(list((outputs / "report" / "videos").glob("*.mp4"))) == 4
+
+    # with the constraint stage: its variant in the tables, and filmed beside the pure run
+    report = outputs / "report_stage"
+    ev.evaluate(eval_cfg(f"paths.outputs={outputs}", "video_frames=3", "rollout.constraints=2",
+                         f"report_dir={report}"))  # fmt: skip
+    runs = {r["run"] for r in read_csv(report / "metrics.csv")}
+    assert {"runs/baseline/t0", "runs/baseline/t0 + constraints"} <= runs
+    frame = imageio.imread(report / "videos" / "ood_cubes_frame.png")
+    assert frame.shape[1] == 3 * video3d.WIDTH  # truth, pure, + constraints
 
 
 def test_eval_of_a_dataset_alone_reports_the_references(tmp_path):

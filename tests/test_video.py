@@ -70,7 +70,7 @@ def test_fit_distance_frames_the_box_just(hi):
 def test_diverged_prediction_is_held_and_marked():
     truth = trajectory(n=3, frames=12)
     pred = dataclasses.replace(truth, pos=truth.pos[:6] + 0.3, quat=truth.quat[:6], diverged_at=6)
-    images = V.side_by_side_frames(truth, pred, "prediction\nrun", "scene", max_frames=12)
+    images = V.side_by_side_frames(truth, [(pred, "prediction\nrun")], "scene", max_frames=12)
     assert len(images) == 12 and images[0].shape == (V.HEIGHT, 2 * V.WIDTH, 3)
     left, right = slice(0, V.WIDTH), slice(V.WIDTH, None)
     below_text = slice(40, None)
@@ -85,9 +85,19 @@ def test_diverged_prediction_is_held_and_marked():
     assert (labels != 0).any() and (labels[..., 1:] <= 0).all()  # red text added
 
 
+def test_every_panel_is_drawn_beside_the_truth():
+    truth = trajectory(n=3, frames=6)
+    moved = dataclasses.replace(truth, pos=truth.pos + 0.5)
+    images = V.side_by_side_frames(truth, [(truth, "a"), (moved, "b")], "", max_frames=6)
+    assert images[0].shape == (V.HEIGHT, 3 * V.WIDTH, 3)
+    below_text = slice(40, None)
+    left, middle, right = (images[3][below_text, k * V.WIDTH : (k + 1) * V.WIDTH] for k in range(3))
+    assert np.array_equal(left, middle) and not np.array_equal(middle, right)
+
+
 def test_gif_mp4_and_png_are_written(tmp_path):
     truth = trajectory(n=2, frames=8)
-    files = V.render_side_by_side(tmp_path / "v", truth, truth, max_frames=5)
+    files = V.render_side_by_side(tmp_path / "v", truth, [(truth, "truth")], max_frames=5)
     assert sorted(files) == ["gif", "mp4", "png"]
     assert len(imageio.mimread(files["gif"])) == 5
     assert imageio.imread(files["png"]).shape == (V.HEIGHT, 2 * V.WIDTH, 3)

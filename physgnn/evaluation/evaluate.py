@@ -111,7 +111,8 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
     keep = {r.name for r in runs[: cfg.energy_runs]} | ({film.name} if film else set())
     stab = [] if cfg.get("stability") else None
     settings = rollout_settings(cfg)
-    out = roll_all(jobs, data, Collected(keep, film, cfg.tol, stab, rest_tol(cfg)), settings)
+    filmed = [r for r in runs if film and r.name in (film.name, f"{film.name} + constraints")]
+    out = roll_all(jobs, data, Collected(keep, filmed, cfg.tol, stab, rest_tol(cfg)), settings)
     if film is not None and cfg.sleeping_compare and not settings["sleeping"]:
         out.rows += sleeping_rows(film, data[film.dataset]["ood"], cfg.tol, settings["sleep"])
     table.write_csv(report_dir / "metrics.csv", out.rows)
@@ -125,10 +126,10 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
         dts = {name: _dt(data, name) for name in out.energies}
         figures.plot_energy(report_dir / "figures" / "energy_ood.png", out.energies, dts)
     if cfg.videos and film is not None:
-        write_videos(report_dir / "videos", film, out.films, cfg.video_frames)
+        write_videos(report_dir / "videos", out.films, cfg.video_frames)
     if cfg.get("rerun"):
-        for scene, (traj, pred) in sorted(out.films.items()):
-            rerun_log.log_rerun(report_dir / "videos" / f"{scene}.rrd", traj, pred)
+        for scene, (traj, panels) in sorted(out.films.items()):
+            rerun_log.log_rerun(report_dir / "videos" / f"{scene}.rrd", traj, panels[0][0])
     bench_dir = cfg.paths.get("bench_dir")
     return write_report(report_dir, out.rows, bench_dir=bench_dir, skipped=skipped)
 
@@ -163,13 +164,14 @@ def _dt(data: dict, scene: str) -> float:
     return 1.0
 
 
-def write_videos(video_dir: Path, film: RunInfo, films: dict, max_frames: int) -> list[Path]:
+def write_videos(video_dir: Path, films: dict, max_frames: int) -> list[Path]:
     """Per OOD scene ``<scene>.gif``, ``.mp4`` and ``_frame.png``: the shaded 3-D view of the
-    ground truth beside the filmed run's rollout; returns the GIFs."""
+    ground truth beside the filmed runs' rollouts (the pure run, then its constrained variant
+    when the eval has one); returns the GIFs."""
     paths = []
-    for scene, (traj, pred) in sorted(films.items()):
-        label = f"prediction\n{film.name}"
+    for scene, (traj, panels) in sorted(films.items()):
+        labelled = [(pred, f"prediction\n{name}") for pred, name in panels]
         stem = video_dir / scene
-        render_side_by_side(stem, traj, pred, right_label=label, title=scene, max_frames=max_frames)
+        render_side_by_side(stem, traj, labelled, title=scene, max_frames=max_frames)
         paths.append(stem.with_name(f"{scene}.gif"))
     return paths

@@ -72,12 +72,13 @@ def warm_up(job: RunInfo, splits: dict[str, list[Trajectory]]) -> None:
 @dataclass
 class Collected:
     """What the rollouts of an evaluation leave: metrics rows, OOD energy series
-    (``{scene: {label: E [T]}}``: the ground truth and the runs named in ``keep``), the filmed
-    run's OOD rollouts (``{scene: (truth, rollout)}``) and, with ``stab`` a list, the
+    (``{scene: {label: E [T]}}``: the ground truth and the runs named in ``keep``), the OOD
+    rollouts of the filmed runs ``film`` (``{scene: (truth, [(rollout, run name), ...])}``, in
+    the order the runs were rolled out) and, with ``stab`` a list, the
     stability rows of the ground truth's and the learned runs' OOD rollouts."""
 
     keep: set[str]
-    film: RunInfo | None
+    film: list[RunInfo]
     tol: float
     stab: list | None = None
     rest_tol: float = 0.01
@@ -93,8 +94,8 @@ class Collected:
         if truth or job.name in self.keep:
             label = "ground truth" if job.name == "ground_truth" else job.name
             self.energies.setdefault(traj.name, {})[label] = energy_of(traj, pred)
-        if job is self.film:
-            self.films[traj.name] = (traj, pred)
+        if any(job is filmed for filmed in self.film):
+            self.films.setdefault(traj.name, (traj, []))[1].append((pred, job.name))
         if self.stab is not None and (truth or job.run_dir is not None):
             self.stab.append(stability_row(job, traj, pred, self.rest_tol))
 

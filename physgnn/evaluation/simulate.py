@@ -226,8 +226,8 @@ run = simulate
 
 def write_videos(out: Path, truth: Trajectory, pred: Trajectory | None, learned: bool) -> dict:
     label = "prediction" if learned else "ground truth (no run given)"
-    return render_side_by_side(out / "video", truth, truth if pred is None else pred,
-                               right_label=label, title=truth.attrs.get("scene", ""))  # fmt: skip
+    panel = (truth if pred is None else pred, label)
+    return render_side_by_side(out / "video", truth, [panel], title=truth.attrs.get("scene", ""))
 
 
 def summary(result: dict) -> str:

@@ -176,37 +176,37 @@ def _xyzw(traj: Trajectory) -> np.ndarray:
 
 
 def side_by_side_frames(
-    truth: Trajectory, pred: Trajectory, right_label: str, title: str, max_frames: int
+    truth: Trajectory, panels: list[tuple[Trajectory, str]], title: str, max_frames: int
 ) -> list[np.ndarray]:
-    """Pictures ``[HEIGHT, 2 * WIDTH, 3]``: truth left, ``pred`` right (frames ``T' ≤ T``:
-    a diverged rollout's finite prefix, its last frame held and its divergence written).
-    ``right_label`` may hold several lines (``\\n``); ``title`` is written under the truth's."""
-    qt, qp = _xyzw(truth), _xyzw(pred)
+    """Pictures ``[HEIGHT, (1 + P) · WIDTH, 3]``: truth left, then each of the ``P`` panels
+    ``(rollout, label)`` (frames ``T' ≤ T``: a diverged rollout's finite prefix, its last frame
+    held and its divergence written). A label may hold several lines (``\\n``); ``title`` is
+    written under the truth's."""
+    qt, qs = _xyzw(truth), [_xyzw(pred) for pred, _ in panels]
     lo, hi = camera_box(np.asarray(truth.pos), np.asarray(truth.radius))
     black, red = (0, 0, 0), (200, 0, 0)
     images = []
     with Renderer(truth.radius, truth.planes, truth.plane_kind, lo, hi) as r:
         for t in frame_indices(truth.n_frames, max_frames):
-            k = min(int(t), pred.n_frames - 1)
             left = [(f"ground truth  t = {t * truth.dt:.1f} s", black)]
-            right = [(line, black) for line in right_label.split("\n")]
             if title:
                 left.append((title, black))
-            if pred.diverged_at is not None and t >= pred.diverged_at:
-                right.append((f"diverged at step {pred.diverged_at}", red))
-            images.append(np.concatenate([
-                _label(r.frame(truth.pos[t], qt[t]), left),
-                _label(r.frame(pred.pos[k], qp[k]), right),
-            ], axis=1))  # fmt: skip
+            row = [_label(r.frame(truth.pos[t], qt[t]), left)]
+            for (pred, label), qp in zip(panels, qs, strict=True):
+                k = min(int(t), pred.n_frames - 1)
+                lines = [(line, black) for line in label.split("\n")]
+                if pred.diverged_at is not None and t >= pred.diverged_at:
+                    lines.append((f"diverged at step {pred.diverged_at}", red))
+                row.append(_label(r.frame(pred.pos[k], qp[k]), lines))
+            images.append(np.concatenate(row, axis=1))
     return images
 
 
 def render_side_by_side(
     stem: str | Path,
     truth: Trajectory,
-    pred: Trajectory,
+    panels: list[tuple[Trajectory, str]],
     *,
-    right_label: str = "prediction",
     title: str = "",
     max_frames: int = 80,
     fps: float = 10.0,
@@ -215,7 +215,7 @@ def render_side_by_side(
     :func:`side_by_side_frames`; returns the paths by kind (no ``mp4`` without ffmpeg)."""
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
-    images = side_by_side_frames(truth, pred, right_label, title, max_frames)
+    images = side_by_side_frames(truth, panels, title, max_frames)
     files = {"gif": f"{stem}.gif", "png": f"{stem}_frame.png"}
     with atomic_path(files["gif"], keep_suffix=True) as tmp:
         imageio.mimsave(tmp, images, format="GIF", duration=1000.0 / fps, loop=0)
