@@ -15,7 +15,7 @@ from hydra import compose, initialize_config_dir
 
 from physgnn import train as train_command
 from physgnn.training.progress import RunProgress
-from physgnn.training.runs import load_run
+from physgnn.training.runs import checkpoint_of, load_run
 from physgnn.training.train import build, train
 
 CONF = str(Path(__file__).resolve().parents[1] / "conf")
@@ -110,6 +110,20 @@ def test_load_run_rebuilds_the_simulator(runs):
     for key, value in simulator.state_dict().items():
         assert torch.equal(value, saved[f"simulator.{key}"])
     assert bool(simulator.effects_trained.all())
+
+
+def test_of_several_best_checkpoints_the_best_scored_is_measured(tmp_path):
+    # a run resumed after its folder moved keeps the earlier best file beside a worse new one
+    folder = tmp_path / "checkpoints"
+    folder.mkdir()
+    key = "ModelCheckpoint{'monitor': 'val/rollout_score', 'mode': 'min'}"
+    for epoch, score in ((49, 6.8), (69, 7.7)):
+        state = {"callbacks": {key: {"current_score": torch.tensor(score)}}}
+        torch.save(state, folder / f"best-epoch{epoch:03d}.ckpt")
+    assert checkpoint_of(tmp_path).name == "best-epoch049.ckpt"
+    torch.save({"callbacks": {key: {"current_score": torch.tensor(6.8)}}},
+               folder / "best-epoch089.ckpt")  # fmt: skip
+    assert checkpoint_of(tmp_path).name == "best-epoch089.ckpt"  # a tie: the latest
 
 
 def test_load_run_without_checkpoint_is_clear(tmp_path):

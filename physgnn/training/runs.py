@@ -65,9 +65,14 @@ def run_status(run_dir: Path) -> str:
 
 
 def checkpoint_of(run_dir: Path) -> Path:
-    """The best checkpoint of a run, else its last one."""
+    """The best checkpoint of a run, else its last one. Several ``best-*`` files (a run
+    resumed after its folder moved: Lightning then forgets the best score so far and keeps
+    the earlier file) are told apart by the score each was saved with (the latest on a tie
+    or where none is found)."""
     best = sorted((run_dir / "checkpoints").glob("best-*.ckpt"))
     last = run_dir / "checkpoints" / "last.ckpt"
+    if len(best) > 1:
+        return min(enumerate(best), key=lambda item: (_own_score(item[1]), -item[0]))[1]
     if best:
         return best[-1]
     if last.exists():
@@ -75,6 +80,20 @@ def checkpoint_of(run_dir: Path) -> Path:
     raise FileNotFoundError(
         f"no checkpoint in {run_dir / 'checkpoints'} (did the run finish an epoch?)"
     )
+
+
+def _own_score(path: Path) -> float:
+    """The monitored score a checkpoint was saved with, lower is better (ModelCheckpoint's
+    ``current_score``; negated for ``mode='max'``); +inf where it holds none."""
+    try:
+        callbacks = torch.load(path, map_location="cpu", weights_only=False).get("callbacks", {})
+    except (OSError, RuntimeError, AttributeError):
+        return float("inf")
+    for key, state in callbacks.items():
+        score = state.get("current_score") if isinstance(state, dict) else None
+        if str(key).startswith("ModelCheckpoint") and score is not None:
+            return -float(score) if "'mode': 'max'" in str(key) else float(score)
+    return float("inf")
 
 
 def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
