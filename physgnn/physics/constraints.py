@@ -79,12 +79,14 @@ def project_contacts(
     )
     centres = pos.index_select(0, sphere)
     front = frames.in_front(centres)  # of the infinite plane
-    _, _, over = frames.distance(centres)
-    frames.unsigned = ~front & ~over  # behind the plane, beside the rectangle: its edge only
-    dist_now, _, _ = frames.distance(centres)
-    active = front | frames.unsigned
+    dist_now, _, over, length = frames.distance(centres)
+    unsigned = ~front & ~over  # behind the plane, beside the rectangle: its edge only
+    frames.keep_sign = ~unsigned
+    dist_now = torch.where(frames.keep_sign, dist_now, length)
+    active = front | unsigned
     if ps_active is not None:
         active = active & ps_active
+    active = active.to(pos_next.dtype)  # [F] 0/1
     plane_target = torch.minimum(radius.index_select(0, sphere), dist_now)
     for _ in range(iterations):
         x = _pair_pass(x, i, j, ends, weight, pair_target)
@@ -98,18 +100,17 @@ def _pair_pass(x, i, j, ends, weight, target) -> torch.Tensor:
     d = x.index_select(0, i) - x.index_select(0, j)
     length = d.norm(dim=1)
     c = length - target
-    bad = (c < 0) & (length > 0)
-    step = torch.where(bad, c / length.clamp_min(1e-12), 0.0)[:, None] * d  # C·n̂
+    # only violated pairs (c < 0) propose; coincident centres (length 0) have d = 0
+    step = (c / length.clamp_min(1e-12)).clamp(max=0.0)[:, None] * d  # C·n̂
     return _combine(x, ends, step.repeat(2, 1) * weight)
 
 
 def _plane_pass(x, sphere, frames, active, target) -> torch.Tensor:
     """Every violated plane edge proposes to put its sphere back on the allowed side (planes
     do not move; :func:`_combine`)."""
-    dist, direction, _ = frames.distance(x.index_select(0, sphere))
-    c = dist - target
-    bad = active & (c < 0)
-    return _combine(x, sphere, torch.where(bad, -c, 0.0)[:, None] * direction)
+    dist, direction, _, _ = frames.distance(x.index_select(0, sphere))
+    push = (target - dist).clamp(min=0.0) * active  # −C of the violated active edges
+    return _combine(x, sphere, push[:, None] * direction)
 
 
 def _combine(x, index, proposals) -> torch.Tensor:
@@ -120,8 +121,7 @@ def _combine(x, index, proposals) -> torch.Tensor:
     acc = x.new_zeros(x.shape[0], 4).index_add_(
         0, index, torch.cat([proposals * weight, weight], 1)
     )
-    total = acc[:, 3:]
-    return x + torch.where(total > 0, acc[:, :3] / total.clamp_min(1e-30), 0.0)
+    return x + acc[:, :3] / acc[:, 3:].clamp_min(1e-30)  # no proposal: 0 / 1e-30
 
 
 class _PlaneFrames:
@@ -135,24 +135,25 @@ class _PlaneFrames:
         other = torch.linalg.cross(self.normal, ref)
         self.basis = torch.stack([ref, other, self.normal], 1)  # [F, 3, 3]: rows u, w, n
         self.half = torch.stack([rows[:, 9], rows[:, 10], torch.zeros_like(rows[:, 9])], 1)
+        self.minus_half = -self.half
         self.ground = kind == GROUND
-        self.unsigned = torch.zeros_like(self.ground)  # [F] bool: distance to the rectangle only
+        self.keep_sign = torch.ones_like(self.ground)  # [F] bool; False: the rectangle's distance
 
     def in_front(self, points: torch.Tensor) -> torch.Tensor:
         """``[F]`` bool: centres on the front side of the infinite plane."""
         return ((points - self.centre) * self.normal).sum(1) >= 0
 
     def distance(self, points: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        """``(dist [F], direction [F, 3], over [F] bool)``: the signed height along the normal
-        over the rectangle (the ground: everywhere), else, and wherever ``unsigned``, the
-        distance to the rectangle and the unit direction from it to the point; ``over``: the
-        point is over the rectangle's footprint."""
+        """``(dist [F], direction [F, 3], over [F] bool, length [F])``: the signed height along
+        the normal over the rectangle (the ground: everywhere) where ``keep_sign``, else the
+        distance to the rectangle (``length``) and the unit direction from it to the point;
+        ``over``: the point is over the rectangle's footprint."""
         local = (self.basis * (points - self.centre)[:, None, :]).sum(-1)  # [F, 3]: u, w, h
-        local = local - torch.clamp(local, -self.half, self.half)  # from the nearest point
+        local = local - torch.clamp(local, self.minus_half, self.half)  # from the nearest point
         over = self.ground | (local[:, :2].norm(dim=1) <= 1e-6)
-        signed = over & ~self.unsigned
+        signed = over & self.keep_sign
         length = local.norm(dim=1)
         dist = torch.where(signed, local[:, 2], length)
         away = (local[:, :, None] * self.basis).sum(1) / length.clamp_min(1e-12)[:, None]
         direction = torch.where(signed[:, None], self.normal, away)
-        return dist, direction, over
+        return dist, direction, over, length
