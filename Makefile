@@ -45,7 +45,7 @@ data-report: ## Print Table 1 of the dataset (PRESET=small; PHYSGNN_OUTPUTS move
 train: ## Train the baseline on data=small (ARGS: Hydra overrides, e.g. ARGS="model.M=3 seed=1")
 	$(PY) -m physgnn.train $(ARGS)
 
-sweep: ## Run a whole ablation sweep (EXPERIMENT=ablation_H|ablation_M|ablation_connectivity|ablation_lambda|ablation_components)
+sweep: ## Run a whole ablation sweep (EXPERIMENT=ablation_H|ablation_M|ablation_connectivity|ablation_lambda|ablation_components|ablation_contacts)
 	$(PY) -m physgnn.train +experiment=$(EXPERIMENT) $(ARGS)
 
 study: ## The ablation study: every unique sweep configuration x 3 seeds, results in docs/results/ (ARGS: --dry-run, launcher.n_jobs=N, budget.steps=N)

@@ -41,6 +41,15 @@ def study_cfg(tmp_path, *overrides):
             f"results_dir={tmp_path}/results", *overrides])  # fmt: skip
 
 
+def test_the_default_study_adds_the_contact_switches_to_the_reports_sweeps(tmp_path):
+    sweeps = list(study_cfg(tmp_path).sweeps)
+    assert sweeps == [*SWEEPS, "ablation_contacts"]
+    extra = [c.key for c in study_configs(sweeps)][17:]
+    assert extra == ["model.contact_features=False", "model.material_features=False",
+                     "model.gravity_prior=False", "lit.lambda_contact=0",
+                     "lit.contact_noise_depth=0", "model.layer_norm=True"]  # fmt: skip
+
+
 def test_the_five_sweeps_are_17_configurations_the_baseline_shared():
     configs = study_configs(SWEEPS)
     keys = [c.key for c in configs]

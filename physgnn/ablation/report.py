@@ -71,7 +71,7 @@ def write_study_report(records: list[dict], configs: list[Config], cfg) -> Path:
         _table2(groups, configs),
         _all_configs(groups, configs),
         _figures(out, groups, configs),
-        _footer(out, cfg),
+        _footer(out, cfg, len(configs) * len(cfg.seeds) - _done(mine)),
     ]
     return write_text(out / "README.md", "\n\n".join(p for p in parts if p) + "\n")
 
@@ -258,10 +258,15 @@ def _num(x: str):
         return (1, 0.0, x)
 
 
-def _footer(out: Path, cfg) -> str:
+def _done(records: list[dict]) -> int:
+    return sum(r.get("status") in DONE for r in records)
+
+
+def _footer(out: Path, cfg, left: int) -> str:
+    trains = "nothing" if left <= 0 else f"only the {left} runs it lacks"
     lines = ["## Reproduce", "", "```bash", "make install", "make study   # = python -m "
              "physgnn.study; --dry-run lists the jobs and the time they will take", "```", "",
-             "A clean checkout has this registry, so `make study` trains nothing and rewrites "
+             f"A clean checkout has this registry, so `make study` trains {trains} and rewrites "
              "this page; to run the study again from scratch, move `registry.jsonl` away "
              f"(runs train under `{portable(cfg.runs_dir)}`)."]  # fmt: skip
     if (out / "discussion.md").exists():
