@@ -24,7 +24,7 @@ RUNS = {
     "ablation_connectivity": 9,
     "ablation_lambda": 12,
     "ablation_components": 24,
-    "ablation_contacts": 21,
+    "ablation_contacts": 27,
 }
 
 

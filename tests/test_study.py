@@ -47,7 +47,9 @@ def test_the_default_study_adds_the_contact_switches_to_the_reports_sweeps(tmp_p
     extra = [c.key for c in study_configs(sweeps)][17:]
     assert extra == ["model.contact_features=False", "model.material_features=False",
                      "model.gravity_prior=False", "lit.lambda_contact=0",
-                     "lit.contact_noise_depth=0", "model.layer_norm=True"]  # fmt: skip
+                     "lit.contact_noise_depth=0", "model.layer_norm=True",
+                     "lit.pushforward_steps=0",
+                     "lit.pushforward_growth=450 lit.pushforward_steps=4"]  # fmt: skip
 
 
 def test_the_five_sweeps_are_17_configurations_the_baseline_shared():
