@@ -348,6 +348,12 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
         ("trainer.max_epochs=0", "trainer.max_epochs=0 trains nothing: give at least 1"),
         ("lit.optimizer.lr=-1", "lit.optimizer.lr must be a number > 0, got -1 (conf/train.yaml"),
         ("seed=-5", "seed must be a whole number from 0 to 4294967295, got -5 (conf/train.yaml"),
+        (
+            "~callbacks.rollout",
+            "callbacks.checkpoint.monitor=val/rollout_score is logged by the "
+            "rollout callback only: keep callbacks.rollout, or set callbacks.checkpoint.monitor="
+            "val/loss",
+        ),
     ],
 )
 def test_config_mistakes_name_the_key_and_are_recorded(tiny_dataset, tmp_path, monkeypatch,

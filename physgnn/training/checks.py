@@ -25,6 +25,9 @@ HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
 # other run with checkpoints (finished, truncated, diverged, debug) is never trained over.
 RESUMABLE = ("interrupted", "running", "failed")
 MAX_SEED = 2**32 - 1
+# What the rollout callback logs (physgnn/training/callbacks.py)
+ROLLOUT_METRICS = ("val/rollout_score", "val/rollout_mse", "val/chamfer", "val/energy_gain",
+                   "val/max_depth", "val/tunnelled", "val/rest_drift")  # fmt: skip
 WORDS = {int: "a whole number", float: "a number", bool: "true or false", str: "a string"}
 
 
@@ -106,6 +109,21 @@ def check_budget(trainer_cfg: DictConfig) -> None:
         if value is not None and value != -1 and value < 1:
             raise ConfigError(
                 f"trainer.{key}={value} trains nothing: give at least 1 (-1: no limit)"
+            )
+
+
+def check_monitors(callbacks_cfg: DictConfig | None) -> None:
+    """A callback that watches a ``val/rollout…`` or other rollout metric needs the rollout
+    callback, the only one that logs them (else Lightning fails at the first validation)."""
+    callbacks = dict(callbacks_cfg or {})
+    rollout = any(str(c.get("_target_", "")).endswith("RolloutCallback") for c in
+                  callbacks.values() if c)  # fmt: skip
+    for name, c in callbacks.items():
+        watched = str((c or {}).get("monitor") or "")
+        if (watched in ROLLOUT_METRICS or watched.startswith("ood/")) and not rollout:
+            raise ConfigError(
+                f"callbacks.{name}.monitor={watched} is logged by the rollout callback only: "
+                f"keep callbacks.rollout, or set callbacks.{name}.monitor=val/loss"
             )
 
 

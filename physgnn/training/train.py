@@ -32,6 +32,7 @@ from physgnn.training.checks import (
     check_arguments,
     check_budget,
     check_checkpoint,
+    check_monitors,
     check_optimizer,
     check_run_dir,
     check_seed,
@@ -66,6 +67,7 @@ def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
     ``extra_callbacks``) and ``cfg.logger``."""
     check_trainer_config(cfg.trainer)
     check_budget(cfg.trainer)
+    check_monitors(cfg.get("callbacks"))
     callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
     callbacks += list(extra_callbacks)
     logger = instantiate(cfg.logger) if cfg.get("logger") else False
