@@ -107,8 +107,8 @@ def plot_study_curves(path: Path, title: str, curves: list[tuple[str, list[dict]
         ax.set_xlabel("optimiser step", fontsize=7)
         ax.set_title(label, fontsize=8)
         ax.tick_params(labelsize=7)
-        if metric == "mse":
-            ax.set_yscale("log")
+        # the untrained first evaluation is orders of magnitude above the rest
+        ax.set_yscale("log") if metric == "mse" else ax.set_yscale("symlog", linthresh=0.01)
     axes[0].legend(fontsize=6)
     fig.suptitle(title, fontsize=9)
     return save_figure(fig, path)
