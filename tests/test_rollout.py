@@ -245,3 +245,50 @@ def test_no_frame_reaches_the_host_before_the_rollout_ends(monkeypatch):
         assert out.n_frames == frames and out.diverged_at is None
         counts.append(dict(calls))
     assert counts[0] == counts[1], counts
+
+
+def test_evaluation_batches_a_split_and_equals_one_by_one_up_to_rounding():
+    """``make eval``'s default: a split's scenes in one rollout call give the one-by-one
+    rollouts up to float rounding, the same frames, and fps as scene-frames per second."""
+    from simdata import STATS, trajectory
+
+    from physgnn.evaluation.rollouts import predict, predict_split
+    from physgnn.evaluation.runs import RunInfo
+    from physgnn.models.learned import LearnedSimulator
+
+    torch.manual_seed(0)
+    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8, neighbor_backend="torch").eval()
+    sim.effects_trained.fill_(True)
+    job = RunInfo("run", "baseline", simulator=sim)
+    trajs = [trajectory(n, frames=15, seed=n) for n in (2, 3, 5)]
+    batched = predict_split(job, trajs)
+    again = predict_split(job, trajs)
+    for traj, pred, repeat in zip(trajs, batched, again, strict=True):
+        alone = predict(job, traj)
+        assert pred.n_frames == alone.n_frames == traj.n_frames
+        assert pred.diverged_at is None and alone.diverged_at is None
+        np.testing.assert_allclose(pred.pos, alone.pos, rtol=0, atol=1e-4)
+        np.testing.assert_array_equal(pred.pos, repeat.pos)  # deterministic
+    # every scene produced 15 - 2 frames in the call's time: fps counts all three scenes'
+    fps = [p.fps for p in batched]
+    assert fps[0] == fps[1] == fps[2] and math.isfinite(fps[0]) and fps[0] > 0
+    truth = RunInfo("ground_truth", "reference")
+    for traj, pred in zip(trajs, predict_split(truth, trajs), strict=True):
+        np.testing.assert_array_equal(pred.pos, traj.pos)
+
+
+def test_batched_fps_counts_the_frames_every_scene_produced(monkeypatch):
+    """Two scenes from frame 1: one ran 10 steps, one diverged after 4; the call made 10 steps
+    at 5 steps/s (2 s), so its scene-frames per second are (10 + 4) / 2 = 7."""
+    import dataclasses
+
+    from simdata import trajectory
+
+    from physgnn.evaluation import rollouts
+    from physgnn.evaluation.runs import RunInfo
+
+    long, short = trajectory(2, frames=12, seed=1), trajectory(2, frames=6, seed=2)
+    made = [dataclasses.replace(t, start=1, fps=5.0) for t in (long, short)]
+    monkeypatch.setattr(rollouts, "rollout", lambda sim, trajs, **kw: made)
+    preds = rollouts.predict_split(RunInfo("run", "x", simulator=object()), [long, short])
+    assert [p.fps for p in preds] == [7.0, 7.0]

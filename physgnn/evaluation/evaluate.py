@@ -112,7 +112,9 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
     stab = [] if cfg.get("stability") else None
     settings = rollout_settings(cfg)
     filmed = [r for r in runs if film and r.name in (film.name, f"{film.name} + constraints")]
-    out = roll_all(jobs, data, Collected(keep, filmed, cfg.tol, stab, rest_tol(cfg)), settings)
+    batched = bool(OmegaConf.select(cfg, "rollout.batch_scenes", default=True))
+    collected = Collected(keep, filmed, cfg.tol, stab, rest_tol(cfg))
+    out = roll_all(jobs, data, collected, settings, batch_scenes=batched)
     if film is not None and cfg.sleeping_compare and not settings["sleeping"]:
         out.rows += sleeping_rows(film, data[film.dataset]["ood"], cfg.tol, settings["sleep"])
     table.write_csv(report_dir / "metrics.csv", out.rows)
