@@ -24,8 +24,10 @@ from physgnn.rollout import rollout
 
 
 class StepCounter(L.Callback):
-    """Counts syncs and kernels of every training step (batch start to batch end) and its
-    host time; ``where`` sums the Python lines of the syncs from batch ``warmup`` on."""
+    """Counts the syncs and kernels of the even training steps (batch start to batch end) and
+    times the odd ones: the counting mode runs Python for every op, which would inflate the
+    host time of a step it watches. ``where`` sums the Python lines of the syncs from batch
+    ``warmup`` on."""
 
     def __init__(self, warmup: int = 0, record_where: bool = False):
         self.warmup, self.record_where = warmup, record_where
@@ -36,28 +38,32 @@ class StepCounter(L.Callback):
     def on_train_batch_start(self, trainer, pl_module, batch, batch_idx):
         if batch_idx == self.warmup:
             self.where.clear()
-        self._context = counting(self.record_where)
-        self._counter = self._context.__enter__()
+        self._context = counting(self.record_where) if batch_idx % 2 == 0 else None
+        self._counter = self._context.__enter__() if self._context is not None else None
         self._t0 = time.perf_counter()
 
     def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx):
         ms = 1000 * (time.perf_counter() - self._t0)
+        if self._context is None:
+            self.steps.append({"host_ms": ms})
+            return
         self._context.__exit__(None, None, None)
         counter = self._counter
-        self.steps.append({"syncs": counter.syncs, "kernels": counter.kernels, "host_ms": ms})
+        self.steps.append({"syncs": counter.syncs, "kernels": counter.kernels})
         self.where.update(counter.where)
 
 
 def training_step_counts(
     model_cfg: DictConfig, lit_cfg: DictConfig, trajectories: list, stats: dict, c: DictConfig
 ) -> dict:
-    """``{"syncs", "kernels", "host_ms", "where"}`` of ``c.steps`` training steps after
-    ``c.warmup_steps`` (batch ``c.batch_size``); ``syncs`` and ``kernels`` the maxima, host ms
-    the mean, ``where`` the syncs per source line over the counted steps."""
+    """``{"syncs", "kernels", "host_ms", "where"}`` of ``c.steps`` counted and ``c.steps``
+    timed training steps, alternated, after ``c.warmup_steps`` (batch ``c.batch_size``);
+    ``syncs`` and ``kernels`` the maxima, host ms the mean, ``where`` the syncs per source line
+    per counted step."""
     simulator = instantiate(model_cfg, stats=stats)
     lit = instantiate(lit_cfg, simulator=simulator)
     data = PairDataset(trajectories, simulator.H, future=int(lit_cfg.pushforward_steps))
-    total = int(c.warmup_steps + c.steps)
+    total = int(c.warmup_steps + 2 * c.steps)
     loader = pair_loader(data, int(c.batch_size), EpochSampler(len(data), total * c.batch_size, 0))
     counter = StepCounter(int(c.warmup_steps), record_where=True)
     trainer = L.Trainer(
@@ -66,30 +72,39 @@ def training_step_counts(
         num_sanity_val_steps=0, limit_val_batches=0, callbacks=[counter], gradient_clip_val=1.0,
     )  # fmt: skip
     trainer.fit(lit, train_dataloaders=loader)
-    counted = counter.steps[int(c.warmup_steps) :]
-    return summary(counted, counter.where, len(counted))
+    after = counter.steps[int(c.warmup_steps) :]
+    counted = [s for s in after if "syncs" in s]
+    timed = [s for s in after if "host_ms" in s]
+    return summary(counted, timed, counter.where, len(counted))
 
 
 def rollout_frame_counts(model_cfg: DictConfig, stats: dict, trajectory, frames: int) -> dict:
     """``{"syncs", "kernels", "host_ms", "where"}`` per frame of a learned rollout from
     ``trajectory``'s start: the difference between rollouts of ``2·frames`` and ``frames``
-    frames, over ``frames`` (what each further frame costs, without the start and the end)."""
+    frames, over ``frames`` (what each further frame costs, without the start and the end);
+    counted in one pair of rollouts and timed in another (the counting mode's own Python per
+    op would inflate the time)."""
     simulator = instantiate(model_cfg, stats=stats).eval()
-    runs = {}
-    for n in (frames, frames, 2 * frames):  # the first is a warm-up
+    go = lambda n: rollout(simulator, [trajectory], n_frames=simulator.H + 1 + n)  # noqa: E731
+    go(frames)  # warm-up
+    counted = {}
+    for n in (frames, 2 * frames):
         with counting(record_where=True) as counter:
-            t0 = time.perf_counter()
-            rollout(simulator, [trajectory], n_frames=simulator.H + 1 + n)
-            runs[n] = (counter, 1000 * (time.perf_counter() - t0))
-    (short, short_ms), (long, long_ms) = runs[frames], runs[2 * frames]
+            go(n)
+        counted[n] = counter
+    ms = {}
+    for n in (frames, 2 * frames):
+        t0 = time.perf_counter()
+        go(n)
+        ms[n] = 1000 * (time.perf_counter() - t0)
+    short, long = counted[frames], counted[2 * frames]
     step = {
         "syncs": (long.syncs - short.syncs) / frames,
         "kernels": (long.kernels - short.kernels) / frames,
-        "host_ms": (long_ms - short_ms) / frames,
     }
     where = long.where
     where.subtract(short.where)
-    return summary([step], +where, frames)
+    return summary([step], [{"host_ms": (ms[2 * frames] - ms[frames]) / frames}], +where, frames)
 
 
 def gpu_readiness(cfg: DictConfig, trajectories: list, stats: dict, start) -> dict:
@@ -109,11 +124,12 @@ def gpu_readiness(cfg: DictConfig, trajectories: list, stats: dict, start) -> di
     return {"train_step": train, "rollout_frame": frame}
 
 
-def summary(steps: list[dict], where: Counter, per: int) -> dict:
-    """Maxima of the counts, mean host ms and the sync lines per step (or frame)."""
+def summary(counted: list[dict], timed: list[dict], where: Counter, per: int) -> dict:
+    """Maxima of the counts, mean host ms of the timed steps and the sync lines per step (or
+    frame)."""
     return {
-        "syncs": max(s["syncs"] for s in steps),
-        "kernels": max(s["kernels"] for s in steps),
-        "host_ms": sum(s["host_ms"] for s in steps) / len(steps),
+        "syncs": max(s["syncs"] for s in counted),
+        "kernels": max(s["kernels"] for s in counted),
+        "host_ms": sum(s["host_ms"] for s in timed) / len(timed),
         "where": {k: v / per for k, v in where.most_common()},
     }
