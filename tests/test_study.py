@@ -318,3 +318,27 @@ def test_the_report_is_rebuilt_from_the_registry_alone(tmp_path):
     assert "| 10 | 4.8 % | 11× | 1 % |" in text
     for name in ("sweep_H", "sweep_M", "sweep_connectivity", "sweep_lambda", "fps", "curve_H"):
         assert f"({name}.png)" in text and (tmp_path / "results" / f"{name}.png").exists()
+
+
+def test_the_contact_switches_are_compared_to_the_baseline_on_matched_seeds():
+    """Paired differences over the seeds both have, the paired t-test's p, a diverged seed
+    named rather than averaged."""
+    from physgnn.ablation.switches import paired, switches_section
+
+    configs = study_configs(["ablation_contacts"])
+    key = next(c.key for c in configs if c.points.get("ablation_contacts") == "layer_norm")
+    base = [rec("baseline", s, [(m, None)]) for s, m in enumerate([4.0, 5.0, 7.0])]
+    mine = [rec(key, 0, [(3.0, None)]), rec(key, 1, [(3.5, None)]), rec(key, 2, [(6.0, None)])]
+    p = stats.ttest_rel([3.0, 3.5, 6.0], [4.0, 5.0, 7.0]).pvalue
+    assert paired(mine, base, "ood", "mse") == f"4.17 (Δ -1.17, p = {p:.2g})"
+    # seed 0 alone: its own difference, no test
+    assert paired(mine[:1], base, "ood", "mse") == "3 (Δ -1)"
+    gone = [mine[0], rec(key, 1, [(3.5, 9)])]
+    assert paired(gone, base, "ood", "mse") == "3 (Δ -1); ∞ in 1/2 seeds"
+    for r in base + mine:
+        r["checkpoint"] = {"step": 2000, "val_score": 2.0}
+    text = switches_section({"baseline": base, key: mine}, configs)
+    row = next(line for line in text.splitlines() if line.startswith("| with LayerNorm |"))
+    assert row.startswith(f"| with LayerNorm | 0, 1, 2 | 4.17 (Δ -1.17, p = {p:.2g}) |")
+    assert row.endswith("| 2 @ 2000 |") and "(baseline, 3 seeds: 2 @ 2000)" in text
+    assert switches_section({"baseline": base}, configs) == ""

@@ -21,6 +21,7 @@ from physgnn.ablation.aggregate import (
 from physgnn.ablation.figures import plot_study_curves, plot_study_fps, plot_study_sweep
 from physgnn.ablation.jobs import Config, study_budget
 from physgnn.ablation.registry import DONE, budget_id
+from physgnn.ablation.switches import switches_section
 from physgnn.ablation.verdicts import RULES, table2
 from physgnn.files import portable, write_text
 from physgnn.report.format import fmt, md_table
@@ -70,6 +71,7 @@ def write_study_report(records: list[dict], configs: list[Config], cfg) -> Path:
         _header(mine, configs, cfg, budget),
         _table2(groups, configs),
         _all_configs(groups, configs),
+        switches_section(groups, configs),
         _figures(out, groups, configs),
         _footer(out, cfg, len(configs) * len(cfg.seeds) - _done(mine)),
     ]
