@@ -210,6 +210,16 @@ def test_dry_run_lists_every_job_and_trains_nothing(tmp_path, capsys):
     assert not (tmp_path / "study").exists() and not (tmp_path / "registry.jsonl").exists()
 
 
+def test_report_only_rebuilds_the_page_and_trains_nothing(tmp_path):
+    cfg = study_cfg(tmp_path, "report_only=true", "sweeps=[ablation_connectivity]", "seeds=[0]")
+    append_record(tmp_path / "registry.jsonl", rec("baseline", 0, [(1.0, None)]) | {
+        "budget": study_budget(cfg)})  # fmt: skip
+    page = run_study(cfg)
+    assert page == tmp_path / "results" / "README.md"
+    assert "**1 done**, 0 failed, 2 left" in page.read_text()
+    assert not (tmp_path / "study").exists()
+
+
 @pytest.mark.slow
 def test_a_tiny_study_runs_resumes_from_the_registry_and_survives_failures(
     tiny_dataset, tmp_path, capsys

@@ -107,6 +107,8 @@ def run_study(cfg: DictConfig) -> Path | None:
     if cfg.dry_run:
         _print_plan(console, specs, pending, records, cfg)
         return None
+    if cfg.get("report_only"):
+        return write_study_report(records, configs, cfg)
     if pending:
         _ensure_dataset(cfg, console)
     failed = _run(console, pending, records, cfg, n_jobs, configs)
