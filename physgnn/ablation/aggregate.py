@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from physgnn.ablation.registry import DONE
+from physgnn.report.format import fmt
 
 
 @dataclass
@@ -71,6 +72,14 @@ def mean_checkpoint(records: list[dict], name: str) -> float | None:
     values = [r["checkpoint"][name] for r in records
               if (r.get("checkpoint") or {}).get(name) is not None]  # fmt: skip
     return float(np.mean(values)) if values else None
+
+
+def checkpoint_text(records: list[dict], name: str, at: str = " @ step ") -> str:
+    """``mean of name`` + ``at`` + ``mean step`` of the measured checkpoints ('–' without)."""
+    value, step = mean_checkpoint(records, name), mean_checkpoint(records, "step")
+    if value is None:
+        return "–"
+    return fmt(value) + (f"{at}{step:.0f}" if step is not None else "")
 
 
 def mean_logged(records: list[dict], name: str) -> float | None:

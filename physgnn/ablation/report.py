@@ -11,8 +11,8 @@ from pathlib import Path
 
 from physgnn.ablation.aggregate import (
     by_config,
+    checkpoint_text,
     divergence,
-    mean_checkpoint,
     mean_fps,
     mean_logged,
     over_seeds,
@@ -184,17 +184,10 @@ def _all_configs(groups, configs) -> str:
                 continue
             stats = [cell(over_seeds(recs, split, m)) for m in COLUMNS]
             body.append([f"`{config.key}`", str(len(recs)), *stats, div_cell(recs, split),
-                         _checkpoint(recs)])  # fmt: skip
+                         checkpoint_text(recs, "val_loss")])  # fmt: skip
         out += [f"### {split} (ground truth's energy gain: {fmt(truth[split])})", "",
                 md_table(header, body), ""]  # fmt: skip
     return "\n".join(out)
-
-
-def _checkpoint(records) -> str:
-    loss, step = mean_checkpoint(records, "val_loss"), mean_checkpoint(records, "step")
-    if loss is None:
-        return "–"
-    return f"{fmt(loss)} @ step {step:.0f}" if step is not None else fmt(loss)
 
 
 def _figures(out: Path, groups, configs) -> str:

@@ -14,7 +14,7 @@ import math
 import numpy as np
 from scipy import stats
 
-from physgnn.ablation.aggregate import mean_checkpoint, seed_value
+from physgnn.ablation.aggregate import checkpoint_text, seed_value
 from physgnn.ablation.jobs import BASELINE, Config
 from physgnn.report.format import fmt, md_table
 
@@ -61,10 +61,7 @@ def paired(mine: list[dict], base: list[dict], split: str, metric: str) -> str:
 
 
 def _score(records: list[dict]) -> str:
-    value, step = mean_checkpoint(records, "val_score"), mean_checkpoint(records, "step")
-    if value is None:
-        return "–"
-    return fmt(value) + (f" @ {step:.0f}" if step is not None else "")
+    return checkpoint_text(records, "val_score", at=" @ ")
 
 
 def switches_section(groups: dict[str, list[dict]], configs: list[Config]) -> str:

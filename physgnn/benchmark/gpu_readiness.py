@@ -48,9 +48,8 @@ class StepCounter(L.Callback):
             self.steps.append({"host_ms": ms})
             return
         self._context.__exit__(None, None, None)
-        counter = self._counter
-        self.steps.append({"syncs": counter.syncs, "kernels": counter.kernels})
-        self.where.update(counter.where)
+        self.steps.append({"syncs": self._counter.syncs, "kernels": self._counter.kernels})
+        self.where.update(self._counter.where)
 
 
 def training_step_counts(

@@ -132,16 +132,12 @@ def roll_all(
             warm_up(job, data[job.dataset])
             for split in SPLITS:
                 trajs = data[job.dataset][split]
-                if batch_scenes:
-                    bar.update(task, description=f"{job.name} · {split} ({len(trajs)} scenes)")
-                    for traj, pred in zip(trajs, predict_split(job, trajs, settings), strict=True):
+                for group in [trajs] if batch_scenes else [[t] for t in trajs]:
+                    names = group[0].name if len(group) == 1 else f"{split} ({len(group)} scenes)"
+                    bar.update(task, description=f"{job.name} · {names}")
+                    for traj, pred in zip(group, predict_split(job, group, settings), strict=True):
                         out.add(job, split, traj, pred)
-                    bar.advance(task, len(trajs))
-                    continue
-                for traj in trajs:
-                    bar.update(task, description=f"{job.name} · {traj.name}")
-                    out.add(job, split, traj, predict(job, traj, settings))
-                    bar.advance(task)
+                    bar.advance(task, len(group))
     return out
 
 
