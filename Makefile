@@ -55,6 +55,7 @@ eval: ## Evaluate every finished run under outputs/ and write outputs/report/ (A
 	$(PY) -m physgnn.eval $(ARGS)
 
 ship: ## Export a run's best weights as the shipped model run=pretrained loads (RUN=<run folder> [OUT=<folder>] [CHECKPOINT=<file>])
+	@test -n "$(RUN)" || { echo "error: make ship needs RUN=<a finished run folder> (e.g. make ship RUN=outputs/runs/baseline/<time>)" >&2; exit 2; }
 	$(PY) -m physgnn.training.export $(RUN) $(or $(OUT),physgnn/pretrained) $(CHECKPOINT)
 
 learning-curve: ## Learning curve of a run's checkpoints evaluated together (REPORT=<eval report folder> [OUT=<folder>])

@@ -148,10 +148,12 @@ def command(
     run: Callable[[DictConfig], object],
     done: Callable[[object], str] | None = None,
     parse: Callable[[list[str]], DictConfig] | None = None,
+    before: Callable[[list[str]], None] | None = None,
 ) -> Callable:
     """``main`` of ``python -m physgnn.<name>`` (config ``conf/<name>.yaml``); it returns what
     ``run`` returns (a Hydra sweeper optimises it). ``main.__wrapped__(cfg)`` is the body
-    without Hydra (for tests). With ``parse`` there is no Hydra (module doc)."""
+    without Hydra (for tests). With ``parse`` there is no Hydra (module doc). ``before(argv)``
+    checks the command line before Hydra writes anything (its error printed as one line)."""
 
     def main(cfg: DictConfig):
         free_threads()
@@ -179,7 +181,7 @@ def command(
     if parse is not None:
         return _parsed(main, parse)
     return _outputs_checked(
-        hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main)
+        hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main), before
     )
 
 
@@ -212,14 +214,17 @@ def run_dir_is_hydras(argv: list[str]) -> list[str]:
     return argv
 
 
-def _outputs_checked(hydra_main: Callable) -> Callable:
-    """``hydra_main`` after :func:`check_outputs_env` (its error printed as one line)."""
+def _outputs_checked(hydra_main: Callable, before: Callable | None = None) -> Callable:
+    """``hydra_main`` after :func:`check_outputs_env` and ``before(argv)`` (their errors
+    printed as one line)."""
 
     @functools.wraps(hydra_main)
     def main(*args, **kwargs):
         try:
             check_outputs_env()
-        except ConfigError as err:
+            if before is not None:
+                before(sys.argv[1:])
+        except USER_ERRORS as err:
             fail(err)
         sys.argv[1:] = run_dir_is_hydras(sys.argv[1:])
         return hydra_main(*args, **kwargs)

@@ -9,6 +9,7 @@ import csv
 import json
 import math
 import os
+import shutil
 import socket
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
@@ -190,3 +191,48 @@ def _refuse_or_clear(lock: Path, what: str, way_out: str) -> None:
             + ("" if here else f"; remove {lock} if that process is gone")
         )
     lock.unlink(missing_ok=True)
+
+
+@contextmanager
+def staged_outputs(folder: str | Path, key: str, outputs: Iterable[str]) -> Iterator[Path]:
+    """Write a command's ``outputs`` (names in ``folder``) whole or not at all, one writer at a
+    time. Holds ``<folder>.lock`` (a second writer is refused in one line, :func:`exclusive`)
+    and yields this process's staging folder ``<folder>.partial-<pid>``; at the end the
+    previous outputs leave ``folder`` and the staged ones move in. On an error or an interrupt
+    the staging folder goes and ``folder`` keeps what it held. Other files in ``folder`` are
+    never touched."""
+    folder = Path(folder)
+    lock = folder.with_name(folder.name + ".lock")
+    way_out = f"wait for it to end, or choose another {key}"
+    with exclusive(lock, f"{key} {folder}", way_out):
+        staging = _fresh_staging(folder)
+        try:
+            yield staging
+            _publish(staging, folder, tuple(outputs))
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def _fresh_staging(folder: Path) -> Path:
+    """This process's empty staging folder beside ``folder``, once the leftovers of interrupted
+    writers (marked, under the lock held) are gone; an unmarked one in the way is refused."""
+    for old in folder.parent.glob(f"{folder.name}.partial-*"):
+        if (old / OUTPUT_MARKER).is_file():
+            shutil.rmtree(old, ignore_errors=True)
+    staging = folder.with_name(f"{folder.name}.partial-{os.getpid()}")
+    if staging.exists():
+        raise FileExistsError(f"{staging} is in the way and physgnn did not write it: move it")
+    staging.mkdir(parents=True)
+    write_json(staging / OUTPUT_MARKER, {"physgnn_version": __version__})
+    return staging
+
+
+def _publish(staging: Path, folder: Path, outputs: tuple[str, ...]) -> None:
+    """The previous outputs out of ``folder``, the staged ones in."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in outputs:
+        old = folder / name
+        shutil.rmtree(old) if old.is_dir() else old.unlink(missing_ok=True)
+    for item in staging.iterdir():
+        if item.name != OUTPUT_MARKER:
+            os.replace(item, folder / item.name)

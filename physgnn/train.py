@@ -5,6 +5,7 @@ the value a Hydra sweeper optimises.
 """
 
 from physgnn.cli import command
+from physgnn.training.checks import check_resume_argv
 from physgnn.training.train import train
 
 
@@ -12,7 +13,8 @@ def _val_loss(cfg) -> float | None:
     return train(cfg)["val_loss"]
 
 
-main = command("train", _val_loss)
+# A resume with other overrides is refused before Hydra rewrites the run's .hydra folder.
+main = command("train", _val_loss, before=check_resume_argv)
 
 if __name__ == "__main__":
     main()

@@ -430,9 +430,14 @@ def test_a_resume_with_nothing_left_to_train_says_so(tiny_dataset, tmp_path):
 
 def test_run_dir_gets_the_log_of_every_session(tiny_dataset, tmp_path, monkeypatch, capsys):
     run_dir, hydra_dir = tmp_path / "run", tmp_path / "hydra"
-    args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={run_dir}", *SHORT]
-    code, line = run_main(monkeypatch, capsys, *args, f"hydra.run.dir={hydra_dir}/1",
-                          *signal_at(signal.SIGINT, 1))  # fmt: skip
+    args = [
+        "data=tiny",
+        f"paths.outputs={outputs_of(tiny_dataset)}",
+        f"run_dir={run_dir}",
+        *SHORT,
+        *signal_at(signal.SIGINT, 1),
+    ]  # fmt: skip (a resume takes the same overrides)
+    code, line = run_main(monkeypatch, capsys, *args, f"hydra.run.dir={hydra_dir}/1")
     assert code == 130 and line.endswith(f"Resume: python -m physgnn.train run_dir={run_dir} "
                                          "(same overrides)")  # fmt: skip
     first = (run_dir / "train.log").read_text()  # a fresh run given its folder

@@ -17,8 +17,6 @@ A ``report_dir`` holding files physgnn did not write is refused unless ``overwri
 
 from __future__ import annotations
 
-import os
-import shutil
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
@@ -45,7 +43,7 @@ from physgnn.evaluation.runs import (
     references,
 )
 from physgnn.evaluation.video3d import render_side_by_side
-from physgnn.files import OUTPUT_MARKER, claim_folder
+from physgnn.files import claim_folder, staged_outputs
 from physgnn.report import bounce, figures, freefall, stability, table
 from physgnn.report.document import write_report
 
@@ -58,41 +56,19 @@ MATERIAL_KEYS = ("restitution", "lateral_friction", "rolling_friction", "spinnin
 def evaluate(cfg: DictConfig) -> Path:
     """Evaluate the runs named by ``cfg`` and write ``cfg.report_dir``; returns report.md.
 
-    Everything is written into ``<report_dir>.partial`` first and moved into ``report_dir``
-    at the end, replacing the previous eval's outputs (:data:`REPORT_OUTPUTS`) whole: a
-    report folder always holds one eval, and an interrupted eval leaves the last one as it
-    was."""
+    One eval at a time per ``report_dir`` (a second is refused in one line); everything is
+    written into its own staging folder first and moved into ``report_dir`` at the end,
+    replacing the previous eval's outputs (:data:`REPORT_OUTPUTS`) whole: a report folder
+    always holds one eval, and an interrupted eval leaves the last one as it was
+    (:func:`physgnn.files.staged_outputs`)."""
     report_dir = Path(cfg.report_dir)
     if cfg.get("rerun"):
         rerun_log.require()  # before the rollouts, not after them
     ours = report_dir == Path(cfg.paths.report_dir)
     claim_folder(report_dir, "report_dir", overwrite=bool(cfg.get("overwrite")), ours=ours)
-    staging = report_dir.with_name(report_dir.name + ".partial")
-    _clear_staging(staging)
-    claim_folder(staging, "report_dir", ours=True)
-    try:
+    with staged_outputs(report_dir, "report_dir", REPORT_OUTPUTS) as staging:
         _evaluate_into(cfg, staging)
-        _publish(staging, report_dir)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
     return report_dir / "report.md"
-
-
-def _clear_staging(staging: Path) -> None:
-    """A leftover staging folder of an interrupted eval goes; anything else there is refused."""
-    if staging.exists() and not (staging / OUTPUT_MARKER).is_file() and any(staging.iterdir()):
-        raise FileExistsError(f"{staging} is in the way and physgnn did not write it: move it")
-    shutil.rmtree(staging, ignore_errors=True)
-
-
-def _publish(staging: Path, report_dir: Path) -> None:
-    """The previous eval's outputs out of ``report_dir``, this eval's in."""
-    for name in REPORT_OUTPUTS:
-        old = report_dir / name
-        shutil.rmtree(old) if old.is_dir() else old.unlink(missing_ok=True)
-    for item in staging.iterdir():
-        if item.name != OUTPUT_MARKER:
-            os.replace(item, report_dir / item.name)
 
 
 def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:

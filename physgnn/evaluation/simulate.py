@@ -18,7 +18,9 @@ else ``outputs``):
   the optional ``rerun`` extra).
 
 A folder ``out`` that holds files physgnn did not write is refused unless ``overwrite=true``
-(:func:`physgnn.files.claim_folder`; the folders it makes carry its marker).
+(:func:`physgnn.files.claim_folder`; the folders it makes carry its marker). One simulate
+writes into an ``out`` at a time, through a staging folder: ``out`` holds one scene's files,
+whole, and an interrupted run leaves it as it was.
 
 Arguments are ``key=value`` over :data:`KEYS` (not Hydra: ``scene=`` names a file here, where
 Hydra would read the ``scene`` config group).
@@ -27,6 +29,7 @@ Hydra would read the ``scene`` config group).
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 import time
 from pathlib import Path
@@ -40,7 +43,7 @@ from physgnn.errors import PhysgnnError
 from physgnn.evaluation import rerun_log
 from physgnn.evaluation.ood import outside
 from physgnn.evaluation.video3d import render_side_by_side
-from physgnn.files import claim_folder, portable, write_json
+from physgnn.files import claim_folder, portable, staged_outputs, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.groundtruth.scenefile import load_scene
 from physgnn.models.constrained import ConstrainedSimulator
@@ -60,6 +63,8 @@ KEYS = {
     "overwrite": "false",
     "constraints": "0",
 }
+# What a simulate writes into its out (replaced whole by the next one).
+SIMULATE_OUTPUTS = ("simulate.h5", "metrics.json", "video.gif", "video.mp4", "video_frame.png")
 METRIC_KEYS = ("mse", "mse20", "chamfer", "energy_gain", "rotation_error", "diverged_at")
 
 
@@ -152,15 +157,25 @@ def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dic
 
 
 def simulate(args: DictConfig | dict) -> dict:
-    """Simulate, roll out, write the files; returns what was written and the metrics."""
-    steps = iterations(args)
+    """Simulate, roll out, write the files; returns what was written and the metrics. One
+    simulate at a time per ``out``; its files replace the previous ones whole
+    (:func:`physgnn.files.staged_outputs`): an interrupted run leaves ``out`` as it was."""
+    steps, tol = iterations(args), tolerance(args)
     scene = load_scene(args["scene"])
     if args["rerun"]:
         rerun_log.require()  # before the work, not after it
     if args["frames"]:
-        scene.n_frames = int(args["frames"])
+        scene.n_frames = frame_count(args["frames"])
     out = Path(args["out"] or outputs_root(args) / "simulate" / scene.name)
     claim_folder(out, "out", overwrite=flag(args, "overwrite"), ours=not args["out"])
+    with staged_outputs(out, "out", SIMULATE_OUTPUTS) as staging:
+        return _simulate_into(args, scene, (staging, out), steps, tol)
+
+
+def _simulate_into(args, scene, folders: tuple[Path, Path], steps: int, tol: float) -> dict:
+    """:func:`simulate`'s work, its files written into the staging folder and named in the
+    result as they will lie in ``out`` (``folders``: staging, out)."""
+    out, final = folders
     start = time.perf_counter()
     truth = simulate_with_progress(scene)
     truth.attrs.update(
@@ -181,15 +196,38 @@ def simulate(args: DictConfig | dict) -> dict:
         "run": source.get("checkpoint"), "constraints": steps, "warnings": warnings,
         "ms_per_frame": {"pybullet": truth.attrs["ms_per_frame"],
                          "learned": source.get("ms_per_frame")},
-        "metrics": scene_metrics(truth, pred, float(args["tol"])),
+        "metrics": scene_metrics(truth, pred, tol),
         "files": {"hdf5": str(h5)},
     }  # fmt: skip
     if flag(args, "video"):
         result["files"].update(write_videos(out, truth, pred, bool(source)))
+    result["files"] = {k: str(final / Path(v).name) for k, v in result["files"].items()}
     if args["rerun"]:
         result["files"]["rerun"] = str(rerun_log.log_rerun(args["rerun"], truth, pred))
     write_json(out / "metrics.json", result)
     return result
+
+
+def tolerance(args: DictConfig | dict) -> float:
+    """The argument ``tol``: a number >= 0 (a fraction of the diameter; 0: any overlap)."""
+    value = str(args.get("tol", KEYS["tol"]))
+    try:
+        tol = float(value)
+    except ValueError:
+        tol = float("nan")
+    if not math.isfinite(tol) or tol < 0:
+        raise SimulateError(
+            f"tol must be a number >= 0 (a fraction of the diameter; 0: any overlap counts), "
+            f"got '{value}'"
+        )
+    return tol
+
+
+def frame_count(value) -> int:
+    """The argument ``frames``: a whole number >= 2 (the first frame is the start)."""
+    if not str(value).isdigit() or int(value) < 2:
+        raise SimulateError(f"frames must be a whole number >= 2, got '{value}' (e.g. frames=100)")
+    return int(value)
 
 
 # Above this many sphere-frames a simulation shows its progress (it takes more than seconds).

@@ -24,6 +24,8 @@ HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
 # requeued cluster job; a run killed outright; a run whose restart had a config mistake); any
 # other run with checkpoints (finished, truncated, diverged, debug) is never trained over.
 RESUMABLE = ("interrupted", "running", "failed")
+# Every status physgnn writes into a run.json (physgnn/training/train.py, export.py).
+STATUSES = ("running", "finished", "truncated", "interrupted", "diverged", "failed", "debug")
 MAX_SEED = 2**32 - 1
 # What the rollout callback logs (physgnn/training/callbacks.py)
 ROLLOUT_METRICS = ("val/rollout_score", "val/rollout_mse", "val/chamfer", "val/energy_gain",
@@ -143,11 +145,15 @@ def check_not_running(run_dir: Path) -> None:
         )
 
 
-def check_run_dir(cfg: DictConfig, run_dir: Path) -> None:
-    """A ``run_dir`` in use by a live training is refused (:func:`check_not_running`); one
-    holding another run's checkpoints is never trained over: only an interrupted run there is
-    resumed, from its own ``last.ckpt``."""
+def check_run_dir(cfg: DictConfig, run_dir: Path, overrides: list[str] | None = None) -> None:
+    """A ``run_dir`` in use by a live training is refused (:func:`check_not_running`), and so
+    is one holding a run.json physgnn did not write; one holding another run's checkpoints is
+    never trained over: only an interrupted run there is resumed, from its own ``last.ckpt``,
+    with the overrides it was started with (``overrides``: this session's, when known)."""
     check_not_running(run_dir)
+    check_own_run_json(run_dir)
+    if overrides is not None:
+        check_resume_overrides(run_dir, overrides)
     status = run_status(run_dir) if (run_dir / RUN_JSON).exists() else None
     last = run_dir / "checkpoints" / "last.ckpt"
     if not any((run_dir / "checkpoints").glob("*.ckpt")):
@@ -159,6 +165,53 @@ def check_run_dir(cfg: DictConfig, run_dir: Path) -> None:
             f"and is never trained over: choose another run_dir (to train that run further, "
             f"ckpt_path={last} in a new run_dir)"
         )
+
+
+def check_own_run_json(run_dir: Path) -> None:
+    """A ``run.json`` in ``run_dir`` that physgnn did not write (no training status) is the
+    user's: refused, never replaced."""
+    if (run_dir / RUN_JSON).exists() and run_status(run_dir) not in STATUSES:
+        raise ConfigError(
+            f"run_dir {run_dir} holds a {RUN_JSON} that physgnn did not write (no training "
+            "status in it): choose another run_dir (physgnn never replaces it)"
+        )
+
+
+def resumed_here(run_dir: Path) -> bool:
+    """Whether training in ``run_dir`` resumes the interrupted run there."""
+    last = run_dir / "checkpoints" / "last.ckpt"
+    return (run_dir / RUN_JSON).exists() and run_status(run_dir) in RESUMABLE and last.is_file()
+
+
+def _changeable(override: str) -> bool:
+    """Overrides that may differ on a resume: the folder named, Hydra's own settings."""
+    key = override.lstrip("+~").partition("=")[0]
+    return key not in ("run_dir", "ckpt_path") and not key.startswith("hydra")
+
+
+def check_resume_overrides(run_dir: Path, overrides: list[str]) -> None:
+    """A resume of the run in ``run_dir`` with other ``overrides`` than it started with is
+    refused (the run would mix two configs and its record lose the first)."""
+    if not resumed_here(run_dir):
+        return
+    then = {o for o in read_run_json(run_dir).get("overrides") or [] if _changeable(o)}
+    now = {o for o in overrides if _changeable(o)}
+    if then != now:
+        gone, new = sorted(then - now), sorted(now - then)
+        raise ConfigError(
+            f"run_dir {run_dir} resumes a run started with other overrides (missing: "
+            f"{' '.join(gone) or 'none'}; new: {' '.join(new) or 'none'}): resume with "
+            f"exactly {' '.join(sorted(then)) or 'no overrides'} and run_dir={run_dir}, or "
+            "train further in a new run_dir with ckpt_path=<its last.ckpt>"
+        )
+
+
+def check_resume_argv(argv: list[str]) -> None:
+    """:func:`check_resume_overrides` on a command line, before Hydra rewrites the run's
+    ``.hydra`` folder: ``run_dir=X`` naming an interrupted run."""
+    given = dict(arg.lstrip("+").split("=", 1) for arg in argv if "=" in arg)
+    if given.get("run_dir"):
+        check_resume_overrides(Path(given["run_dir"]), [a for a in argv if "=" in a])
 
 
 def resume_from(cfg: DictConfig, run_dir: Path) -> str | None:

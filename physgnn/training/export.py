@@ -42,6 +42,11 @@ KEPT = ("experiment", "overrides", "seed", "epochs", "max_epochs", "global_step"
 def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path | None = None):
     """Write ``out_dir`` from ``run_dir`` (module doc); returns the weights file."""
     run_dir, out_dir = Path(run_dir), Path(out_dir)
+    if run_dir.resolve() == out_dir.resolve():
+        raise PhysgnnError(
+            f"RUN_DIR and OUT_DIR are the same folder ({portable(out_dir)}): name the run to "
+            "export (make ship RUN=<a finished run folder>)"
+        )
     source = Path(checkpoint) if checkpoint else checkpoint_of(run_dir)
     full = torch.load(source, map_location="cpu", weights_only=True)
     weights = {k: v for k, v in full["state_dict"].items() if k.startswith("simulator.")}

@@ -157,7 +157,8 @@ def train(cfg: DictConfig) -> dict:
     _log_to_run_file()
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
-    check_run_dir(cfg, run_dir)  # before run.json is written: the folder may be another run's
+    # before run.json is written: the folder may be another run's, or the user's
+    check_run_dir(cfg, run_dir, _overrides() if HydraConfig.initialized() else None)
     with run_log(run_dir):
         return _train(cfg, run_dir)
 
