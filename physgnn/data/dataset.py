@@ -152,6 +152,13 @@ def _read_traj(path: Path, name: str, g: h5py.Group) -> Trajectory:
     for key in FRAME_FIELDS + ("radius", "mass"):
         if not np.all(np.isfinite(data[key])):
             raise DatasetError(f"{where}: {key} contains NaN or inf")
+    for key in ("radius", "mass"):
+        if np.any(data[key] <= 0):
+            i = int(np.argmin(data[key]))
+            raise DatasetError(
+                f"{where}: {key} of sphere {i} is {float(data[key][i]):g}; every {key} must be > 0 "
+                f"({_generate_hint(path)})"
+            )
     try:
         effects = Effects.from_dict(json.loads(_attr(g.attrs["effects"])))
     except (ValueError, SceneError) as e:
@@ -180,6 +187,7 @@ def read_split(path) -> list[Trajectory]:
                     f"{path} has schema version {version}, this physgnn reads "
                     f"{SCHEMA_VERSION}: regenerate it ({_generate_hint(path)})"
                 )
+            _check_split(path, f.attrs.get("split"))
             return [_read_traj(path, name, f[name]) for name in sorted(f.keys())]
     except DatasetError:
         raise
@@ -188,6 +196,21 @@ def read_split(path) -> list[Trajectory]:
         raise DatasetError(
             f"{path} is truncated or corrupt ({first}): {_generate_hint(path)}"
         ) from None
+
+
+# The split files of a dataset folder; each says which it is in its file attribute ``split``.
+SPLIT_FILES = ("train", "val", "test", "ood")
+
+
+def _check_split(path: Path, split) -> None:
+    """A split file (``val.h5``, ...) whose attribute says it is another split is refused:
+    training would validate on its own training data, or evaluate on it."""
+    split = _attr(split)
+    if path.stem in SPLIT_FILES and split is not None and split != path.stem:
+        raise DatasetError(
+            f"{path} holds the {split} split (its file attribute split={split}), not {path.stem}: "
+            f"put the {path.stem} split there ({_generate_hint(path)})"
+        )
 
 
 def _mean_std(x: np.ndarray, axis=0) -> dict:

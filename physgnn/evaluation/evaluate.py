@@ -17,10 +17,12 @@ A ``report_dir`` holding files physgnn did not write is refused unless ``overwri
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
+from physgnn.errors import ConfigError
 from physgnn.evaluation import rerun_log
 from physgnn.evaluation.bounce import bounce_rows
 from physgnn.evaluation.freefall import freefall_rows
@@ -62,6 +64,7 @@ def evaluate(cfg: DictConfig) -> Path:
     always holds one eval, and an interrupted eval leaves the last one as it was
     (:func:`physgnn.files.staged_outputs`)."""
     report_dir = Path(cfg.report_dir)
+    check_eval_values(cfg)
     if cfg.get("rerun"):
         rerun_log.require()  # before the rollouts, not after them
     ours = report_dir == Path(cfg.paths.report_dir)
@@ -69,6 +72,22 @@ def evaluate(cfg: DictConfig) -> Path:
     with staged_outputs(report_dir, "report_dir", REPORT_OUTPUTS) as staging:
         _evaluate_into(cfg, staging)
     return report_dir / "report.md"
+
+
+def check_eval_values(cfg: DictConfig) -> None:
+    """``max_frames`` is null or a whole number >= 2 (a rollout needs frames to predict);
+    ``tol`` a number >= 0."""
+    frames, tol = cfg.get("max_frames"), cfg.get("tol")
+    if frames is not None and (not isinstance(frames, int) or isinstance(frames, bool)
+                               or frames < 2):  # fmt: skip
+        raise ConfigError(
+            f"max_frames must be a whole number >= 2 or null (whole trajectories), got {frames!r}"
+        )
+    if not isinstance(tol, int | float) or isinstance(tol, bool) or not 0 <= tol < math.inf:
+        raise ConfigError(
+            f"tol must be a number >= 0 (a fraction of the diameter; 0: any overlap counts), "
+            f"got {tol!r}"
+        )
 
 
 def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:

@@ -134,6 +134,7 @@ class Scene:
             )
         if not np.all(self.mass > 0):
             raise SceneError(f"scene '{self.name}': mass must be > 0 (got min {self.mass.min()})")
+        check_float32_scale(self.name, self.pos, self.radius)
         if self.planes.ndim != 2 or self.planes.shape[1] != PLANE_DIM:
             raise SceneError(f"scene '{self.name}': planes must be [S, {PLANE_DIM}]")
         if self.plane_kind.shape != (self.planes.shape[0],):
@@ -148,3 +149,24 @@ class Scene:
             if not np.all(np.isfinite(getattr(self, key))):
                 raise SceneError(f"scene '{self.name}': {key} contains NaN or inf")
         return self
+
+
+# float32 (physgnn's tensors) resolves about 1.2e-7 of a value: the smallest sphere must span
+# many such steps at the scene's extent, or contacts happen at the wrong place or not at all.
+MIN_RADIUS_PER_EXTENT = 1e-5
+
+
+def check_float32_scale(name: str, pos: np.ndarray, radius: np.ndarray) -> None:
+    """Positions float32 can hold, and radii float32 resolves at the scene's extent (a scene
+    at 1e30 m fell through the ground; a sphere of 1e-9 m bounced without touching)."""
+    pos = np.asarray(pos, dtype=np.float32)
+    if not np.all(np.isfinite(pos)):
+        raise SceneError(f"scene '{name}': positions must be finite float32 numbers (< 3.4e38 m)")
+    extent = max(1.0, float(np.abs(pos).max()))
+    i = int(np.argmin(radius))
+    if radius[i] < extent * MIN_RADIUS_PER_EXTENT:
+        raise SceneError(
+            f"scene '{name}': sphere {i} has radius {float(radius[i]):g} m in a scene reaching "
+            f"{extent:g} m from the origin, finer than float32 resolves there: bring the scene "
+            f"near the origin (metres), or give radii >= {extent * MIN_RADIUS_PER_EXTENT:g} m"
+        )

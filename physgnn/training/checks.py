@@ -103,6 +103,19 @@ def check_optimizer(lit_cfg: DictConfig | None) -> None:
         )
 
 
+def check_scheduler(lit_cfg: DictConfig | None) -> None:
+    """``lit.scheduler.gamma`` (the learning rate's factor per epoch) is a number > 0: at 0 the
+    rate vanishes, below it turns negative (gradient ascent) and the run still "finishes"."""
+    gamma = OmegaConf.select(lit_cfg, "scheduler.gamma") if lit_cfg is not None else None
+    if gamma is None:
+        return
+    if not isinstance(gamma, int | float) or isinstance(gamma, bool) or not 0 < gamma < 1e3:
+        raise ConfigError(
+            f"lit.scheduler.gamma must be a number > 0 (lr x gamma^epoch; 1 keeps it, default "
+            f"0.97), got {gamma!r}"
+        )
+
+
 def check_budget(trainer_cfg: DictConfig) -> None:
     """``trainer.max_epochs`` and ``trainer.max_steps`` train something: >= 1, or -1 (no
     limit) or null."""

@@ -35,6 +35,7 @@ from physgnn.training.checks import (
     check_monitors,
     check_optimizer,
     check_run_dir,
+    check_scheduler,
     check_seed,
     resume_from,
 )
@@ -82,6 +83,7 @@ def build(cfg: DictConfig, extra_callbacks=()):
     """``(datamodule, LitSimulator, trainer)`` of a composed training config."""
     check_arguments(cfg)
     check_optimizer(cfg.get("lit"))
+    check_scheduler(cfg.get("lit"))
     datamodule = instantiate(cfg.datamodule)
     simulator = instantiate(cfg.model, stats=datamodule.stats())
     simulator.effects_trained.copy_(datamodule.effects_trained())

@@ -6,7 +6,8 @@ console script or a test), ``run(cfg)`` does the work and ``done(result)`` (opti
 the line to print. An error of the user's making (:class:`~physgnn.errors.PhysgnnError`, a
 Hydra or OmegaConf error raised while running, a file missing or already there) is printed
 as one line ``error: <message>`` and exits with its ``exit_code`` (2 unless it says
-otherwise); anything else is a bug and keeps its traceback. Ctrl-C and SIGTERM print one
+otherwise); anything else is a bug and keeps its traceback. A key added with ``+`` that nothing
+reads is refused first (:mod:`physgnn.cli.overrides`). Ctrl-C and SIGTERM print one
 line too and exit with 128 + the signal (:class:`~physgnn.errors.Interrupted`).
 
 In a sweep (``-m``, ``hydra.mode=MULTIRUN``) a failing job does not end the sweep: its error
@@ -45,6 +46,7 @@ from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
+from physgnn.cli.overrides import check_added_keys
 from physgnn.errors import (
     ConfigError,
     Interrupted,
@@ -158,6 +160,8 @@ def command(
     def main(cfg: DictConfig):
         free_threads()
         try:
+            if HydraConfig.initialized():
+                check_added_keys(cfg, list(HydraConfig.get().overrides.task), name)
             with sigterm_interrupts():
                 result = run(cfg)
         except KeyboardInterrupt as err:

@@ -1,0 +1,106 @@
+"""Keys added with ``+`` on a command line that nothing reads, refused in one line.
+
+Hydra's ``+key=value`` adds a key the config does not have, and Hydra's own hint for a typo
+suggests exactly that form: ``+lr=0.01`` or ``+trainer.max_epoch=5`` would then be ignored.
+A ``+`` key is taken only where something reads it:
+
+- a config group (``+experiment=ablation_M``);
+- an argument of the nearest section above it with a ``_target_`` (``+trainer.limit_val_batches=2``
+  is an argument of ``lightning.Trainer``; a target taking ``**kwargs`` takes any);
+- a key below a section whose keys are passed on as they are (:data:`OPEN_SECTIONS`);
+- Hydra's own settings (``hydra.*``).
+
+Anything else is refused, naming the keys of the config it most resembles.
+"""
+
+from __future__ import annotations
+
+import difflib
+import inspect
+from pathlib import Path
+
+from hydra.utils import get_object
+from omegaconf import DictConfig, OmegaConf
+
+from physgnn import CONF_DIR
+from physgnn.errors import ConfigError
+
+# Sections whose keys go on to another program as they are (submitit's executor parameters).
+OPEN_SECTIONS = ("launcher.slurm",)
+HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
+
+
+def check_added_keys(cfg: DictConfig, overrides: list[str], command: str) -> None:
+    """Refuse the first ``+key=value`` of ``overrides`` that nothing of ``command`` reads."""
+    for override in overrides:
+        if not override.startswith("+") or override.startswith("++"):
+            continue
+        key = override[1:].partition("=")[0]
+        problem = _unread(cfg, key, command)
+        if problem:
+            raise ConfigError(f"{override}: {problem}")
+
+
+def _unread(cfg: DictConfig, key: str, command: str) -> str | None:
+    """Why nothing reads the added ``key``, or None when something does."""
+    if key.startswith("hydra") or _is_group(key) or key.startswith(OPEN_SECTIONS):
+        return None
+    parts = key.split(".")
+    for depth in range(len(parts) - 1, 0, -1):
+        node = OmegaConf.select(cfg, ".".join(parts[:depth]))
+        if isinstance(node, DictConfig) and "_target_" in node:
+            return _not_an_argument(node, ".".join(parts[:depth]), parts[depth])
+    like = _resembling(cfg, key)
+    hint = f"did you mean {' or '.join(like)}? (no '+': it is set like any key)" if like else (
+        "check the key's spelling")  # fmt: skip
+    return (f"{key} is not a key of the {command} config and nothing reads it ('+' adds a "
+            f"key that is not there): {hint}")  # fmt: skip
+
+
+def _is_group(key: str) -> bool:
+    """``key`` names a config group (``experiment``, ``scene@ood.x``)."""
+    group = key.split("@")[0]
+    return (Path(CONF_DIR) / group).is_dir()
+
+
+def _not_an_argument(node: DictConfig, section: str, name: str) -> str | None:
+    """Why ``name`` is not an argument of ``section``'s target (None when it is, or when the
+    target cannot be looked up here: the command says so itself)."""
+    if name in HYDRA_KEYS:
+        return None
+    try:
+        params = inspect.signature(get_object(node._target_)).parameters
+    except (ImportError, ValueError, TypeError, AttributeError):
+        return None
+    if name in params or any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        return None
+    known = [k for k in params if k not in ("self", "args", "kwargs")]
+    like = difflib.get_close_matches(name, known, n=2)
+    hint = f"did you mean {' or '.join(f'{section}.{k}' for k in like)}?" if like else (
+        f"known: {', '.join(known)}")  # fmt: skip
+    return f"{section}.{name} is not an argument of {node._target_} ({hint})"
+
+
+def _resembling(cfg: DictConfig, key: str) -> list[str]:
+    """Up to two other keys of ``cfg`` (dotted) whose last part is the most like ``key``'s,
+    looked for beside it first, then anywhere."""
+    keys = [k for k in _dotted_keys(cfg) if not k.startswith("hydra") and k != key]
+    parent, _, name = key.rpartition(".")
+    beside = [k for k in keys if k.rpartition(".")[0] == parent]
+    for pool in (beside, keys):
+        close = difflib.get_close_matches(name, sorted({k.rsplit(".", 1)[-1] for k in pool}), n=1)
+        if close:
+            return [k for k in pool if k.rsplit(".", 1)[-1] == close[0]][:2]
+    return []
+
+
+def _dotted_keys(node: DictConfig, prefix: str = "") -> list[str]:
+    out = []
+    for k in node.keys():
+        path = f"{prefix}{k}"
+        value = node._get_node(k)
+        if isinstance(value, DictConfig):
+            out += _dotted_keys(value, f"{path}.")
+        else:
+            out.append(path)
+    return out
