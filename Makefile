@@ -58,6 +58,12 @@ ship: ## Export a run's best weights as the shipped model run=pretrained loads (
 	@test -n "$(RUN)" || { echo "error: make ship needs RUN=<a finished run folder> (e.g. make ship RUN=outputs/runs/baseline/<time>)" >&2; exit 2; }
 	$(PY) -m physgnn.training.export $(RUN) $(or $(OUT),physgnn/pretrained) $(CHECKPOINT)
 
+default-table: ## The default model's table per seed from the study's registry, with each figure's commit (docs/results/default.md; REGISTRY= OUT= KEY= STEPS=)
+	$(PY) -m physgnn.ablation.default_table $(or $(REGISTRY),docs/results/registry.jsonl) $(or $(OUT),docs/results/default.md) $(or $(KEY),baseline) $(STEPS)
+
+fingerprint: ## Re-pin the numerics fingerprint (tests/fingerprint.json) after a deliberate change of training numerics
+	PHYSGNN_REPIN=1 OMP_NUM_THREADS=1 $(PY) -m pytest tests/test_fingerprint.py -p no:cacheprovider
+
 learning-curve: ## Learning curve of a run's checkpoints evaluated together (REPORT=<eval report folder> [OUT=<folder>])
 	$(PY) -m physgnn.report.learning_curve $(REPORT) $(OUT)
 
@@ -71,4 +77,4 @@ clean: ## Remove caches (keeps outputs/)
 	rm -rf .pytest_cache .ruff_cache .hypothesis
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +
 
-.PHONY: help install test test-slow lint format data data-report train sweep study eval bench sleep-study clean
+.PHONY: help install test test-slow lint format data data-report train sweep study eval bench sleep-study clean ship default-table fingerprint learning-curve

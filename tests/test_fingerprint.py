@@ -1,0 +1,116 @@
+"""The numerics fingerprint: the first training losses of one seed and a rollout's positions,
+on the tiny preset with one thread, against the values pinned in ``tests/fingerprint.json``.
+
+A change to the training's numerics (inputs, graph, network, noise, loss, optimiser, data
+order) changes them and fails here, loudly: the README's and docs/results' figures were
+measured before it and must be measured again (``make study`` into a new registry, then
+``make default-table``). When the change is meant, re-pin in one command::
+
+    make fingerprint        # PHYSGNN_REPIN=1: rewrites tests/fingerprint.json
+
+The config is spelled out key by key (:data:`CONFIG`), not taken from the defaults, so that a
+change of the *default* model or recipe (conf/) does not move the fingerprint; a change of
+the code's numerics does. A new model or training key that changes numerics by default fails
+here too: add it to :data:`CONFIG` with its old value, or re-pin.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import lightning as L
+import numpy as np
+import pytest
+import torch
+from test_train import config
+
+from physgnn.data.dataset import read_split
+from physgnn.rollout import rollout
+from physgnn.training.train import build
+
+PINNED = Path(__file__).with_name("fingerprint.json")
+CONFIG = [
+    "seed=0",
+    # the model, every key that shapes its numerics
+    "model.H=2", "model.M=1", "model.hidden=16", "model.connectivity=vi", "model.epsilon=0.01",
+    "model.factor=1.0", "model.third_law=true", "model.use_surfaces=true",
+    "model.boundary_features=false", "model.contact_features=true",
+    "model.material_features=true", "model.gravity_prior=true", "model.layer_norm=false",
+    # the recipe: noise, push-forward (from step 2 of 4), contact terms, Adam, schedule
+    "lit.noise_std=0.03", "lit.pushforward_steps=2", "lit.pushforward_after=2",
+    "lit.pushforward_growth=0", "lit.lambda_energy=0.0", "lit.lambda_contact=1.0",
+    "lit.contact_tol=0.02", "lit.contact_noise_depth=0.2", "lit.contact_noise_prob=0.3",
+    "lit.contact_touch=0.05", "lit.optimizer.lr=1.0e-3", "lit.scheduler.gamma=0.97",
+    # 4 steps of 4 pairs, no callbacks, no logger
+    "datamodule.batch_size=4", "datamodule.pairs_per_epoch=16", "datamodule.val_pairs=8",
+    "trainer.max_epochs=1", "trainer.max_time=null", "trainer.enable_progress_bar=false",
+    "trainer.enable_model_summary=false", "+trainer.enable_checkpointing=false",
+    "callbacks=none", "~logger",
+]  # fmt: skip
+ROLLOUT_FRAMES = 8
+RTOL, ATOL = 1e-4, 1e-5
+
+
+class LossRecorder(L.Callback):
+    def __init__(self):
+        self.losses: list[float] = []
+
+    def on_train_batch_end(self, trainer, module, outputs, batch, batch_idx) -> None:
+        loss = outputs["loss"] if isinstance(outputs, dict) else outputs
+        self.losses.append(float(loss))
+
+
+def measure(tiny_dataset, run_dir) -> dict:
+    """The losses of the first steps and the last rollout frame's positions (1 thread)."""
+    cfg = config(tiny_dataset, run_dir, *CONFIG)
+    L.seed_everything(cfg.seed, workers=True)
+    recorder = LossRecorder()
+    datamodule, lit, trainer = build(cfg, [recorder])
+    trainer.fit(lit, datamodule=datamodule)
+    truth = read_split(Path(tiny_dataset) / "test.h5")[0].truncated(ROLLOUT_FRAMES)
+    lit.simulator.eval()
+    with torch.no_grad():
+        pred = rollout(lit.simulator, [truth])[0]
+    last = pred.pos[-1].tolist()
+    return {"train_losses": recorder.losses, "rollout_trajectory": truth.name,
+            "rollout_frames": ROLLOUT_FRAMES, "rollout_last_pos": last}  # fmt: skip
+
+
+def repin(found: dict) -> None:
+    rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                         text=True).stdout.strip()  # fmt: skip
+    about = (
+        "Numerics fingerprint of tests/test_fingerprint.py (tiny preset, 1 thread); "
+        "re-pinned by `make fingerprint` when training numerics change on purpose."
+    )
+    pinned = {"about": about, "pinned_at": rev or None, "torch": torch.__version__,
+              "config": CONFIG, **found}  # fmt: skip
+    PINNED.write_text(json.dumps(pinned, indent=1) + "\n")
+
+
+@pytest.fixture
+def one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def test_training_numerics_match_the_pinned_fingerprint(tiny_dataset, tmp_path, one_thread):
+    found = measure(tiny_dataset, tmp_path)
+    if os.environ.get("PHYSGNN_REPIN") == "1":
+        repin(found)
+    assert PINNED.is_file(), f"no {PINNED.name}: pin it with `make fingerprint`"
+    pinned = json.loads(PINNED.read_text())
+    how = (f"training numerics changed since {pinned.get('pinned_at')}: re-measure the README's "
+           "figures, then re-pin with `make fingerprint` if the change is meant")  # fmt: skip
+    assert pinned["config"] == CONFIG, f"CONFIG differs from the pinned one; {how}"
+    assert len(found["train_losses"]) == len(pinned["train_losses"]), how
+    np.testing.assert_allclose(found["train_losses"], pinned["train_losses"], rtol=RTOL,
+                               err_msg=how)  # fmt: skip
+    assert found["rollout_trajectory"] == pinned["rollout_trajectory"], how
+    np.testing.assert_allclose(found["rollout_last_pos"], pinned["rollout_last_pos"], rtol=RTOL,
+                               atol=ATOL, err_msg=how)  # fmt: skip
