@@ -69,16 +69,25 @@ USER_ERRORS = (
 DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM)
 
 
+# What torch and h5py say (in a RuntimeError) when a write hit a full or read-only disk.
+DISK_WORDS = ("No space left on device", "Read-only file system", "file write failed",
+              "Disk quota exceeded")  # fmt: skip
+
+
 def disk_problem(err: BaseException) -> bool:
-    """``err`` is an OSError of a full, read-only or forbidden place to write."""
-    return isinstance(err, OSError) and err.errno in DISK_ERRNOS
+    """``err`` is an OSError of a full, read-only or forbidden place to write, or torch's or
+    h5py's RuntimeError wrapping one."""
+    if isinstance(err, OSError):
+        return err.errno in DISK_ERRNOS
+    return isinstance(err, RuntimeError) and any(w in str(err) for w in DISK_WORDS)
 
 
-def disk_error(err: OSError) -> ConfigError:
+def disk_error(err: BaseException) -> ConfigError:
     """The one line of a :func:`disk_problem`: what, where, and the way out."""
+    what = getattr(err, "strerror", None) or "writing failed (disk full or read-only)"
+    where = getattr(err, "filename", None) or "the outputs folder"
     return ConfigError(
-        f"{err.strerror}: {err.filename or 'the outputs folder'}; free space, or choose a "
-        "writable paths.outputs (or PHYSGNN_OUTPUTS)"
+        f"{what}: {where}; free space, or choose a writable paths.outputs (or PHYSGNN_OUTPUTS)"
     )
 
 

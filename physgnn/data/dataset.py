@@ -11,6 +11,7 @@ is ever replaced or removed (``python -m physgnn.generate overwrite=true``).
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 from pathlib import Path
 
@@ -105,8 +106,12 @@ def write_split(path, trajectories: list[Trajectory], file_attrs: dict) -> Path:
 
     Groups are named ``traj_00000``, … unless a trajectory's ``attrs["group"]`` names it.
     ``file_attrs`` should hold ``split`` and ``preset``; ``schema_version`` is added.
+    The file is built in memory and written with one plain write: HDF5 writing straight to a
+    disk that fills up crashed the process (a segmentation fault in h5py's clean-up), where a
+    plain write raises ``OSError(ENOSPC)``, which every command reports in one line.
     """
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as f:
         f.attrs["schema_version"] = SCHEMA_VERSION
         for key, value in file_attrs.items():
             f.attrs[key] = value
@@ -114,6 +119,8 @@ def write_split(path, trajectories: list[Trajectory], file_attrs: dict) -> Path:
             name = traj.attrs.get("group", f"traj_{i:05d}")
             attrs = {k: v for k, v in traj.attrs.items() if k != "group"}
             _write_traj(f.create_group(name), dataclasses.replace(traj, attrs=attrs))
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(buffer.getbuffer())
     return Path(path)
 
 

@@ -1,0 +1,71 @@
+"""Full and read-only disks as they really surface: h5py and torch wrap ENOSPC and EROFS in a
+RuntimeError (not the OSError that injected faults raise). Each is one line, exit 2; a real
+small filesystem (tmpfs, mounted when the suite runs as root) checks simulate end to end."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+from omegaconf import OmegaConf
+
+from physgnn import simulate as simulate_command
+from physgnn.cli import command
+
+ROOT = Path(__file__).resolve().parents[1]
+TORCH_FULL = ("[enforce fail at inline_container.cc:664] . PytorchStreamWriter failed writing "
+              "file data/0: file write failed")  # fmt: skip
+H5PY_FULL = ("Can't decrement id ref count (file write failed: time = now, filename = 'x.h5', "
+             "errno = 28, error message = 'No space left on device')")  # fmt: skip
+
+
+@pytest.mark.parametrize("message", [TORCH_FULL, H5PY_FULL], ids=["torch", "h5py"])
+def test_a_disk_error_wrapped_in_a_runtime_error_is_one_line(capsys, message):
+    def full(cfg):
+        raise RuntimeError(message)
+
+    with pytest.raises(SystemExit) as exit_info:
+        command("train", full).__wrapped__(OmegaConf.create())
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err == (
+        "error: writing failed (disk full or read-only): the outputs folder; free space, or "
+        "choose a writable paths.outputs (or PHYSGNN_OUTPUTS)\n"
+    )
+
+
+@pytest.fixture
+def full_tmpfs(tmp_path):
+    """A real 2 MiB filesystem with 16 KiB left (root only: it mounts a tmpfs)."""
+    if os.geteuid() != 0 or not shutil.which("mount"):
+        pytest.skip("mounting a small tmpfs needs root")
+    mount = tmp_path / "small"
+    mount.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(mount)],
+                          capture_output=True)  # fmt: skip
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.decode().strip()})")
+    try:
+        with open(mount / "fill", "wb") as f:
+            try:
+                f.write(b"\0" * (3 << 20))
+            except OSError:
+                pass
+        os.truncate(mount / "fill", os.path.getsize(mount / "fill") - 16384)
+        yield mount
+    finally:
+        subprocess.run(["umount", str(mount)], check=False)
+
+
+def test_simulate_onto_a_real_full_disk_is_one_line_and_leaves_nothing(full_tmpfs, capsys):
+    out = full_tmpfs / "sim"
+    scene = ROOT / "conf" / "scenes" / "throw.yaml"
+    with pytest.raises(SystemExit) as exit_info:
+        simulate_command.main([f"scene={scene}", "frames=1000", "video=false", f"out={out}"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and len(err.splitlines()) == 1
+    assert err.startswith("error: No space left on device: ")
+    assert sorted(p.name for p in full_tmpfs.iterdir()) == ["fill", "sim"]  # no lock, no staging
+    assert [p.name for p in out.iterdir()] == ["physgnn-output.json"]
