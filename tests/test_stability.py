@@ -322,7 +322,7 @@ def test_config_typos_name_the_problem_without_traceback(monkeypatch, capsys, ov
 def test_unknown_model_key_appended_is_one_error_line(monkeypatch, capsys, tiny_dataset, tmp_path):
     args = ["data=tiny", f"paths.outputs={Path(tiny_dataset).parents[1]}", f"run_dir={tmp_path}"]
     code, err = run_cli(monkeypatch, capsys, train_command.main, *args, "+model.MM=3")
-    assert code == 2 and err[-1].startswith("error: model.MM is not an argument of")
+    assert code == 2 and err[-1].startswith("error: +model.MM=3: model.MM is not an argument of")
     assert not any("Traceback" in line for line in err)
 
 

@@ -134,7 +134,6 @@ class Scene:
             )
         if not np.all(self.mass > 0):
             raise SceneError(f"scene '{self.name}': mass must be > 0 (got min {self.mass.min()})")
-        check_float32_scale(self.name, self.pos, self.radius)
         if self.planes.ndim != 2 or self.planes.shape[1] != PLANE_DIM:
             raise SceneError(f"scene '{self.name}': planes must be [S, {PLANE_DIM}]")
         if self.plane_kind.shape != (self.planes.shape[0],):
@@ -148,6 +147,7 @@ class Scene:
         for key in ("radius", "mass", "pos", "quat", "vel", "angvel"):
             if not np.all(np.isfinite(getattr(self, key))):
                 raise SceneError(f"scene '{self.name}': {key} contains NaN or inf")
+        check_float32_scale(self.name, self.pos, self.radius)
         return self
 
 
