@@ -42,7 +42,7 @@ from physgnn.evaluation.ood import outside
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.files import claim_folder, portable, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
-from physgnn.groundtruth.scenefile import load_scene
+from physgnn.groundtruth.scenefile import load_scene, scene_file
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
@@ -76,7 +76,7 @@ def parse_args(argv: list[str]) -> DictConfig:
             raise SimulateError(f"bad argument '{item}'; use key=value with keys {list(KEYS)}")
         args[key] = value
     if not args["scene"]:
-        raise SimulateError("missing scene=FILE (a YAML scene file, e.g. conf/scenes/throw.yaml)")
+        raise SimulateError("missing scene=FILE (a YAML scene file, or an example: scene=throw)")
     cfg = OmegaConf.create()
     for key, value in args.items():
         OmegaConf.update(cfg, key, value)  # paths.outputs -> cfg.paths.outputs
@@ -164,7 +164,7 @@ def simulate(args: DictConfig | dict) -> dict:
     start = time.perf_counter()
     truth = simulate_with_progress(scene)
     truth.attrs.update(
-        group="truth", scene=scene.name, scene_config=Path(args["scene"]).read_text(),
+        group="truth", scene=scene.name, scene_config=scene_file(args["scene"]).read_text(),
         velocity="the engine's (pybullet)", ms_per_frame=1000 * (time.perf_counter() - start)
         / max(scene.n_frames - 1, 1),
     )  # fmt: skip

@@ -1,0 +1,134 @@
+"""How ready a training step and a rollout frame are for a GPU, counted on any device.
+
+Per training step (the default recipe: input noise, contact noise, push-forward, the loss and
+its contact penalty, backward, clipping and Adam, through Lightning as ``make train`` runs it)
+and per rollout frame (:func:`physgnn.rollout.rollout` of the learned model): the host round
+trips (``syncs``) and aten ops (``kernels``) of :mod:`physgnn.benchmark.syncs`, and the host
+time in ms with a tiny network (``hidden`` small, so the arithmetic does not hide the
+overhead). The neighbour backend is ``torch``, which is what ``auto`` picks on CUDA without
+torch-cluster. Counts are the maxima over the steps (push-forward lengths vary), times means.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+
+import lightning as L
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from physgnn.benchmark.syncs import counting
+from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
+from physgnn.rollout import rollout
+
+
+class StepCounter(L.Callback):
+    """Counts the syncs and kernels of the even training steps (batch start to batch end) and
+    times the odd ones: the counting mode runs Python for every op, which would inflate the
+    host time of a step it watches. ``where`` sums the Python lines of the syncs from batch
+    ``warmup`` on."""
+
+    def __init__(self, warmup: int = 0, record_where: bool = False):
+        self.warmup, self.record_where = warmup, record_where
+        self.steps: list[dict] = []
+        self.where: Counter = Counter()
+        self._context = self._counter = None
+
+    def on_train_batch_start(self, trainer, pl_module, batch, batch_idx):
+        if batch_idx == self.warmup:
+            self.where.clear()
+        self._context = counting(self.record_where) if batch_idx % 2 == 0 else None
+        self._counter = self._context.__enter__() if self._context is not None else None
+        self._t0 = time.perf_counter()
+
+    def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx):
+        ms = 1000 * (time.perf_counter() - self._t0)
+        if self._context is None:
+            self.steps.append({"host_ms": ms})
+            return
+        self._context.__exit__(None, None, None)
+        self.steps.append({"syncs": self._counter.syncs, "kernels": self._counter.kernels})
+        self.where.update(self._counter.where)
+
+
+def training_step_counts(
+    model_cfg: DictConfig, lit_cfg: DictConfig, trajectories: list, stats: dict, c: DictConfig
+) -> dict:
+    """``{"syncs", "kernels", "host_ms", "where"}`` of ``c.steps`` counted and ``c.steps``
+    timed training steps, alternated, after ``c.warmup_steps`` (batch ``c.batch_size``);
+    ``syncs`` and ``kernels`` the maxima, host ms the mean, ``where`` the syncs per source line
+    per counted step."""
+    simulator = instantiate(model_cfg, stats=stats)
+    lit = instantiate(lit_cfg, simulator=simulator)
+    data = PairDataset(trajectories, simulator.H, future=int(lit_cfg.pushforward_steps))
+    total = int(c.warmup_steps + 2 * c.steps)
+    loader = pair_loader(data, int(c.batch_size), EpochSampler(len(data), total * c.batch_size, 0))
+    counter = StepCounter(int(c.warmup_steps), record_where=True)
+    trainer = L.Trainer(
+        accelerator="cpu", devices=1, max_steps=total, max_epochs=1, logger=False,
+        enable_checkpointing=False, enable_progress_bar=False, enable_model_summary=False,
+        num_sanity_val_steps=0, limit_val_batches=0, callbacks=[counter], gradient_clip_val=1.0,
+    )  # fmt: skip
+    trainer.fit(lit, train_dataloaders=loader)
+    after = counter.steps[int(c.warmup_steps) :]
+    counted = [s for s in after if "syncs" in s]
+    timed = [s for s in after if "host_ms" in s]
+    return summary(counted, timed, counter.where, len(counted))
+
+
+def rollout_frame_counts(model_cfg: DictConfig, stats: dict, trajectory, frames: int) -> dict:
+    """``{"syncs", "kernels", "host_ms", "where"}`` per frame of a learned rollout from
+    ``trajectory``'s start: the difference between rollouts of ``2·frames`` and ``frames``
+    frames, over ``frames`` (what each further frame costs, without the start and the end);
+    counted in one pair of rollouts and timed in another (the counting mode's own Python per
+    op would inflate the time)."""
+    simulator = instantiate(model_cfg, stats=stats).eval()
+    go = lambda n: rollout(simulator, [trajectory], n_frames=simulator.H + 1 + n)  # noqa: E731
+    go(frames)  # warm-up
+    counted = {}
+    for n in (frames, 2 * frames):
+        with counting(record_where=True) as counter:
+            go(n)
+        counted[n] = counter
+    ms = {}
+    for n in (frames, 2 * frames):
+        t0 = time.perf_counter()
+        go(n)
+        ms[n] = 1000 * (time.perf_counter() - t0)
+    short, long = counted[frames], counted[2 * frames]
+    step = {
+        "syncs": (long.syncs - short.syncs) / frames,
+        "kernels": (long.kernels - short.kernels) / frames,
+    }
+    where = long.where
+    where.subtract(short.where)
+    return summary([step], [{"host_ms": (ms[2 * frames] - ms[frames]) / frames}], +where, frames)
+
+
+def gpu_readiness(cfg: DictConfig, trajectories: list, stats: dict, start) -> dict:
+    """``{"train_step": {...}, "rollout_frame": {...}}`` of the module doc (bench.json's
+    ``gpu_readiness``; ``where`` of each goes to bench_extra.json); ``start``: a bench scene
+    in motion, the rollout's first frames."""
+    c = cfg.gpu_readiness
+    model = OmegaConf.merge(cfg.model, c.model)
+    train = training_step_counts(model, c.lit, trajectories, stats, c)
+    frame = rollout_frame_counts(model, stats, start, int(c.rollout_frames))
+    print(
+        f"gpu readiness: training step {train['syncs']} syncs, {train['kernels']} kernels, "
+        f"{train['host_ms']:.1f} ms; rollout frame {frame['syncs']:.1f} syncs, "
+        f"{frame['kernels']:.0f} kernels, {frame['host_ms']:.1f} ms",
+        flush=True,
+    )
+    return {"train_step": train, "rollout_frame": frame}
+
+
+def summary(counted: list[dict], timed: list[dict], where: Counter, per: int) -> dict:
+    """Maxima of the counts, mean host ms of the timed steps and the sync lines per step (or
+    frame)."""
+    return {
+        "syncs": max(s["syncs"] for s in counted),
+        "kernels": max(s["kernels"] for s in counted),
+        "host_ms": sum(s["host_ms"] for s in timed) / len(timed),
+        "where": {k: v / per for k, v in where.most_common()},
+    }

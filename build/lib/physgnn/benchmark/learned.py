@@ -1,0 +1,172 @@
+"""Learned steps timed: the model of a config with random weights (the cost does not depend on
+them), one step per ground-truth frame, split into graph, network and integration by a
+:class:`~physgnn.models.profiling.StepTimer`."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+from torch_geometric.data import Batch
+
+from physgnn.data.state import TrajectoryFrames
+from physgnn.models.constrained import ConstrainedSimulator
+from physgnn.models.profiling import StepTimer
+from physgnn.physics import integrator
+
+
+def make_simulator(model_cfg: DictConfig, overrides: dict, stats: dict):
+    """The model of ``model_cfg`` with ``overrides`` (constructor keys), random weights."""
+    cfg = OmegaConf.merge(model_cfg, overrides)
+    sim = instantiate(cfg, stats=stats).eval()
+    sim.effects_trained.fill_(True)  # as if trained on every effect: no rollout warning
+    return sim
+
+
+def frame_states(traj, H: int, copies: int = 1) -> list:
+    """Batches of every frame ``t ≥ H`` of a trajectory (targets dropped), each holding
+    ``copies`` copies of the scene (disconnected graphs, as a batched rollout)."""
+    frames = TrajectoryFrames(traj)
+    states = []
+    for t in range(H, frames.n_frames):
+        s = frames.state(t, H)
+        s.target_vel = s.target_angvel = None
+        states.append(Batch.from_data_list([s] * copies))
+    return states
+
+
+@torch.inference_mode()
+def step_once(sim, state) -> tuple[dict, tuple | None]:
+    """One learned step on ``state`` (prediction, then
+    :func:`physgnn.physics.integrator.step`): seconds of each part and ``(nodes, pp edges,
+    ps edges)`` of the graph the network ran on (None when it did not run)."""
+    timer = StepTimer()
+    t0 = time.perf_counter()
+    with timer.watch(sim):
+        vel, angvel = timer.predict(sim, state)
+    rotate, hold = sim.rotating(state), getattr(sim, "hold", None)
+    timer.integrate(integrator.step, state.pos, state.quat, state.vel, state.angvel, vel, angvel,
+                    state.scene_dt, rotate, hold)  # fmt: skip
+    t = timer.timings
+    secs = {"graph": t["graph"], "network": t["network"], "integrate": t["integration"]}
+    return secs | {"total": time.perf_counter() - t0}, (timer.sizes[-1] if timer.sizes else None)
+
+
+def time_cases(cases: list[tuple], repeats: int) -> list[dict]:
+    """Per-frame cost of each ``(sim, states)`` case over ``repeats`` rounds; a round runs one
+    step of every case (cycling over its states), so a busy spell of the machine hits all the
+    cases alike. Per case: ms of graph / network / integration / total averaged over its
+    fastest half of the steps (robust, and the parts add up), fps, mean node / edge counts and
+    the network's GFLOP per step (``flops_per_step`` of the graphs it ran on)."""
+    logs = []
+    for sim, states in cases:
+        step_once(sim, states[0])  # warm-up
+        logs.append(
+            {
+                "graph": [],
+                "network": [],
+                "integrate": [],
+                "total": [],
+                "flop": 0,
+                "nodes": 0,
+                "pp": 0,
+                "ps": 0,
+            }
+        )
+    for k in range(repeats):
+        for (sim, states), log in zip(cases, logs, strict=True):
+            step, ran = step_once(sim, states[k % len(states)])
+            for key in ("graph", "network", "integrate", "total"):
+                log[key].append(step[key])
+            if ran is not None:
+                n, e, f = ran
+                log["flop"] += sim.network.flops_per_step(n, e, f)
+                log["nodes"], log["pp"], log["ps"] = log["nodes"] + n, log["pp"] + e, log["ps"] + f
+    return [_summary(log, repeats) for log in logs]
+
+
+def _summary(log: dict, repeats: int) -> dict:
+    fast = np.argsort(log["total"])[: max(repeats // 2, 1)]
+    ms = {
+        k: 1000 * float(np.mean(np.asarray(log[k])[fast]))
+        for k in ("graph", "network", "integrate", "total")
+    }
+    return {
+        "graph_ms": ms["graph"],
+        "network_ms": ms["network"],
+        "integrate_ms": ms["integrate"],
+        "total_ms": ms["total"],
+        "fps": 1000 / ms["total"],
+        "gflop_per_step": log["flop"] / repeats / 1e9,
+        "network_flop": log["flop"],
+        "nodes": log["nodes"] / repeats,
+        "pp_edges": log["pp"] / repeats,
+        "ps_edges": log["ps"] / repeats,
+        "repeats": repeats,
+    }
+
+
+def time_learned(sim, states: list, repeats: int) -> dict:
+    """:func:`time_cases` of one case."""
+    return time_cases([(sim, states)], repeats)[0]
+
+
+def repeats_for(n: int, c: DictConfig) -> int:
+    return int(min(max(c.sphere_frames // max(n, 1), c.min_repeats), c.max_repeats))
+
+
+def learned_rows(cfg: DictConfig, runs: dict, stats: dict, matmul_gflops: float) -> list[dict]:
+    """Every configuration on every size it asks for (``runs[n]`` = pybullet run of size n);
+    the configurations of one size are timed together (:func:`time_cases`)."""
+    sims, sizes = {}, {}
+    for name, c in cfg.learned.configs.items():
+        sims[name] = make_simulator(cfg.model, OmegaConf.to_container(c.overrides), stats)
+        if c.get("constraints"):  # the learned step followed by the constraint stage
+            sims[name] = ConstrainedSimulator(sims[name], int(c.constraints))
+        sizes[name] = list(cfg.sizes) if c.sizes is None else list(c.sizes)
+    rows = {}
+    for n in sorted({n for s in sizes.values() for n in s}):
+        names = [name for name in sims if n in sizes[name]]
+        states = {h: frame_states(runs[n]["traj"], h) for h in {sims[k].H for k in names}}
+        cases = [(sims[k], states[sims[k].H]) for k in names]
+        for name, t in zip(names, time_cases(cases, repeats_for(n, cfg.learned)), strict=True):
+            rate = t["gflop_per_step"] / max(t["network_ms"] / 1000, 1e-12)
+            rows[name, n] = {
+                "config": name,
+                "n_spheres": n,
+                **t,
+                "share_of_matmul": rate / matmul_gflops,
+            }
+            print(
+                f"learned {name:9s} n={n:6d}: {t['total_ms']:8.2f} ms/frame "
+                f"(graph {t['graph_ms']:.2f}, network {t['network_ms']:.2f}), "
+                f"{rate:.1f} GFLOP/s",
+                flush=True,
+            )
+    return [rows[name, n] for name in sims for n in sizes[name]]
+
+
+def batched_rows(cfg: DictConfig, runs: dict, stats: dict) -> list[dict]:
+    """The baseline on ``batched.scenes`` copies of one scene in one graph: cost per scene
+    (the batch sizes are timed together, :func:`time_cases`)."""
+    sim = make_simulator(cfg.model, {}, stats)
+    n, sizes = cfg.batched.n_spheres, list(cfg.batched.scenes)
+    cases = [(sim, frame_states(runs[n]["traj"], sim.H, copies=b)) for b in sizes]
+    rows = []
+    for b, t in zip(sizes, time_cases(cases, repeats_for(n, cfg.learned)), strict=True):
+        per_scene = t["total_ms"] / b
+        rows.append(
+            {
+                "n_spheres": n,
+                "scenes": b,
+                "batch_ms": t["total_ms"],
+                "ms_per_scene": per_scene,
+                "scene_fps": 1000 / per_scene,
+                "gflop_per_step": t["gflop_per_step"],
+            }
+        )
+        print(f"batched {b:3d} x {n} spheres: {per_scene:8.2f} ms per scene-frame", flush=True)
+    return rows

@@ -1,0 +1,133 @@
+"""``make bench``: what accuracy costs in time, in one run (:func:`bench`).
+
+Measures the machine (CPU, threads, fp32 matmul rate), the learned simulator per configuration
+and scene size (ms per frame split into graph / network / integration, FPS, FLOPs and the share
+of the matmul rate), pybullet on the same scenes (FPS at 10 substeps; at one size, FPS and
+accuracy against a fine reference for several substep counts), the training throughput of the
+baseline and the cost of idle spheres, contacts and walls. Writes ``bench.json`` (the keys the
+Pareto view reads), ``bench_extra.json`` (everything else) and ``bench.md``.
+
+Scenes are random_box scenes in motion: pybullet runs ``warmup_frames`` from the initial
+state, and the timed frames start from there, so learned steps (one step per ground-truth
+frame, random weights) see the contacts of a real pile. Weights do not change the cost.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from physgnn.benchmark import activity, machine, profile, scenes
+from physgnn.benchmark.gpu_readiness import gpu_readiness
+from physgnn.benchmark.learned import batched_rows, learned_rows
+from physgnn.benchmark.markdown import write_markdown
+from physgnn.benchmark.pybullet import accuracy_sweep, pybullet_rows, pybullet_runs
+from physgnn.data.dataset import compute_stats
+from physgnn.errors import ConfigError
+from physgnn.files import write_json, write_text
+
+
+class BenchError(ConfigError):
+    """A bench setting that cannot be run (one-line message)."""
+
+
+def bench(cfg: DictConfig) -> dict:
+    """Run every measurement of ``cfg`` (see ``conf/bench.yaml``); returns bench.json's dict."""
+    if cfg.quick:
+        cfg = quick_config(cfg)
+    if int(cfg.threads) < 1:
+        raise BenchError(f"threads must be >= 1 (got {cfg.threads})")
+    torch.set_num_threads(int(cfg.threads))
+    torch.manual_seed(int(cfg.seed))
+    start = time.perf_counter()
+    info = machine.machine_info(int(cfg.threads), cfg.machine.shapes, cfg.machine.repeats)
+    print(
+        f"machine: {info['cpu']}, {info['threads']} threads, {info['matmul_gflops']:.1f} GFLOP/s",
+        flush=True,
+    )
+    phases: dict[str, float] = {}
+    m = measure(cfg, np.random.default_rng(int(cfg.seed)), info["matmul_gflops"], phases)
+    result = {
+        "machine": {k: info[k] for k in ("cpu", "threads", "matmul_gflops")},
+        "learned": [{k: r[k] for k in LEARNED_KEYS} for r in m["learned"]],
+        "pybullet": pybullet_rows(cfg, m["runs"], m["pybullet_accuracy"]),
+        "training": {
+            k: m["training"][k] for k in ("pairs_per_s", "nodes_per_s", "share_of_matmul")
+        },
+        "gpu_readiness": {
+            part: {k: v for k, v in counts.items() if k != "where"}
+            for part, counts in m["gpu_readiness"].items()
+        },
+    }
+    extra = {
+        "machine": info,
+        **{k: v for k, v in m.items() if k != "runs"},
+        "settings": OmegaConf.to_container(cfg, resolve=True),
+        "wall_s": time.perf_counter() - start,
+        "phase_s": phases,
+        "loadavg_end": os.getloadavg()[0],
+    }
+    write_outputs(Path(cfg.out_dir), result, extra)
+    print(f"bench: {extra['wall_s']:.0f} s; wrote {Path(cfg.out_dir) / 'bench.md'}", flush=True)
+    return result
+
+
+def measure(cfg: DictConfig, rng: np.random.Generator, matmul: float, phases: dict) -> dict:
+    """Every measurement in order, the seconds of each phase written to ``phases``."""
+
+    def timed(name: str, fn, *args):
+        t0 = time.perf_counter()
+        out = fn(*args)
+        phases[name] = time.perf_counter() - t0
+        return out
+
+    train_trajs = timed("training data", scenes.training_trajectories, cfg, rng)
+    stats = compute_stats(train_trajs)
+    m = {"runs": timed("pybullet sizes", pybullet_runs, cfg, rng)}
+    runs = m["runs"]
+    m["learned"] = timed("learned", learned_rows, cfg, runs, stats, matmul)
+    start = runs[cfg.accuracy.n_spheres]["start"]
+    m["pybullet_accuracy"] = timed("pybullet substeps", accuracy_sweep, cfg, start)
+    m["training"] = timed("training", activity.training_throughput, cfg, train_trajs, stats, matmul)
+    m["profile"] = timed("profile", profile.training_profile, cfg, train_trajs, stats, matmul)
+    m["activity"] = timed("activity", activity.activity_rows, cfg, runs, stats, rng)
+    m["rollout"] = timed("rollout", activity.rollout_rows, cfg, runs, stats)
+    m["batched"] = timed("batched", batched_rows, cfg, runs, stats)
+    moving = runs[cfg.gpu_readiness.rollout_size]["traj"]
+    m["gpu_readiness"] = timed("gpu readiness", gpu_readiness, cfg, train_trajs, stats, moving)
+    return m
+
+
+def quick_config(cfg: DictConfig) -> DictConfig:
+    """``cfg`` with ``quick_settings`` merged over it; its list of configurations replaces
+    the full one (not merged into it)."""
+    cfg = cfg.copy()
+    OmegaConf.set_struct(cfg, False)
+    quick = cfg.quick_settings
+    if quick.get("learned", {}).get("configs") is not None:
+        cfg.learned.configs = quick.learned.configs
+    return OmegaConf.merge(cfg, quick)
+
+
+LEARNED_KEYS = (
+    "config",
+    "n_spheres",
+    "fps",
+    "graph_ms",
+    "network_ms",
+    "integrate_ms",
+    "gflop_per_step",
+    "share_of_matmul",
+)
+
+
+def write_outputs(out_dir: Path, result: dict, extra: dict) -> None:
+    """``bench.json``, ``bench_extra.json`` and ``bench.md`` in ``out_dir``, atomically."""
+    write_json(out_dir / "bench.json", result)
+    write_json(out_dir / "bench_extra.json", extra)
+    write_text(out_dir / "bench.md", write_markdown(result, extra))

@@ -1,0 +1,105 @@
+"""What would make a GPU wait: host round trips and kernel launches, counted on any device.
+
+A GPU runs kernels asynchronously; the host stalls whenever it needs a value back
+(``.item()``, ``bool(t)``, a size that depends on the data). :class:`DispatchCounter` sees
+every aten op of the code it watches (a ``TorchDispatchMode``) and counts
+
+- ``kernels``: every aten op dispatched (about one kernel launch each on a GPU);
+- ``syncs``: the ops that read a device value back to the host on CUDA:
+  ``_local_scalar_dense`` (``item``, ``float``, ``int``, ``bool`` of a tensor), ``nonzero``,
+  boolean-mask indexing and ``masked_select`` (their output size), ``unique`` and
+  ``unique_consecutive``, ``bincount`` (its length), ``repeat_interleave`` without
+  ``output_size``, ``equal``, ``is_nonzero``; plus ``Tensor.tolist`` and ``Tensor.numpy``,
+  which leave the device without an aten op.
+
+It runs on the CPU as well, where these ops cost little, which is the point: what a GPU step
+would wait for is counted without a GPU. ``where`` names the Python line of each sync
+(``record_where=True``), to find them.
+"""
+
+from __future__ import annotations
+
+import traceback
+from collections import Counter
+from contextlib import contextmanager
+
+import torch
+from torch.utils._python_dispatch import TorchDispatchMode
+
+aten = torch.ops.aten
+_ALWAYS = {
+    aten._local_scalar_dense, aten.nonzero, aten.argwhere, aten.masked_select,
+    aten._unique, aten._unique2, aten.unique_dim, aten.unique_consecutive,
+    aten.unique_dim_consecutive, aten.bincount, aten.equal, aten.is_nonzero,
+}  # fmt: skip
+_MASK_INDEXING = {aten.index, aten.index_put, aten.index_put_, aten._index_put_impl_}
+
+
+def reads_back(func, args, kwargs) -> bool:
+    """True when the aten op ``func`` reads a device value back to the host (module doc)."""
+    packet = func.overloadpacket
+    if packet in _ALWAYS:
+        return True
+    if packet is aten.repeat_interleave:
+        return func is aten.repeat_interleave.Tensor and kwargs.get("output_size") is None
+    if packet in _MASK_INDEXING:
+        indices = args[1] if len(args) > 1 else kwargs.get("indices", ())
+        return any(
+            isinstance(i, torch.Tensor) and i.dtype in (torch.bool, torch.uint8) for i in indices
+        )
+    return False
+
+
+class DispatchCounter(TorchDispatchMode):
+    """Counts kernels and syncs (module doc) of the code run inside ``with counter:``."""
+
+    def __init__(self, record_where: bool = False):
+        super().__init__()
+        self.kernels = 0
+        self.syncs = 0
+        self.record_where = record_where
+        self.where: Counter = Counter()
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        kwargs = kwargs or {}
+        self.kernels += 1
+        if reads_back(func, args, kwargs):
+            self.count_sync(str(func.overloadpacket.__name__))
+        return func(*args, **kwargs)
+
+    def count_sync(self, what: str) -> None:
+        self.syncs += 1
+        if self.record_where:
+            self.where[f"{what} at {_caller()}"] += 1
+
+
+def _caller() -> str:
+    """``file:line`` of the innermost physgnn frame on the stack."""
+    for frame in reversed(traceback.extract_stack()):
+        if "physgnn" in frame.filename and not frame.filename.endswith("syncs.py"):
+            return f"{frame.filename.split('physgnn/')[-1]}:{frame.lineno}"
+    return "?"
+
+
+@contextmanager
+def counting(record_where: bool = False):
+    """``with counting() as counter:`` counts aten ops and syncs, ``tolist`` and ``numpy``
+    included (patched on ``torch.Tensor`` for the duration)."""
+    counter = DispatchCounter(record_where)
+    originals = {name: getattr(torch.Tensor, name) for name in ("tolist", "numpy")}
+
+    def patched(name):
+        def method(self, *args, **kwargs):
+            counter.count_sync(name)
+            return originals[name](self, *args, **kwargs)
+
+        return method
+
+    for name in originals:
+        setattr(torch.Tensor, name, patched(name))
+    try:
+        with counter:
+            yield counter
+    finally:
+        for name, method in originals.items():
+            setattr(torch.Tensor, name, method)

@@ -1,0 +1,270 @@
+"""The one wrapper of every ``python -m physgnn.<command>``: one config dir, one-line errors.
+
+:func:`command` makes a command's ``main``: Hydra composes ``conf/<name>.yaml`` from the one
+absolute config dir :data:`physgnn.CONF_DIR` (so ``main`` runs alike from ``python -m``, a
+console script or a test), ``run(cfg)`` does the work and ``done(result)`` (optional) gives
+the line to print. An error of the user's making (:class:`~physgnn.errors.PhysgnnError`, a
+Hydra or OmegaConf error raised while running, a file missing or already there) is printed
+as one line ``error: <message>`` and exits with its ``exit_code`` (2 unless it says
+otherwise); anything else is a bug and keeps its traceback. Ctrl-C and SIGTERM print one
+line too and exit with 128 + the signal (:class:`~physgnn.errors.Interrupted`).
+
+In a sweep (``-m``, ``hydra.mode=MULTIRUN``) a failing job does not end the sweep: its error
+is printed (one line, or the traceback of a bug) and the job returns None; the run records the
+failure (``run.json``) and the sweep's summary counts it. An interruption still stops it.
+
+Before the work, torch gets as many threads as the cores other processes leave free
+(:func:`free_threads`, measured over a fifth of a second): on a busy machine a second thread
+only waits for a core, and steps ran several times slower than on one thread.
+``OMP_NUM_THREADS``, when set, wins.
+
+A command whose arguments Hydra cannot read (``simulate``: ``scene=FILE`` names a file, where
+Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instead: its
+``main(argv=None)`` parses ``sys.argv[1:]`` (or ``argv``) itself, with the same errors.
+"""
+
+from __future__ import annotations
+
+import errno
+import functools
+import math
+import os
+import sys
+import time
+import traceback
+from collections.abc import Callable
+from typing import NoReturn
+
+import hydra
+import torch
+from hydra.core.global_hydra import GlobalHydra
+from hydra.core.hydra_config import HydraConfig
+from hydra.errors import HydraException
+from hydra.types import RunMode
+from omegaconf import DictConfig
+from omegaconf.errors import OmegaConfBaseException
+
+from physgnn import CONF_DIR
+from physgnn.errors import (
+    ConfigError,
+    Interrupted,
+    PhysgnnError,
+    interrupt_signal,
+    one_line,
+    sigterm_interrupts,
+)
+
+USER_ERRORS = (
+    PhysgnnError,
+    HydraException,
+    OmegaConfBaseException,
+    FileNotFoundError,
+    FileExistsError,
+)
+
+
+# A disk that is full or not writable is the user's to fix, not a bug.
+DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM)
+
+
+def disk_problem(err: BaseException) -> bool:
+    """``err`` is an OSError of a full, read-only or forbidden place to write."""
+    return isinstance(err, OSError) and err.errno in DISK_ERRNOS
+
+
+def disk_error(err: OSError) -> ConfigError:
+    """The one line of a :func:`disk_problem`: what, where, and the way out."""
+    return ConfigError(
+        f"{err.strerror}: {err.filename or 'the outputs folder'}; free space, or choose a "
+        "writable paths.outputs (or PHYSGNN_OUTPUTS)"
+    )
+
+
+def fail(err: BaseException) -> NoReturn:
+    """Print ``error: <one line>`` on stderr and exit with the error's code (default 2)."""
+    print(f"error: {one_line(err)}", file=sys.stderr)
+    sys.exit(getattr(err, "exit_code", 2))
+
+
+def free_threads() -> int | None:
+    """Set torch's threads to the cores this process may run on that other processes leave
+    free now (at least 1) and return that count; None (threads untouched) when
+    ``OMP_NUM_THREADS`` is set."""
+    if os.environ.get("OMP_NUM_THREADS"):
+        return None
+    cpus = own_cpus()
+    busy = busy_cores(cpus)
+    threads = max(1, min(len(cpus), len(cpus) - math.floor(busy + 0.5)))
+    if threads < torch.get_num_threads():
+        print(f"threads: {threads} of {len(cpus)} cores ({busy:.1f} busy; OMP_NUM_THREADS=N)")
+    torch.set_num_threads(threads)
+    return threads
+
+
+def own_cpus() -> list[int]:
+    """The cores this process may run on (its CPU affinity: ``taskset``, a SLURM job's cpuset),
+    or every core where the system does not say."""
+    if hasattr(os, "sched_getaffinity"):
+        return sorted(os.sched_getaffinity(0))
+    return list(range(os.cpu_count() or 1))
+
+
+def busy_cores(cpus: list[int], window_s: float = 0.2, stat: str = "/proc/stat") -> float:
+    """How many of the cores ``cpus`` other processes keep busy now: their busy share over
+    ``window_s`` seconds (Linux ``/proc/stat``, per core) × their count; where there is no
+    ``/proc/stat``, the 1-minute load average. Not the load average everywhere: it still
+    counts, for about a minute, a process that has ended (``make data`` just before ``make
+    train`` left an idle 2-core machine training on one thread), and it counts every core of
+    the machine, not the ones a cluster job was given."""
+    first = cpu_times(cpus, stat)
+    if first is None:
+        return os.getloadavg()[0]
+    time.sleep(window_s)
+    second = cpu_times(cpus, stat)
+    busy, total = (b - a for a, b in zip(first, second, strict=True))
+    return len(cpus) * busy / total if total > 0 else 0.0
+
+
+def cpu_times(cpus: list[int], stat: str = "/proc/stat") -> tuple[int, int] | None:
+    """``(busy, total)`` clock ticks since boot summed over the ``cpuN`` lines of ``stat`` for
+    N in ``cpus`` (user nice system idle iowait irq softirq steal; busy = all but idle and
+    iowait); None if it cannot be read or lacks one of them."""
+    wanted, busy, total, found = {f"cpu{n}" for n in cpus}, 0, 0, 0
+    try:
+        with open(stat) as f:
+            for line in f:
+                fields = line.split()
+                if fields and fields[0] in wanted:
+                    ticks = [int(v) for v in fields[1:9]]
+                    busy, total = busy + sum(ticks) - ticks[3] - ticks[4], total + sum(ticks)
+                    found += 1
+    except (OSError, ValueError, IndexError):
+        return None
+    return (busy, total) if found == len(wanted) else None
+
+
+def command(
+    name: str,
+    run: Callable[[DictConfig], object],
+    done: Callable[[object], str] | None = None,
+    parse: Callable[[list[str]], DictConfig] | None = None,
+    usage: str = "",
+) -> Callable:
+    """``main`` of ``python -m physgnn.<name>`` (config ``conf/<name>.yaml``); it returns what
+    ``run`` returns (a Hydra sweeper optimises it). ``main.__wrapped__(cfg)`` is the body
+    without Hydra (for tests). With ``parse`` there is no Hydra (module doc); ``--help`` then
+    prints ``usage``."""
+
+    def main(cfg: DictConfig):
+        free_threads()
+        try:
+            with sigterm_interrupts():
+                result = run(cfg)
+        except KeyboardInterrupt as err:
+            signum = interrupt_signal(err)
+            fail(Interrupted(f"{name} interrupted (exit code {128 + signum})", signum))
+        except Exception as err:
+            if _in_sweep() and not isinstance(err, Interrupted):
+                _report_failed_job(err)
+                return None
+            if isinstance(err, USER_ERRORS):
+                fail(err)
+            if disk_problem(err):
+                fail(disk_error(err))
+            raise
+        if done is not None:
+            print(done(result))
+        return result
+
+    # Hydra names the job (and its log file) after the module of the task function.
+    main.__module__ = f"physgnn.{name}"
+    if parse is not None:
+        return _parsed(main, parse, usage)
+    return _outputs_checked(
+        hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main)
+    )
+
+
+def check_outputs_env(argv: list[str] | None = None) -> None:
+    """``PHYSGNN_OUTPUTS``, where set, and ``paths.outputs=`` on the command line are not
+    files: Hydra makes its output folder under them before any command runs, and would fail
+    with a traceback."""
+    outputs = os.environ.get("PHYSGNN_OUTPUTS")
+    if outputs and os.path.exists(outputs) and not os.path.isdir(outputs):
+        raise ConfigError(
+            f"PHYSGNN_OUTPUTS={outputs} is a file: set it to a folder (physgnn writes its data, "
+            "runs and reports there), or unset it to write into ./outputs"
+        )
+    for arg in sys.argv[1:] if argv is None else argv:
+        key, _, value = arg.lstrip("+").partition("=")
+        if key == "paths.outputs" and os.path.exists(value) and not os.path.isdir(value):
+            raise ConfigError(
+                f"paths.outputs={value} is a file: give a folder (physgnn writes its data, "
+                "runs and reports there), or leave it out to write into ./outputs"
+            )
+
+
+def run_dir_is_hydras(argv: list[str]) -> list[str]:
+    """``argv`` with ``hydra.run.dir=X`` added where ``run_dir=X`` is given without it: Hydra's
+    own folder is then the run's (else it makes a stray ``runs/<experiment>/<now>/`` with an
+    empty log beside the run being trained)."""
+    given = dict(arg.lstrip("+").split("=", 1) for arg in argv if "=" in arg)
+    if "run_dir" in given and "hydra.run.dir" not in given:
+        return [*argv, f"hydra.run.dir={given['run_dir']}"]
+    return argv
+
+
+def _outputs_checked(hydra_main: Callable) -> Callable:
+    """``hydra_main`` after :func:`check_outputs_env` (its error printed as one line)."""
+
+    @functools.wraps(hydra_main)
+    def main(*args, **kwargs):
+        try:
+            check_outputs_env()
+        except ConfigError as err:
+            fail(err)
+        sys.argv[1:] = run_dir_is_hydras(sys.argv[1:])
+        return hydra_main(*args, **kwargs)
+
+    main.__wrapped__ = hydra_main.__wrapped__  # the body, as documented in :func:`command`
+    return main
+
+
+def compose_config(name: str, overrides: list[str] | None = None) -> DictConfig:
+    """``conf/<name>.yaml`` composed with ``overrides``, inside a running Hydra app (its own
+    search path) or outside one (a fresh one)."""
+    if GlobalHydra.instance().is_initialized():
+        return hydra.compose(name, overrides=overrides or [])
+    with hydra.initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        return hydra.compose(name, overrides=overrides or [])
+
+
+def _in_sweep() -> bool:
+    return HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
+
+
+def _report_failed_job(err: Exception) -> None:
+    """One line for a user error, the traceback for a bug; the sweep goes on."""
+    if not isinstance(err, USER_ERRORS):
+        traceback.print_exception(err)
+    print(f"error: {one_line(err)} (this job failed; the sweep goes on)", file=sys.stderr)
+
+
+def _parsed(body: Callable, parse: Callable[[list[str]], DictConfig], usage: str) -> Callable:
+    """``main(argv=None)``: ``body(parse(argv))``, a parse error printed as one line;
+    ``-h`` or ``--help`` prints ``usage`` and exits 0."""
+
+    def main(argv: list[str] | None = None):
+        argv = sys.argv[1:] if argv is None else list(argv)
+        if "-h" in argv or "--help" in argv:
+            print(usage.strip())
+            sys.exit(0)
+        try:
+            cfg = parse(argv)
+        except USER_ERRORS as err:
+            fail(err)
+        return body(cfg)
+
+    main.__wrapped__ = body
+    main.__module__ = body.__module__
+    return main

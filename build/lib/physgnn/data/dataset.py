@@ -1,0 +1,266 @@
+"""HDF5 dataset files: one file per split, one group per trajectory (schema in ARCHITECTURE.md).
+
+``write_split`` writes ``path.tmp`` then renames it, so an interrupted run never leaves a half
+file under the real name. ``read_split`` checks everything it reads and raises
+:class:`DatasetError` with one line naming the problem. ``stats.json`` holds the training
+split's normalisation statistics (``compute_stats`` / ``write_stats`` / ``read_stats``).
+A folder physgnn generated carries the marker file :data:`DATASET_MARKER`: only such a folder
+is ever replaced or removed (``python -m physgnn.generate overwrite=true``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import torch
+
+from physgnn import CONF_DIR, __version__
+from physgnn.errors import PhysgnnError
+from physgnn.files import atomic_path, write_json
+from physgnn.physics.kinematics import finite_difference_velocities
+from physgnn.physics.scene import PLANE_DIM, Effects, SceneError
+from physgnn.physics.trajectory import Trajectory
+
+SCHEMA_VERSION = 1
+FRAME_FIELDS = ("pos", "quat", "vel", "angvel")
+STATIC_FIELDS = ("radius", "mass", "material", "materials", "planes", "plane_kind")
+STD_FLOOR = 1e-6
+# Chunks hold this many frames of one trajectory (time-major, so a window is one read).
+CHUNK_FRAMES = 64
+# Written first into every dataset folder physgnn generates: the proof that it may replace it.
+DATASET_MARKER = "physgnn-dataset.json"
+
+
+class DatasetError(PhysgnnError, RuntimeError):
+    """A dataset file is missing, corrupt or does not match the schema (one-line message)."""
+
+
+def _generate_hint(path: Path) -> str:
+    return generate_hint(Path(path).parent)
+
+
+def generate_hint(folder: str | Path, preset: str | None = None) -> str:
+    """How to (re)make the dataset folder ``folder``: ``run `make data PRESET=x` or `...``
+    when its name is a preset of conf/data/, else the generate command with ``data.dir=``
+    (``preset``, else the one its marker names, else small); with ``overwrite=true`` when it
+    exists."""
+    folder = Path(folder)
+    again = " overwrite=true" if folder.is_dir() and any(folder.iterdir()) else ""
+    if (Path(CONF_DIR) / "data" / f"{folder.name}.yaml").is_file():
+        make = f"make data PRESET={folder.name}" + (f" ARGS={again.strip()}" if again else "")
+        return f"run `{make}` or `python -m physgnn.generate data={folder.name}{again}`"
+    preset = preset or dataset_preset(folder) or "small"
+    return f"run `python -m physgnn.generate data={preset} data.dir={folder}{again}`"
+
+
+def dataset_preset(folder: str | Path) -> str | None:
+    """The preset a dataset folder was generated from (its marker), None when unknown."""
+    try:
+        return str(json.loads((Path(folder) / DATASET_MARKER).read_text())["preset"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def write_marker(folder: str | Path, preset: str) -> Path:
+    """Mark ``folder`` (made if needed) as a dataset folder written by physgnn."""
+    info = {"physgnn_version": __version__, "schema_version": SCHEMA_VERSION, "preset": preset}
+    return write_json(Path(folder) / DATASET_MARKER, info)
+
+
+def is_dataset(folder: str | Path) -> bool:
+    """True when ``folder`` carries physgnn's :data:`DATASET_MARKER`."""
+    return (Path(folder) / DATASET_MARKER).is_file()
+
+
+def _write_traj(group: h5py.Group, traj: Trajectory) -> None:
+    t = traj.n_frames
+    for key in FRAME_FIELDS:
+        arr = np.ascontiguousarray(getattr(traj, key), dtype=np.float32)
+        chunk = (min(t, CHUNK_FRAMES), *arr.shape[1:])
+        group.create_dataset(key, data=arr, chunks=chunk, compression="gzip", compression_opts=4)
+    for key in STATIC_FIELDS:
+        arr = np.asarray(getattr(traj, key))
+        dtype = np.int64 if key in ("material", "plane_kind") else np.float32
+        group.create_dataset(key, data=arr.astype(dtype))
+    attrs = dict(traj.attrs)
+    group.attrs["dt"] = float(traj.dt)
+    group.attrs["gravity"] = np.asarray(attrs.pop("gravity", (0.0, 0.0, -9.81)), dtype=np.float64)
+    group.attrs["scene"] = attrs.pop("scene", traj.name)
+    group.attrs["scene_config"] = attrs.pop("scene_config", "")
+    group.attrs["effects"] = json.dumps(traj.effects.as_dict())
+    group.attrs["seed"] = int(attrs.pop("seed", -1))
+    group.attrs["substeps"] = int(attrs.pop("substeps", 0))
+    group.attrs["engine"] = str(attrs.pop("engine", ""))
+    group.attrs["physgnn_version"] = __version__
+    for key, value in attrs.items():  # extra attributes (e.g. engine settings) as JSON
+        group.attrs[key] = value if isinstance(value, str) else json.dumps(value)
+
+
+def write_split(path, trajectories: list[Trajectory], file_attrs: dict) -> Path:
+    """Write ``trajectories`` to ``path`` atomically (``path.tmp`` then ``os.replace``).
+
+    Groups are named ``traj_00000``, … unless a trajectory's ``attrs["group"]`` names it.
+    ``file_attrs`` should hold ``split`` and ``preset``; ``schema_version`` is added.
+    """
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs["schema_version"] = SCHEMA_VERSION
+        for key, value in file_attrs.items():
+            f.attrs[key] = value
+        for i, traj in enumerate(trajectories):
+            name = traj.attrs.get("group", f"traj_{i:05d}")
+            attrs = {k: v for k, v in traj.attrs.items() if k != "group"}
+            _write_traj(f.create_group(name), dataclasses.replace(traj, attrs=attrs))
+    return Path(path)
+
+
+def _attr(value):
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return value
+
+
+def _read_traj(path: Path, name: str, g: h5py.Group) -> Trajectory:
+    where = f"{path}:{name}"
+    missing = [k for k in FRAME_FIELDS + STATIC_FIELDS if k not in g]
+    missing += [k for k in ("dt", "effects") if k not in g.attrs]
+    if missing:
+        raise DatasetError(f"{where}: missing field(s) {missing} (schema v{SCHEMA_VERSION})")
+    data = {k: g[k][()] for k in FRAME_FIELDS + STATIC_FIELDS}
+    t, n = data["pos"].shape[:2]
+    shapes = {
+        "pos": (t, n, 3),
+        "quat": (t, n, 4),
+        "vel": (t, n, 3),
+        "angvel": (t, n, 3),
+        "radius": (n,),
+        "mass": (n,),
+        "material": (n,),
+    }
+    for key, shape in shapes.items():
+        if data[key].shape != shape:
+            raise DatasetError(f"{where}: {key} has shape {data[key].shape}, expected {shape}")
+    if data["planes"].ndim != 2 or data["planes"].shape[1] != PLANE_DIM:
+        raise DatasetError(f"{where}: planes has shape {data['planes'].shape}, expected [S, 11]")
+    for key in FRAME_FIELDS + ("radius", "mass"):
+        if not np.all(np.isfinite(data[key])):
+            raise DatasetError(f"{where}: {key} contains NaN or inf")
+    try:
+        effects = Effects.from_dict(json.loads(_attr(g.attrs["effects"])))
+    except (ValueError, SceneError) as e:
+        raise DatasetError(f"{where}: bad effects attribute ({e})") from None
+    attrs = {k: _attr(v) for k, v in g.attrs.items() if k not in ("dt", "effects")}
+    attrs["group"] = name
+    return Trajectory(
+        name=name,
+        dt=float(g.attrs["dt"]),
+        effects=effects,
+        attrs=attrs,
+        **{k: data[k] for k in FRAME_FIELDS + STATIC_FIELDS},
+    )
+
+
+def read_split(path) -> list[Trajectory]:
+    """All trajectories of a split file, checked (raises :class:`DatasetError`)."""
+    path = Path(path)
+    if not path.exists():
+        raise DatasetError(f"dataset file {path} not found: {_generate_hint(path)}")
+    try:
+        with h5py.File(path, "r") as f:
+            version = f.attrs.get("schema_version")
+            if version is None or int(version) != SCHEMA_VERSION:
+                raise DatasetError(
+                    f"{path} has schema version {version}, this physgnn reads "
+                    f"{SCHEMA_VERSION}: regenerate it ({_generate_hint(path)})"
+                )
+            return [_read_traj(path, name, f[name]) for name in sorted(f.keys())]
+    except DatasetError:
+        raise
+    except (OSError, KeyError, ValueError) as e:
+        first = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise DatasetError(
+            f"{path} is truncated or corrupt ({first}): {_generate_hint(path)}"
+        ) from None
+
+
+def _mean_std(x: np.ndarray, axis=0) -> dict:
+    return {
+        "mean": np.mean(x, axis=axis).tolist(),
+        "std": np.maximum(np.std(x, axis=axis), STD_FLOOR).tolist(),
+    }
+
+
+def compute_stats(trajectories: list[Trajectory]) -> dict:
+    """Normalisation statistics (contract in ARCHITECTURE.md) from finite-difference
+    velocities; ``n_pairs`` is the number of (frame t, frame t+1) state pairs."""
+    if not trajectories:
+        raise DatasetError("cannot compute statistics of an empty split")
+    vel, angvel, dvel, dangvel, radius, mass = [], [], [], [], [], []
+    for tr in trajectories:
+        f64 = lambda a: torch.as_tensor(np.asarray(a, dtype=np.float64))  # noqa: E731
+        v, w = finite_difference_velocities(
+            f64(tr.pos), f64(tr.quat), f64(tr.vel[0]), f64(tr.angvel[0]), tr.dt
+        )
+        v, w = v.numpy(), w.numpy()
+        vel.append(v.reshape(-1, 3))
+        angvel.append(w.reshape(-1, 3))
+        dvel.append((v[1:] - v[:-1]).reshape(-1, 3))
+        dangvel.append((w[1:] - w[:-1]).reshape(-1, 3))
+        radius.append(tr.radius)
+        mass.append(tr.mass)
+    cat = np.concatenate
+    speeds = np.linalg.norm(cat(vel), axis=1)
+    r, m = cat(radius).astype(np.float64), cat(mass).astype(np.float64)
+    return {
+        "vel": _mean_std(cat(vel)),
+        "angvel": _mean_std(cat(angvel)),
+        "delta_vel": _mean_std(cat(dvel)),
+        "delta_angvel": _mean_std(cat(dangvel)),
+        "radius": {"mean": float(r.mean()), "std": float(max(r.std(), STD_FLOOR))},
+        "mass": {"mean": float(m.mean()), "std": float(max(m.std(), STD_FLOOR))},
+        "max_speed": float(speeds.max()),
+        "n_pairs": int(sum(tr.n_frames - 1 for tr in trajectories)),
+    }
+
+
+def write_stats(dataset_dir, stats: dict) -> Path:
+    """Write ``stats.json`` atomically into ``dataset_dir``."""
+    return write_json(Path(dataset_dir) / "stats.json", stats)
+
+
+def read_stats(dataset_dir) -> dict:
+    """``stats.json`` of a dataset folder, checked for the contract's keys."""
+    path = Path(dataset_dir) / "stats.json"
+    if not path.exists():
+        raise DatasetError(f"{path} not found: {_generate_hint(path)}")
+    try:
+        stats = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DatasetError(f"{path} is not valid JSON ({e})") from None
+    keys = ("vel", "angvel", "delta_vel", "delta_angvel", "radius", "mass", "max_speed", "n_pairs")
+    missing = [k for k in keys if k not in stats]
+    if missing:
+        raise DatasetError(f"{path}: missing key(s) {missing}")
+    for key in keys[:6]:
+        _check_std(path, key, stats[key])
+    return stats
+
+
+def _check_std(path: Path, key: str, entry) -> None:
+    """A normaliser divides by ``std``: it must be a positive finite number (or vector)."""
+    try:
+        std = np.asarray(entry["std"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        std = np.asarray(np.nan)
+    if not np.all(np.isfinite(std)) or np.any(std <= 0):
+        raise DatasetError(
+            f"{path}: {key}.std must be positive and finite (got {np.asarray(std).tolist()}); "
+            f"regenerate the dataset ({_generate_hint(path)})"
+        )

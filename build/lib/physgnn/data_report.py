@@ -1,0 +1,14 @@
+"""``python -m physgnn.data_report [preset=NAME | dataset=PATH]``: Table 1 of a dataset
+(``make data-report PRESET=NAME``).
+
+The work is :func:`physgnn.evaluation.data_report.data_report` (prints the table, writes
+``<dataset>/report.json``).
+"""
+
+from physgnn.cli import command
+from physgnn.evaluation.data_report import data_report
+
+main = command("data_report", data_report)
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,76 @@
+"""The one base of every error of the user's making (bad config, missing or corrupt data).
+
+A :class:`PhysgnnError` carries a message of one line that names the problem; every command
+(:mod:`physgnn.cli`) prints it as ``error: <message>`` and exits with :attr:`exit_code`.
+Anything else is a bug and keeps its traceback.
+
+A command stopped from outside (Ctrl-C, ``kill``) is an :class:`Interrupted`: exit code
+128 + the signal number, as a shell reports it. :func:`sigterm_interrupts` makes SIGTERM
+raise ``KeyboardInterrupt`` like Ctrl-C, so ``finally`` blocks clean up after both.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+
+class PhysgnnError(Exception):
+    """An error of the user's making, told in one line."""
+
+    exit_code = 2
+
+
+def one_line(err: BaseException) -> str:
+    """The message of ``err`` on one line (its non-empty lines joined by ``"; "``)."""
+    return "; ".join(line.strip() for line in str(err).splitlines() if line.strip())
+
+
+class ConfigError(PhysgnnError, ValueError):
+    """A config value that cannot be used (missing, of the wrong kind or out of range)."""
+
+
+class Interrupted(PhysgnnError):
+    """A command stopped by a signal (Ctrl-C: SIGINT, ``kill``: SIGTERM); exit 128 + signal."""
+
+    def __init__(self, message: str, signum: int = signal.SIGINT):
+        super().__init__(message)
+        self.signum = int(signum)
+        self.exit_code = 128 + self.signum
+
+
+def signal_name(signum: int) -> str:
+    return signal.Signals(signum).name
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt(signum)
+
+
+def replaceable(handler) -> bool:
+    """True for a signal handler physgnn may take over: Python's defaults or its own. A job
+    scheduler's handler is left alone (submitit ignores SIGTERM and pre-empts with SIGUSR2)."""
+    return handler in (signal.SIG_DFL, signal.default_int_handler, _raise_interrupt, None)
+
+
+@contextmanager
+def sigterm_interrupts() -> Iterator[None]:
+    """Within: SIGTERM raises ``KeyboardInterrupt(SIGTERM)`` in the main thread, as Ctrl-C
+    raises ``KeyboardInterrupt``; the handler before is restored after."""
+    previous = signal.getsignal(signal.SIGTERM)
+    if threading.current_thread() is not threading.main_thread() or not replaceable(previous):
+        yield
+        return
+    signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def interrupt_signal(err: KeyboardInterrupt) -> int:
+    """The signal a ``KeyboardInterrupt`` stands for (SIGTERM when raised by
+    :func:`sigterm_interrupts`, else SIGINT)."""
+    return signal.SIGTERM if err.args and err.args[0] == signal.SIGTERM else signal.SIGINT

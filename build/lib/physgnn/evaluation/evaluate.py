@@ -1,0 +1,179 @@
+"""Evaluate finished runs: ``make eval`` (:func:`evaluate`).
+
+Evaluates every finished run under ``${paths.outputs}`` (``runs/`` and ``multirun/``), one run
+folder or one multirun folder, together with the references ``ground_truth`` (the data
+itself), ``static`` and ``gravity_only`` on each dataset the runs were trained on. Every test
+and OOD trajectory is rolled out from its first H+1 frames; a diverged rollout's metrics are
+on its finite prefix and carry ``diverged_at``. With ``stability=true`` (default) every learned
+run is also rolled out on the hard scenes of ``hard`` and measured with
+:mod:`physgnn.evaluation.stability` (``stability.csv`` and the report's stability section).
+Every learned run also falls freely from ``freefall.heights`` (:mod:`physgnn.evaluation.freefall`,
+``freefall.csv``) and bounces once per training material (:mod:`physgnn.evaluation.bounce`,
+``bounce.csv``). Writes metrics.csv, report.md, figures and videos into ``report_dir``; with
+``rerun=true`` also ``videos/<ood scene>.rrd``, the filmed run's rollouts as Rerun recordings.
+A ``report_dir`` holding files physgnn did not write is refused unless ``overwrite=true``
+(:func:`physgnn.files.claim_folder`).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+from omegaconf import DictConfig, OmegaConf
+
+from physgnn.evaluation import rerun_log
+from physgnn.evaluation.bounce import bounce_rows
+from physgnn.evaluation.freefall import freefall_rows
+from physgnn.evaluation.rollouts import (
+    Collected,
+    hard_rows,
+    rest_tol,
+    roll_all,
+    rollout_settings,
+    sleeping_rows,
+)
+from physgnn.evaluation.runs import (
+    EvalError,
+    RunInfo,
+    constrained_variants,
+    load_datasets,
+    load_runs,
+    load_splits,
+    pick_video_run,
+    references,
+)
+from physgnn.evaluation.video3d import render_side_by_side
+from physgnn.files import OUTPUT_MARKER, claim_folder
+from physgnn.report import bounce, figures, freefall, stability, table
+from physgnn.report.document import write_report
+
+# What an eval writes into its report_dir (replaced whole by the next eval).
+REPORT_OUTPUTS = ("report.md", "metrics.csv", "stability.csv", "freefall.csv", "bounce.csv",
+                  "figures", "videos")  # fmt: skip
+MATERIAL_KEYS = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
+
+
+def evaluate(cfg: DictConfig) -> Path:
+    """Evaluate the runs named by ``cfg`` and write ``cfg.report_dir``; returns report.md.
+
+    Everything is written into ``<report_dir>.partial`` first and moved into ``report_dir``
+    at the end, replacing the previous eval's outputs (:data:`REPORT_OUTPUTS`) whole: a
+    report folder always holds one eval, and an interrupted eval leaves the last one as it
+    was."""
+    report_dir = Path(cfg.report_dir)
+    if cfg.get("rerun"):
+        rerun_log.require()  # before the rollouts, not after them
+    ours = report_dir == Path(cfg.paths.report_dir)
+    claim_folder(report_dir, "report_dir", overwrite=bool(cfg.get("overwrite")), ours=ours)
+    staging = report_dir.with_name(report_dir.name + ".partial")
+    _clear_staging(staging)
+    claim_folder(staging, "report_dir", ours=True)
+    try:
+        _evaluate_into(cfg, staging)
+        _publish(staging, report_dir)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return report_dir / "report.md"
+
+
+def _clear_staging(staging: Path) -> None:
+    """A leftover staging folder of an interrupted eval goes; anything else there is refused."""
+    if staging.exists() and not (staging / OUTPUT_MARKER).is_file() and any(staging.iterdir()):
+        raise FileExistsError(f"{staging} is in the way and physgnn did not write it: move it")
+    shutil.rmtree(staging, ignore_errors=True)
+
+
+def _publish(staging: Path, report_dir: Path) -> None:
+    """The previous eval's outputs out of ``report_dir``, this eval's in."""
+    for name in REPORT_OUTPUTS:
+        old = report_dir / name
+        shutil.rmtree(old) if old.is_dir() else old.unlink(missing_ok=True)
+    for item in staging.iterdir():
+        if item.name != OUTPUT_MARKER:
+            os.replace(item, report_dir / item.name)
+
+
+def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
+    """The eval itself, written into ``report_dir`` (the staging folder)."""
+    outputs = Path(cfg.paths.outputs)
+    runs, skipped = load_runs(cfg, outputs)
+    runs += constrained_variants(runs, int(OmegaConf.select(cfg, "rollout.constraints") or 0))
+    if not runs and not cfg.dataset:
+        raise EvalError(f"no finished run under {outputs} (make train first, or pass dataset=PATH)")
+    if cfg.dataset:
+        data = {Path(cfg.dataset): load_splits(Path(cfg.dataset), cfg.max_frames)}
+    else:
+        data, runs = load_datasets(runs, cfg.max_frames, skipped)
+    jobs = [ref for d in data for ref in references(d, len(data) > 1)] + runs
+    film = pick_video_run(runs, cfg.video_run)
+    keep = {r.name for r in runs[: cfg.energy_runs]} | ({film.name} if film else set())
+    stab = [] if cfg.get("stability") else None
+    settings = rollout_settings(cfg)
+    filmed = [r for r in runs if film and r.name in (film.name, f"{film.name} + constraints")]
+    batched = bool(OmegaConf.select(cfg, "rollout.batch_scenes", default=True))
+    collected = Collected(keep, filmed, cfg.tol, stab, rest_tol(cfg))
+    out = roll_all(jobs, data, collected, settings, batch_scenes=batched)
+    if film is not None and cfg.sleeping_compare and not settings["sleeping"]:
+        out.rows += sleeping_rows(film, data[film.dataset]["ood"], cfg.tol, settings["sleep"])
+    table.write_csv(report_dir / "metrics.csv", out.rows)
+    if stab is not None:
+        stability.write_csv(report_dir / "stability.csv", stab + hard_rows(runs, cfg))
+    else:
+        (report_dir / "stability.csv").unlink(missing_ok=True)  # no stale section
+    freefall.write_csv(report_dir / "freefall.csv", _freefall(runs, cfg.freefall, settings))
+    bounce.write_csv(report_dir / "bounce.csv", _bounce(runs, cfg.get("bounce"), settings))
+    if out.energies:
+        dts = {name: _dt(data, name) for name in out.energies}
+        figures.plot_energy(report_dir / "figures" / "energy_ood.png", out.energies, dts)
+    if cfg.videos and film is not None:
+        write_videos(report_dir / "videos", out.films, cfg.video_frames)
+    if cfg.get("rerun"):
+        for scene, (traj, panels) in sorted(out.films.items()):
+            rerun_log.log_rerun(report_dir / "videos" / f"{scene}.rrd", traj, panels[0][0])
+    bench_dir = cfg.paths.get("bench_dir")
+    return write_report(report_dir, out.rows, bench_dir=bench_dir, skipped=skipped)
+
+
+def _freefall(runs: list[RunInfo], cfg: DictConfig, settings: dict) -> list[dict]:
+    """Every learned run dropped from ``cfg.heights`` (:mod:`physgnn.evaluation.freefall`)."""
+    args = list(cfg.heights), float(cfg.seconds), float(cfg.dt), float(cfg.floor)
+    rows = []
+    for run in runs:
+        rows += freefall_rows(run.name, run.simulator, *args, **settings)
+    return rows
+
+
+def _bounce(runs: list[RunInfo], cfg: DictConfig | None, settings: dict) -> list[dict]:
+    """Every learned run bouncing with each of ``cfg.materials``
+    (:mod:`physgnn.evaluation.bounce`); none without a ``bounce`` config."""
+    if cfg is None:
+        return []
+    materials = [[m[k] for k in MATERIAL_KEYS] for m in cfg.materials]
+    args = materials, float(cfg.height), float(cfg.dt), float(cfg.radius)
+    rows = []
+    for run in runs:
+        rows += bounce_rows(run.name, run.simulator, *args, **settings)
+    return rows
+
+
+def _dt(data: dict, scene: str) -> float:
+    for splits in data.values():
+        for traj in splits["ood"]:
+            if traj.name == scene:
+                return float(traj.dt)
+    return 1.0
+
+
+def write_videos(video_dir: Path, films: dict, max_frames: int) -> list[Path]:
+    """Per OOD scene ``<scene>.gif``, ``.mp4`` and ``_frame.png``: the shaded 3-D view of the
+    ground truth beside the filmed runs' rollouts (the pure run, then its constrained variant
+    when the eval has one); returns the GIFs."""
+    paths = []
+    for scene, (traj, panels) in sorted(films.items()):
+        labelled = [(pred, f"prediction\n{name}") for pred, name in panels]
+        stem = video_dir / scene
+        render_side_by_side(stem, traj, labelled, title=scene, max_frames=max_frames)
+        paths.append(stem.with_name(f"{scene}.gif"))
+    return paths

@@ -1,0 +1,93 @@
+"""Free fall against the analytic answer: one sphere released at rest at several heights.
+
+The learned simulator never sees absolute height (surface distances are clipped at the graph's
+reach), so its free fall must be the same at 10, 100 and 1 000 m, and match
+``z(t) = h − ½ g t²``. Each row: the rollout from the analytic seed frames (frames ``0..H``)
+for ``seconds``, or less where the sphere would come within ``floor`` m of the ground (the fall
+stays free); ``z_error`` = ``|ẑ(T) − z(T)|`` in m, ``z_error_pct`` the same as a percentage of
+the fall ``½ g T²``, and ``dvz_first`` the velocity change of the first predicted step, from
+positions (free flight: ``−g·dt``). Rows of ``freefall.csv`` and the report's free-fall section.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from physgnn.physics.energy import G
+from physgnn.physics.scene import Effects, ground_plane
+from physgnn.physics.trajectory import Trajectory
+from physgnn.rollout import rollout
+
+
+def free_fall(height: float, seconds: float, dt: float, radius: float = 0.5) -> Trajectory:
+    """One sphere of ``radius`` (density 1 000) released at rest at ``height`` m above the
+    ground, frames ``k·dt`` for ``k = 0..seconds/dt``, exact positions and velocities."""
+    n = int(round(seconds / dt)) + 1
+    t = np.arange(n) * dt
+    pos = np.zeros((n, 1, 3), np.float64)
+    pos[:, 0, 2] = height - 0.5 * G * t**2
+    vel = np.zeros((n, 1, 3), np.float64)
+    vel[:, 0, 2] = -G * t
+    quat = np.zeros((n, 1, 4), np.float64)
+    quat[..., 0] = 1.0
+    mass = np.full(1, 1000.0 * 4.0 / 3.0 * np.pi * radius**3)
+    return Trajectory(
+        name=f"free_fall_{height:g}m",
+        pos=pos,
+        quat=quat,
+        vel=vel,
+        angvel=np.zeros((n, 1, 3)),
+        radius=np.full(1, radius),
+        mass=mass,
+        material=np.zeros(1, np.int64),
+        planes=ground_plane()[None].astype(np.float64),
+        plane_kind=np.zeros(1, np.int64),
+        materials=np.array([[0.5, 0.7, 0.01, 0.01]]),
+        dt=dt,
+        effects=Effects(),
+    )
+
+
+def free_seconds(height: float, seconds: float, dt: float, floor: float) -> float:
+    """``seconds``, cut to whole frames before the sphere falls below ``floor`` m."""
+    frames = math.floor(math.sqrt(2.0 * max(height - floor, 0.0) / G) / dt + 1e-9)
+    return min(seconds, frames * dt)
+
+
+def freefall_rows(
+    name: str, simulator, heights, seconds: float, dt: float, floor: float = 5.0, **kwargs
+) -> list[dict]:
+    """Roll ``simulator`` out from the analytic seed frames at each height (keyword arguments
+    of :func:`physgnn.rollout.rollout`) and measure the rows
+    (:data:`physgnn.report.freefall.COLUMNS`)."""
+    truths = [free_fall(float(h), free_seconds(h, seconds, dt, floor), dt) for h in heights]
+    rows = []
+    for truth, pred in zip(truths, rollout(simulator, truths, **kwargs), strict=True):
+        h, start = float(truth.pos[0, 0, 2]), int(pred.start)
+        z_true = float(truth.pos[-1, 0, 2])
+        stable = pred.diverged_at is None
+        z_pred = float(pred.pos[-1, 0, 2]) if stable else float("nan")
+        fall = float(h - z_true)
+        rows.append({
+            "run": name,
+            "height": h,
+            "seconds": (truth.n_frames - 1) * dt,
+            "dt": dt,
+            "z_true": z_true,
+            "z_pred": z_pred,
+            "z_error": abs(z_pred - z_true),
+            "z_error_pct": 100.0 * abs(z_pred - z_true) / fall,
+            "dvz_first": _first_dvz(pred.pos[:, 0, 2], truth.vel[0, 0, 2], start, dt),
+        })  # fmt: skip
+    return rows
+
+
+def _first_dvz(z: np.ndarray, vz0: float, start: int, dt: float) -> float:
+    """``(z_{s+1} − 2 z_s + z_{s−1}) / dt`` at the first predicted frame ``s + 1``; with no
+    history (``s = 0``) the seed velocity ``vz0`` stands for ``(z_s − z_{s−1}) / dt``."""
+    if len(z) < start + 2:
+        return float("nan")
+    before = (z[start] - z[start - 1]) / dt if start > 0 else vz0
+    return float((z[start + 1] - z[start]) / dt - before)

@@ -1,0 +1,62 @@
+"""Does a scene lie inside what a run was trained on? One line naming what does not.
+
+The ranges come from the run's own config (``data.scene``: the training family's radius range,
+density, drop height and initial speed, frame interval and materials): radius, mass
+(``density·4/3·π·r³`` over the radius range), speed (up to the initial speed bound plus a free
+fall from the highest start), frame interval and each material parameter. A scene value more
+than :data:`MARGIN` (relative) outside its range is named; a learned simulator there
+extrapolates, and its rollout should be read as such.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from omegaconf import OmegaConf
+
+MARGIN = 0.1
+MATERIAL_KEYS = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
+
+
+def training_ranges(cfg) -> dict[str, tuple[float, float]]:
+    """``{quantity: (low, high)}`` of the run config's training family (empty when the config
+    names none)."""
+    family = OmegaConf.select(cfg, "data.scene") if cfg is not None else None
+    if family is None or "radius_min" not in family:
+        return {}
+    r0, r1, rho = float(family.radius_min), float(family.radius_max), float(family.density)
+    ball = lambda r: rho * 4.0 / 3.0 * math.pi * r**3  # noqa: E731
+    fall = math.sqrt(2 * 9.81 * float(family.get("h_max", 0.0)))
+    ranges = {"radius (m)": (r0, r1), "mass (kg)": (ball(r0), ball(r1))}
+    ranges["speed (m/s)"] = (0.0, float(family.get("max_speed0", 0.0)) + fall)
+    ranges["dt (s)"] = (float(family.dt), float(family.dt))
+    for k in MATERIAL_KEYS:
+        values = [float(m[k]) for m in family.get("materials", [])]
+        if values:
+            ranges[k] = (min(values), max(values))
+    return ranges
+
+
+def scene_values(scene) -> dict[str, np.ndarray]:
+    """The same quantities of a :class:`~physgnn.physics.scene.Scene` at its start."""
+    values = {"radius (m)": scene.radius, "mass (kg)": scene.mass}
+    values["speed (m/s)"] = np.linalg.norm(scene.vel, axis=-1)
+    values["dt (s)"] = np.array([scene.dt])
+    params = np.asarray(scene.materials)[np.asarray(scene.material)]
+    values |= {k: params[:, i] for i, k in enumerate(MATERIAL_KEYS)}
+    return values
+
+
+def outside(scene, cfg) -> list[str]:
+    """``"<quantity> a–b (trained on c–d)"`` for every quantity of ``scene`` outside the
+    training ranges of the run config ``cfg``."""
+    values, found = scene_values(scene), []
+    for name, (low, high) in training_ranges(cfg).items():
+        v = np.asarray(values[name], dtype=np.float64)
+        if v.size == 0:
+            continue
+        lo, hi = float(v.min()), float(v.max())
+        if lo < low - MARGIN * abs(low) - 1e-12 or hi > high + MARGIN * abs(high) + 1e-12:
+            found.append(f"{name} {lo:.3g}–{hi:.3g} (trained on {low:.3g}–{high:.3g})")
+    return found

@@ -1,0 +1,196 @@
+"""The rollouts of an evaluation and what is measured of them: metrics.csv rows, OOD energy
+series, the filmed run's OOD rollouts, the stability rows (OOD and hard scenes) and OOD (c)
+again with sleeping spheres. Truth and rollouts alike are
+:class:`~physgnn.physics.trajectory.Trajectory` objects."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+from omegaconf import DictConfig, OmegaConf
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from physgnn import metrics
+from physgnn.evaluation import stability
+from physgnn.evaluation.runs import SPLITS, RunInfo
+from physgnn.groundtruth.hard import hard_split
+from physgnn.physics.trajectory import Trajectory
+from physgnn.report.table import COLUMNS, SLEEP_SCENE, SLEEP_SUFFIX
+from physgnn.rollout import rollout
+
+
+def rollout_settings(cfg: DictConfig) -> dict:
+    """``rollout`` keyword arguments from ``cfg.rollout``: ``sleeping`` (bool) and ``sleep``
+    (the :class:`physgnn.models.sleeping.SleepingSimulator` settings)."""
+    r = cfg.get("rollout") or {}
+    sleep = OmegaConf.to_container(r["sleep"]) if r.get("sleep") is not None else {}
+    return {"sleeping": bool(r.get("sleeping", False)), "sleep": sleep}
+
+
+def predict(job: RunInfo, traj: Trajectory, settings: dict | None = None) -> Trajectory:
+    """For the ground truth, ``traj`` with finite-difference velocities (measured as a rollout
+    is: with the engine's velocities its energy gain would be lower than any rollout's could
+    be); else the job's rollout of it (finite prefix)."""
+    if job.simulator is None:
+        return traj.with_finite_velocities()
+    return rollout(job.simulator, [traj], **(settings or {}))[0]
+
+
+def metrics_row(info: RunInfo, split: str, traj: Trajectory, pred: Trajectory, tol: float) -> dict:
+    """One metrics.csv row (columns of :data:`physgnn.report.table.COLUMNS`)."""
+    m = metrics.trajectory_metrics(pred, traj, tol=tol, horizon=20)
+    row = {k: m.get(k) for k in COLUMNS}
+    row.update(
+        run=info.name,
+        experiment=info.experiment,
+        overrides=info.overrides,
+        seed=info.seed,
+        split=split,
+        trajectory=traj.name,
+        n_spheres=traj.n_spheres,
+        n_frames=pred.n_frames,
+        diverged_at=pred.diverged_at,
+        fps=pred.fps,
+    )
+    return row
+
+
+def energy_of(traj: Trajectory, pred: Trajectory) -> np.ndarray:
+    return metrics.energy_series(pred.pos, pred.vel, traj.mass, traj.radius)
+
+
+def warm_up(job: RunInfo, splits: dict[str, list[Trajectory]]) -> None:
+    """One short untimed rollout, so that one-off costs (lazy imports, allocator, first
+    kernels) do not land in the FPS of the first trajectory."""
+    first = next((t for s in SPLITS for t in splits[s]), None)
+    if job.simulator is not None and first is not None:
+        rollout(job.simulator, [first.truncated(int(job.simulator.H) + 3)])
+
+
+@dataclass
+class Collected:
+    """What the rollouts of an evaluation leave: metrics rows, OOD energy series
+    (``{scene: {label: E [T]}}``: the ground truth and the runs named in ``keep``), the OOD
+    rollouts of the filmed runs ``film`` (``{scene: (truth, [(rollout, run name), ...])}``, in
+    the order the runs were rolled out) and, with ``stab`` a list, the
+    stability rows of the ground truth's and the learned runs' OOD rollouts."""
+
+    keep: set[str]
+    film: list[RunInfo]
+    tol: float
+    stab: list | None = None
+    rest_tol: float = 0.01
+    rows: list[dict] = field(default_factory=list)
+    energies: dict = field(default_factory=dict)
+    films: dict = field(default_factory=dict)
+
+    def add(self, job: RunInfo, split: str, traj: Trajectory, pred: Trajectory) -> None:
+        self.rows.append(metrics_row(job, split, traj, pred, self.tol))
+        if split != "ood":
+            return
+        truth = job.simulator is None
+        if truth or job.name in self.keep:
+            label = "ground truth" if job.name == "ground_truth" else job.name
+            self.energies.setdefault(traj.name, {})[label] = energy_of(traj, pred)
+        if any(job is filmed for filmed in self.film):
+            self.films.setdefault(traj.name, (traj, []))[1].append((pred, job.name))
+        if self.stab is not None and (truth or job.run_dir is not None):
+            self.stab.append(stability_row(job, traj, pred, self.rest_tol))
+
+
+def predict_split(job: RunInfo, trajs: list[Trajectory], settings: dict | None = None):
+    """:func:`predict` of every trajectory of a split in one rollout call (the scenes batched in
+    one graph per frame). Differs from one-by-one rollouts by float rounding only, and is
+    deterministic. Each rollout's ``fps`` is the batch's scene-frames per second (the frames
+    every scene produced over the call's time): a frame of one scene costs ``1 / fps``."""
+    if job.simulator is None or not trajs:
+        return [predict(job, t, settings) for t in trajs]
+    preds = rollout(job.simulator, trajs, **(settings or {}))
+    produced = [p.n_frames - p.start - 1 for p in preds]
+    steps = max(produced)
+    scale = sum(produced) / steps if steps > 0 else 1.0
+    return [dataclasses.replace(p, fps=p.fps * scale) for p in preds]
+
+
+def roll_all(
+    jobs: list[RunInfo],
+    data: dict,
+    out: Collected,
+    settings: dict | None = None,
+    batch_scenes: bool = True,
+):
+    """Every job on every test and OOD trajectory of its dataset, with a progress bar; what is
+    measured goes to ``out``. ``settings``: keyword arguments of every rollout;
+    ``batch_scenes``: a split's scenes in one rollout call (:func:`predict_split`), else one
+    rollout per trajectory."""
+    total = sum(len(data[j.dataset][s]) for j in jobs for s in SPLITS)
+    with progress() as bar:
+        task = bar.add_task("evaluating", total=total)
+        for job in jobs:
+            warm_up(job, data[job.dataset])
+            for split in SPLITS:
+                trajs = data[job.dataset][split]
+                for group in [trajs] if batch_scenes else [[t] for t in trajs]:
+                    names = group[0].name if len(group) == 1 else f"{split} ({len(group)} scenes)"
+                    bar.update(task, description=f"{job.name} · {names}")
+                    for traj, pred in zip(group, predict_split(job, group, settings), strict=True):
+                        out.add(job, split, traj, pred)
+                    bar.advance(task, len(group))
+    return out
+
+
+def rest_tol(cfg: DictConfig) -> float:
+    return float(OmegaConf.select(cfg, "hard.rest_tol", default=0.01))
+
+
+def stability_row(job: RunInfo, traj: Trajectory, pred: Trajectory, tol: float) -> dict:
+    """The stability numbers of one OOD rollout (the ground truth: its own row)."""
+    if job.simulator is None:
+        return stability.truth_row(traj, "ood", tol) | {"run": job.name}
+    m = stability.measure(traj, pred, tol)
+    return {"run": job.name, "experiment": job.experiment, "source": "ood", **m}
+
+
+def hard_rows(runs: list[RunInfo], cfg: DictConfig) -> list[dict]:
+    """The ground truth and every learned run on the hard scenes of ``cfg.hard`` (simulated
+    once, cached in ``cfg.hard.dir``; cut to ``cfg.max_frames``)."""
+    hard = cfg.hard
+    trajs = hard_split(hard.dir, hard.scenes, hard.engine, hard.seed)
+    trajs = [t.truncated(cfg.max_frames) for t in trajs]
+    rows = [stability.truth_row(t, "hard", hard.rest_tol) for t in trajs]
+    settings = rollout_settings(cfg)
+    with progress() as bar:
+        task = bar.add_task("stability", total=len(runs))
+        for run in runs:
+            bar.update(task, description=f"stability · {run.name}")
+            rows += stability.rollout_rows(
+                run.name, run.experiment, run.simulator, trajs, "hard", hard.rest_tol, **settings
+            )
+            bar.advance(task)
+    return rows
+
+
+def sleeping_rows(
+    film: RunInfo, ood: list[Trajectory], tol: float, sleep: dict | None = None
+) -> list[dict]:
+    """OOD (c) rolled out again with sleeping spheres (settings ``sleep``), as the run
+    ``<name>+sleeping``."""
+    info = dataclasses.replace(
+        film,
+        name=film.name + SLEEP_SUFFIX,
+        overrides=(film.overrides + " rollout.sleeping=true").strip(),
+    )
+    settings = {"sleeping": True, "sleep": sleep}
+    return [
+        metrics_row(info, "ood", traj, predict(film, traj, settings), tol)
+        for traj in ood
+        if traj.name == SLEEP_SCENE
+    ]
+
+
+def progress() -> Progress:
+    return Progress(
+        TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()
+    )

@@ -1,0 +1,241 @@
+"""The runs an evaluation covers: finished training runs found under the outputs (each with its
+simulator and dataset), the references ``ground_truth``, ``static`` and ``gravity_only``, and
+the test and OOD trajectories of their datasets."""
+
+from __future__ import annotations
+
+import dataclasses
+import socket
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+from omegaconf import DictConfig, OmegaConf
+
+from physgnn.data.dataset import DatasetError, read_split
+from physgnn.errors import PhysgnnError
+from physgnn.files import process_alive
+from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
+from physgnn.models.constrained import ConstrainedSimulator
+from physgnn.physics.trajectory import Trajectory
+from physgnn.report.table import config_label
+from physgnn.training import runs as training_runs
+
+SPLITS = ("test", "ood")
+
+
+class EvalError(PhysgnnError, RuntimeError):
+    """Evaluation cannot start (one line naming the problem)."""
+
+
+@dataclass
+class RunInfo:
+    """A finished training run (or a reference: ``ground_truth``, ``static``, ``gravity_only``)."""
+
+    name: str
+    experiment: str
+    overrides: str = ""
+    seed: int | None = None
+    run_dir: Path | None = None
+    dataset: Path | None = None
+    simulator: object = None
+    extra: dict = field(default_factory=dict)
+
+
+def all_runs(target: str | None, outputs: Path) -> list[Path]:
+    """Every folder with a run.json: under ``outputs/{runs,multirun}`` (target None), the
+    folder ``target`` itself, or below it (a multirun folder). Sorted."""
+    if target is None:
+        roots = [outputs / "runs", outputs / "multirun"]
+    else:
+        root = training_runs.resolve_run(target)
+        if not root.is_dir():
+            raise EvalError(f"run folder {target} does not exist")
+        if (root / "run.json").exists():
+            return [root]
+        roots = [root]
+    return sorted({p.parent for r in roots if r.is_dir() for p in r.rglob("run.json")})
+
+
+# A truncated run (its step budget cut short by the time guard) is evaluated, and named so.
+EVALUATED = ("finished", "truncated")
+
+
+def find_runs(target: str | None, outputs: Path) -> list[Path]:
+    """The finished (or truncated) runs of :func:`all_runs`; a named target without one is an
+    error."""
+    runs = [p for p in all_runs(target, outputs) if training_runs.run_status(p) in EVALUATED]
+    if target is not None and not runs:
+        folder = training_runs.resolve_run(target)
+        status = training_runs.run_status(folder) if (folder / "run.json").exists() else None
+        info = training_runs.read_run_json(folder) if status == "running" else {}
+        if info.get("host") == socket.gethostname() and process_alive(info.get("pid")):
+            raise EvalError(
+                f"run {target} is still training (pid {info.get('pid')} on {info.get('host')}, "
+                f"started {info.get('started')}): its checkpoints are mid-run; evaluate it "
+                "when it has finished"
+            )
+        if status is not None:
+            raise EvalError(f"run {target} has not finished (run.json status is '{status}')")
+        raise EvalError(f"no finished run (run.json with status 'finished') under {target}")
+    return runs
+
+
+def run_name(run_dir: Path, outputs: Path) -> str:
+    if Path(run_dir).resolve() == training_runs.PRETRAINED_DIR.resolve():
+        return training_runs.PRETRAINED
+    try:
+        return run_dir.resolve().relative_to(outputs.resolve()).as_posix()
+    except ValueError:
+        return run_dir.as_posix()
+
+
+def run_info(run_dir: Path, outputs: Path) -> RunInfo:
+    """Experiment, overrides (space-joined) and seed from ``run.json``."""
+    info = training_runs.read_run_json(run_dir)
+    overrides = info.get("overrides")
+    if overrides is None and (run_dir / ".hydra" / "overrides.yaml").exists():
+        overrides = yaml.safe_load((run_dir / ".hydra" / "overrides.yaml").read_text())
+    if isinstance(overrides, list | tuple):
+        overrides = " ".join(str(o) for o in overrides)
+    name = run_name(run_dir, outputs)
+    if info.get("status") == "truncated":
+        name += " (truncated)"
+    return RunInfo(
+        name=name,
+        experiment=str(info.get("experiment")),
+        overrides=overrides or "",
+        seed=info.get("seed"),
+        run_dir=run_dir,
+    )
+
+
+def dataset_of(run_cfg) -> Path:
+    """The dataset folder a run was trained on (``datamodule.data_dir`` or ``data.dir``)."""
+    for key in ("datamodule.data_dir", "data.dir"):
+        try:
+            value = OmegaConf.select(run_cfg, key, throw_on_missing=False)
+        except Exception:  # an interpolation that only resolves inside Hydra
+            value = None
+        if value:
+            return Path(str(value))
+    raise EvalError("the run's config names no dataset (datamodule.data_dir); pass dataset=PATH")
+
+
+def load_splits(data_dir: Path, max_frames: int | None) -> dict[str, list[Trajectory]]:
+    """The test and OOD trajectories of a dataset folder, cut to ``max_frames``."""
+    if not data_dir.is_dir():
+        raise EvalError(f"dataset folder {data_dir} does not exist (make data first)")
+    out = {}
+    for split in SPLITS:
+        path = data_dir / f"{split}.h5"
+        out[split] = [t.truncated(max_frames) for t in read_split(path)] if path.exists() else []
+    if not any(out.values()):
+        raise EvalError(f"dataset folder {data_dir} has neither test.h5 nor ood.h5")
+    return out
+
+
+def references(dataset: Path, several: bool) -> list[RunInfo]:
+    """ground_truth, static and gravity_only on one dataset (suffixed when there are several)."""
+    suffix = f"[{dataset.name}]" if several else ""
+    sims = {
+        "ground_truth": None,
+        "static": StaticSimulator(),
+        "gravity_only": GravityOnlySimulator(),
+    }
+    return [
+        RunInfo(
+            name=k + suffix,
+            experiment=k,
+            overrides=f"dataset={dataset}",
+            dataset=dataset,
+            simulator=s,
+        )
+        for k, s in sims.items()
+    ]
+
+
+def load_runs(cfg: DictConfig, outputs: Path) -> tuple[list[RunInfo], list[str]]:
+    """Every finished run with its simulator and dataset, and one note per run left out
+    (not finished, or failing to load: one bad run must not stop the report of the others)."""
+    run_dirs = find_runs(cfg.runs, outputs)
+    skipped = [_not_evaluated(p, outputs) for p in all_runs(cfg.runs, outputs) if p not in run_dirs]
+    infos = []
+    for run_dir in run_dirs:
+        info = run_info(run_dir, outputs)
+        try:
+            info.simulator, run_cfg, _ = training_runs.load_run(run_dir)
+            info.simulator.eval()
+            info.dataset = Path(cfg.dataset) if cfg.dataset else dataset_of(run_cfg)
+        except Exception as e:
+            note = f"{type(e).__name__}: {e}".splitlines()[0]
+            print(f"warning: skipping run {info.name}: {note}", file=sys.stderr)
+            skipped.append(f"`{info.name}`: {note}")
+            continue
+        infos.append(info)
+    return infos, skipped
+
+
+def _not_evaluated(run_dir: Path, outputs: Path) -> str:
+    """The note of a run left out: its status and, if it failed or stopped, why."""
+    status = training_runs.run_status(run_dir)
+    error = training_runs.read_run_json(run_dir).get("error") if status != "unreadable" else None
+    return f"`{run_name(run_dir, outputs)}`: status {status}" + (f" ({error})" if error else "")
+
+
+def pick_video_run(runs: list[RunInfo], wanted: str | None) -> RunInfo | None:
+    """The run whose OOD rollouts are filmed: ``wanted`` (a name), else the first baseline."""
+    learned = [r for r in runs if r.run_dir is not None]
+    if wanted:
+        match = [r for r in learned if r.name == wanted or str(r.run_dir) == wanted]
+        if not match:
+            raise EvalError(f"video_run {wanted} is not among the evaluated runs")
+        return match[0]
+    order = sorted(
+        learned,
+        key=lambda r: (
+            r.experiment != "baseline",
+            config_label(r.overrides) != "default",
+            r.seed if r.seed is not None else 0,
+            r.name,
+        ),
+    )
+    return order[0] if order else None
+
+
+def load_datasets(runs: list[RunInfo], max_frames: int | None, skipped: list[str]):
+    """The datasets of the runs; runs whose dataset cannot be read are left out with a note
+    (an error when that leaves none). Returns ``({folder: splits}, runs kept)``."""
+    data, errors = {}, {}
+    for folder in dict.fromkeys(r.dataset for r in runs):
+        try:
+            data[folder] = load_splits(folder, max_frames)
+        except (EvalError, DatasetError) as e:
+            errors[folder] = str(e)
+    if errors and not data:
+        raise EvalError(next(iter(errors.values())))
+    for r in runs:
+        if r.dataset in errors:
+            print(f"warning: skipping run {r.name}: {errors[r.dataset]}", file=sys.stderr)
+            skipped.append(f"`{r.name}`: {errors[r.dataset]}")
+    return data, [r for r in runs if r.dataset in data]
+
+
+def constrained_variants(runs: list[RunInfo], iterations: int) -> list[RunInfo]:
+    """Each learned run again, followed by ``iterations`` of the constraint stage
+    (:mod:`physgnn.models.constrained`), as its own variant: the name and experiment end in
+    ``+ constraints`` so that every table shows it beside the pure model. None for 0."""
+    if iterations < 1:
+        return []
+    return [
+        dataclasses.replace(
+            run,
+            name=f"{run.name} + constraints",
+            experiment=f"{run.experiment} + constraints",
+            simulator=ConstrainedSimulator(run.simulator, iterations),
+            extra={**run.extra, "constraints": iterations},
+        )
+        for run in runs
+        if run.run_dir is not None
+    ]

@@ -1,0 +1,192 @@
+"""Files written atomically (a ``<name>.tmp`` beside the target, flushed to disk, then renamed
+over it), so an interrupted run or a full disk never leaves a half file under the real name;
+CSV tables with typed reads; output folders that physgnn may write into (:func:`claim_folder`).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import socket
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from datetime import datetime
+from pathlib import Path
+
+from physgnn import __version__
+from physgnn.errors import PhysgnnError
+
+# Written into every output folder physgnn makes (simulate's out, eval's report_dir): the
+# proof that physgnn may write over the files it holds.
+OUTPUT_MARKER = "physgnn-output.json"
+
+
+@contextmanager
+def atomic_path(path: str | Path, keep_suffix: bool = False) -> Iterator[Path]:
+    """Yield ``<path>.tmp`` to write; on success it is flushed to disk and replaces ``path``
+    (folders are made), on an error (a full disk included) it is removed and ``path`` is left
+    as it was. ``keep_suffix``: ``<stem>.tmp<suffix>`` instead, for writers that choose the
+    format by the suffix."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    name = f"{path.stem}.tmp{path.suffix}" if keep_suffix else path.name + ".tmp"
+    tmp = path.with_name(name)
+    try:
+        yield tmp
+        _sync(tmp)
+        os.replace(tmp, path)
+        _sync(path.parent)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _sync(path: Path) -> None:
+    """Flush ``path`` (a file, or a folder's entries) to disk."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def portable(path: str | Path) -> str:
+    """``path`` as committed files show it: relative to the working folder when it lies below
+    it (``outputs/study/...``, not a machine's absolute path), else unchanged."""
+    path = Path(path)
+    try:
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+    return Path(path)
+
+
+def _finite(x):
+    """``x`` with every non-finite float replaced by None (JSON has no NaN or inf)."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_finite(v) for v in x]
+    return x
+
+
+def write_json(path: str | Path, data) -> Path:
+    """``data`` as indented JSON (non-finite floats as null), written atomically."""
+    return write_text(path, json.dumps(_finite(data), indent=2) + "\n")
+
+
+def write_rows(path: str | Path, rows: list[dict], columns: list[str]) -> Path:
+    """Write ``rows`` (dicts keyed by ``columns``; None → empty cell) to ``path`` atomically."""
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=columns)
+        w.writeheader()
+        for row in rows:
+            w.writerow({k: "" if row.get(k) is None else row[k] for k in columns})
+    return Path(path)
+
+
+def read_rows(path: str | Path, floats: Iterable[str], ints: Iterable[str]) -> list[dict]:
+    """Rows of a CSV with the ``floats`` and ``ints`` columns parsed (empty cell → None)."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    for row in rows:
+        for k in floats:
+            row[k] = float(row[k]) if row.get(k) not in (None, "") else None
+        for k in ints:
+            row[k] = int(float(row[k])) if row.get(k) not in (None, "") else None
+    return rows
+
+
+def claim_folder(folder: str | Path, key: str, overwrite: bool = False, ours: bool = False) -> Path:
+    """Make ``folder`` (if needed) for physgnn to write into, once it may: an absent or empty
+    folder, one marked with :data:`OUTPUT_MARKER` or ``ours`` (the command's default folder
+    under ``paths.outputs``) gets the marker; any other folder is written into only with
+    ``overwrite`` (and stays unmarked), else :class:`FileExistsError`, one line naming ``key``,
+    the folder and the fix."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise FileExistsError(f"{key} {folder} is a file: choose another {key}")
+    mine = ours or not folder.exists() or (folder / OUTPUT_MARKER).is_file()
+    if not mine and any(folder.iterdir()):
+        if overwrite:
+            return folder
+        raise FileExistsError(
+            f"{key} {folder} is a folder with files that physgnn did not write (no "
+            f"{OUTPUT_MARKER}): choose another {key}, or pass overwrite=true to write over them"
+        )
+    write_json(folder / OUTPUT_MARKER, {"physgnn_version": __version__})
+    return folder
+
+
+class InUseError(PhysgnnError, RuntimeError):
+    """Another process writes where this one would (one line naming it and the way out)."""
+
+
+def process_alive(pid) -> bool:
+    """Whether process ``pid`` of this host is alive (and not this process)."""
+    if not isinstance(pid, int) or pid <= 0 or pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+@contextmanager
+def exclusive(lock: str | Path, what: str, way_out: str) -> Iterator[Path]:
+    """Hold the file ``lock`` while the block runs: it is created exclusively and names this
+    process (pid, host, since when). A live holder makes :class:`InUseError` (``what`` is in
+    use ..., then ``way_out``); the lock of a dead process of this host is taken over. The
+    lock is removed at the end, whatever happened."""
+    lock = Path(lock)
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    mine = {"pid": os.getpid(), "host": socket.gethostname(),
+            "since": datetime.now().isoformat(timespec="seconds")}  # fmt: skip
+    for _ in range(3):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            _refuse_or_clear(lock, what, way_out)
+            continue
+        with os.fdopen(fd, "w") as f:
+            json.dump(mine, f)
+        break
+    else:
+        raise InUseError(f"{what} is in use (lock {lock} keeps changing hands): {way_out}")
+    try:
+        yield lock
+    finally:
+        if _holder(lock).get("pid") == mine["pid"]:
+            lock.unlink(missing_ok=True)
+
+
+def _holder(lock: Path) -> dict:
+    try:
+        return json.loads(lock.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _refuse_or_clear(lock: Path, what: str, way_out: str) -> None:
+    """A lock held by a live process (or one of another host) is refused; a dead one's, or
+    an unreadable one (its writer died at once), is removed."""
+    holder = _holder(lock)
+    here = holder.get("host") == socket.gethostname()
+    if holder and (not here or process_alive(holder.get("pid"))):
+        raise InUseError(
+            f"{what} is in use: pid {holder.get('pid')} on {holder.get('host')} writes there "
+            f"since {holder.get('since')} (lock {lock}): {way_out}"
+            + ("" if here else f"; remove {lock} if that process is gone")
+        )
+    lock.unlink(missing_ok=True)

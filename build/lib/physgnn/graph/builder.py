@@ -1,0 +1,245 @@
+"""Sphere–sphere (pp) and surface–sphere (ps) edges with their features, rebuilt every step.
+
+Connectivity, with ``gap_ij = |p_i − p_j| − r_i − r_j`` and a per-sphere
+motion allowance ``a_i``:
+
+- ``epsilon``: ``a_i = 0``
+- ``vmax``:    ``a_i = factor · V_max · dt``, V_max the largest speed in the sphere's scene
+- ``vi``:      ``a_i = factor · |v_i| · dt``
+
+pp edge iff ``gap_ij ≤ a_i + a_j + ε``; ps edge to a bounded non-ground plane iff
+(distance from the centre to the closest point of the rectangle) ``− r_i ≤ a_i + ε`` and the
+centre is not more than ``r_i`` behind the plane (planes are one-sided: a sphere wholly behind
+one has tunnelled and feels nothing); plus one edge from every sphere's ground plane. The
+rules are evaluated in float64 (boundary included); the features are in the input dtype and
+in raw physical units.
+
+**Features see no absolute position.** A ps edge carries the offset ``δ`` from the closest
+point of the plane (the rectangle for bounded planes, the infinite plane for the ground) to
+the sphere's centre, and the signed height ``h = δ·n_s``, both clipped at the sphere's reach
+``ρ_i = r_i + a_i + ε`` plus ``clip_margin``: a sphere farther than the reach cannot touch the
+plane before the next frame, and the clipped ground edge of a sphere in free flight is the
+same at 10, 100 or 1 000 m (so gravity does not grow with altitude).
+
+Effects (``state.effects``): no pp edges without ``sphere_contact``; no wall/static edges
+without ``surface_contact``; the ground edge exists when ``gravity`` or ``surface_contact``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import torch
+
+from physgnn.data.state import host_sizes, scene_of_sphere
+from physgnn.graph.candidates import compact, scene_pairs, scene_plane_pairs
+from physgnn.graph.neighbors import BACKENDS, radius_pairs
+from physgnn.physics.geometry import rectangle_offset
+from physgnn.physics.scene import EFFECT_NAMES, GROUND
+
+CONNECTIVITIES = ("epsilon", "vmax", "vi")
+_GRAVITY = EFFECT_NAMES.index("gravity")
+_SPHERE_CONTACT = EFFECT_NAMES.index("sphere_contact")
+_SURFACE_CONTACT = EFFECT_NAMES.index("surface_contact")
+# Up to this many same-scene pairs (or this many per sphere) the pp candidates are all pairs of
+# each scene, written down with no read-back; beyond it a radius search proposes them.
+ALL_PAIRS_MAX = 1 << 18
+ALL_PAIRS_PER_SPHERE = 64
+
+
+@dataclass
+class Graph:
+    """Edges of a batch of scenes (E pp edges, F ps edges; PyG flow source → target).
+
+    - ``pp_index [2, E]``: row 0 source j, row 1 target i, *paired layout*: columns
+      ``[0, E/2)`` hold each unordered pair once (source < target, sorted), columns
+      ``[E/2, E)`` the same pairs reversed, so the reverse of edge e is edge ``e + E/2``.
+    - ``pp_attr [E, 4]``: ``[p_i − p_j, |p_i − p_j|]`` (i the target).
+    - ``ps_index [2, F]``: row 0 plane index into ``state.planes``, row 1 sphere index,
+      sorted by (plane, sphere).
+    - ``ps_attr [F, 10]``: ``[v_i, n_s, clip(δ_is), clip(h_is)]``: ``δ_is`` the offset from the
+      closest point of plane s to sphere i, ``h_is = δ_is·n_s`` (signed), clipped at ``ρ_i``.
+    - ``allowance [N]`` (float64): the motion allowance ``a_i`` the edges were chosen with.
+    """
+
+    pp_index: torch.Tensor
+    pp_attr: torch.Tensor
+    ps_index: torch.Tensor
+    ps_attr: torch.Tensor
+    allowance: torch.Tensor
+
+    @property
+    def num_pairs(self) -> int:
+        """Number of unordered sphere pairs (``E / 2``)."""
+        return self.pp_index.shape[1] // 2
+
+
+class GraphBuilder:
+    """Builds a :class:`Graph` from a ``SceneState`` (one scene or a PyG ``Batch`` of them).
+
+    ``epsilon`` is a length in metres; ``factor`` scales the velocity terms; ``backend`` is
+    the :func:`physgnn.graph.neighbors.radius_pairs` backend. ``clip_margin`` (metres) moves
+    the clip of the ps features beyond the reach, to ``ρ_i + clip_margin``: with 0, a sphere at
+    rest on the ground (height r) and one at rest high above it (height clipped at r + ε) look
+    almost alike to the network, though only the second falls.
+    """
+
+    def __init__(
+        self,
+        connectivity: str = "vi",
+        epsilon: float = 0.01,
+        factor: float = 1.0,
+        backend: str = "auto",
+        clip_margin: float = 0.0,
+    ):
+        if connectivity not in CONNECTIVITIES:
+            raise ValueError(
+                f"unknown connectivity '{connectivity}'; choose one of {list(CONNECTIVITIES)}"
+            )
+        if not 0 <= float(epsilon) < float("inf"):
+            raise ValueError(f"epsilon must be finite and >= 0, got {epsilon}")
+        if not 0 <= float(factor) < float("inf"):
+            raise ValueError(f"factor must be finite and >= 0, got {factor}")
+        if not 0 <= float(clip_margin) < float("inf"):
+            raise ValueError(f"clip_margin must be finite and >= 0, got {clip_margin}")
+        if backend not in BACKENDS:
+            raise ValueError(
+                f"unknown neighbour backend '{backend}'; choose one of {list(BACKENDS)}"
+            )
+        self.connectivity = connectivity
+        self.epsilon = float(epsilon)
+        self.factor = float(factor)
+        self.clip_margin = float(clip_margin)
+        self.backend = backend
+
+    def __call__(self, state) -> Graph:
+        batch = scene_of_sphere(state)
+        allowance = self.allowance(state)
+        spheres, planes = host_sizes(state)
+        src, dst = self._pair_candidates(state, batch, allowance, spheres)
+        pp_mask = self._pp_rule(state, batch, allowance, src, dst)
+        plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long())
+        ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere)
+        n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
+        keep = compact(pp_mask, n_pp)
+        pp_index, pp_attr = _paired(state.pos, src[keep], dst[keep])
+        keep = compact(ps_mask, n_ps)
+        ps_index = torch.stack([plane[keep], sphere[keep]])
+        if checks_on():
+            _check_ground(state, batch)
+        clip = self.reach(state, allowance) + self.clip_margin
+        ps_attr = _ps_attr(state, ps_index, offset[keep], clip)
+        return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance)
+
+    def allowance(self, state, moving: torch.Tensor | None = None) -> torch.Tensor:
+        """Motion allowance ``a_i`` of every sphere, float64 ``[N]``; ``moving [N]`` (bool):
+        only these spheres move, the others count with speed 0 (sleeping spheres)."""
+        batch = scene_of_sphere(state)
+        speed = _velocity(state).to(torch.float64).norm(dim=-1)
+        if self.connectivity == "epsilon":
+            return torch.zeros_like(speed)
+        if moving is not None:
+            speed = torch.where(moving, speed, 0.0)
+        if self.connectivity == "vmax":
+            vmax = speed.new_zeros(state.dt.shape[0]).scatter_reduce(0, batch, speed, "amax")
+            speed = vmax[batch]
+        return self.factor * speed * state.dt.to(torch.float64)[batch]
+
+    def pair_within_reach(self, state, i, j, allowance: torch.Tensor) -> torch.Tensor:
+        """``[P]`` bool: the pp rule ``gap_ij ≤ a_i + a_j + ε`` (same scene) for pairs
+        ``(i, j)``, float64."""
+        batch = scene_of_sphere(state)
+        p, r = state.pos.to(torch.float64), state.radius.to(torch.float64)
+        gap = (p[i] - p[j]).norm(dim=-1) - r[i] - r[j]
+        return (batch[i] == batch[j]) & (gap <= allowance[i] + allowance[j] + self.epsilon)
+
+    def _pair_candidates(self, state, batch, allowance, spheres) -> tuple[torch.Tensor, ...]:
+        """Candidate pairs ``(i, j)``, ``i < j``, sorted: every pair of each scene while there
+        are at most ``ALL_PAIRS_MAX`` of them (or ``ALL_PAIRS_PER_SPHERE`` per sphere), else
+        a radius search (:func:`~physgnn.graph.neighbors.radius_pairs`, reads sizes back)."""
+        n = state.pos.shape[0]
+        total = sum(c * (c - 1) // 2 for c in spheres)
+        if total <= max(ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE * n):
+            return scene_pairs(spheres, state.pos.device)
+        radius = state.radius.to(torch.float64)
+        reach = 2 * float(radius.max()) + 2 * float(allowance.max()) + self.epsilon
+        pairs = radius_pairs(state.pos, reach * (1 + 1e-9), batch, self.backend)
+        return pairs[0], pairs[1]
+
+    def _pp_rule(self, state, batch, allowance, src, dst) -> torch.Tensor:
+        """``[P]`` bool: pairs of scenes with sphere contact that satisfy the pp rule."""
+        on = state.effects[batch[src], _SPHERE_CONTACT]
+        return on & self.pair_within_reach(state, src, dst, allowance)
+
+    def reach(self, state, allowance: torch.Tensor) -> torch.Tensor:
+        """``ρ_i = r_i + a_i + ε``, float64 ``[N]``: the farthest plane a sphere may touch."""
+        return state.radius.to(torch.float64) + allowance + self.epsilon
+
+    def _ps_rule(self, state, batch, allowance, plane, sphere) -> tuple[torch.Tensor, ...]:
+        """``([Q] bool, offsets [Q, 3] float64)`` for (plane, sphere) candidates of one scene
+        (the offsets from each rectangle, kept for the edge features): the ground of a scene with
+        gravity or surface contact; a wall or static plane of a scene with surface contact
+        whose rectangle is within ``a_i + ε`` of the sphere's surface and which the centre is
+        not more than ``r_i`` behind (planes are one-sided)."""
+        effects = state.effects[batch[sphere]]
+        ground = state.plane_kind[plane] == GROUND
+        offset = rectangle_offset(state.pos[sphere], state.planes[plane])
+        radius = state.radius.to(torch.float64)[sphere]
+        height = (offset * state.planes[plane, 3:6].to(torch.float64)).sum(-1)
+        near = offset.norm(dim=-1) - radius <= allowance[sphere] + self.epsilon
+        bounded = ~ground & effects[:, _SURFACE_CONTACT] & near & (height > -radius)
+        keep = (ground & (effects[:, _GRAVITY] | effects[:, _SURFACE_CONTACT])) | bounded
+        return keep, offset
+
+
+def build_graph(state, cfg: Mapping) -> Graph:
+    """``GraphBuilder(**cfg)(state)``: cfg holds the builder's arguments (config keys)."""
+    return GraphBuilder(**dict(cfg))(state)
+
+
+def _velocity(state) -> torch.Tensor:
+    """Current velocity ``v_t``, ``[N, 3]`` (``vel`` is ``[N, H+1, 3]``, latest first)."""
+    return state.vel[:, 0] if state.vel.dim() == 3 else state.vel
+
+
+def _paired(pos, src, dst) -> tuple[torch.Tensor, torch.Tensor]:
+    """pp index ``[2, E]`` in the paired layout and its features ``[E, 4]`` (class Graph)."""
+    rel = pos[dst] - pos[src]
+    attr = torch.cat([rel, torch.linalg.vector_norm(rel, dim=-1, keepdim=True)], dim=-1)
+    index = torch.cat([torch.stack([src, dst]), torch.stack([dst, src])], dim=1)
+    rev = torch.cat([-attr[:, :3], attr[:, 3:]], dim=-1)
+    return index, torch.cat([attr, rev], dim=0)
+
+
+def checks_on() -> bool:
+    """Checks that read values back to the host (``PHYSGNN_CHECKS=1``; off by default, so
+    that a GPU step never waits for them)."""
+    return os.environ.get("PHYSGNN_CHECKS", "") == "1"
+
+
+def _check_ground(state, batch) -> None:
+    """Every scene with a sphere that needs a ground edge has exactly one ground plane."""
+    effects = state.effects
+    grounds = (state.plane_kind == GROUND).long()
+    per_scene = torch.zeros_like(effects[:, 0], dtype=torch.long)
+    per_scene.scatter_add_(0, state.plane_batch.long(), grounds)
+    needed = torch.zeros_like(effects[:, 0]).index_fill_(0, batch, True)
+    needed &= effects[:, _GRAVITY] | effects[:, _SURFACE_CONTACT]
+    bad = (needed & (per_scene != 1)).nonzero().flatten().tolist()
+    if bad:
+        raise ValueError(f"scene {bad[0]} of the batch must have exactly one ground plane (kind 0)")
+
+
+def _ps_attr(state, index: torch.Tensor, offset: torch.Tensor, reach: torch.Tensor) -> torch.Tensor:
+    """``[v_i, n_s, clip(δ_is), clip(h_is)]`` of ps edges, ``[F, 10]`` (see the module doc);
+    ``offset [F, 3]`` (float64) is δ before the clip, ``reach [N]`` float64 is ``ρ_i``."""
+    planes = state.planes[index[0]].to(torch.float64)
+    dist = offset.norm(dim=-1, keepdim=True)
+    rho = reach[index[1], None]
+    offset = offset * torch.where(dist > rho, rho / dist, torch.ones_like(dist))
+    height = (offset * planes[:, 3:6]).sum(-1, keepdim=True)
+    dtype = state.pos.dtype
+    v = _velocity(state)[index[1]]
+    return torch.cat([v, planes[:, 3:6].to(dtype), offset.to(dtype), height.to(dtype)], dim=-1)

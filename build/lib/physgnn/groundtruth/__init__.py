@@ -1,0 +1,3 @@
+"""Ground truth: scene families, the pybullet engine, dataset generation and the cached hard
+scenes.
+"""

@@ -1,0 +1,301 @@
+"""Scenes as data: the YAML scene format, read and written.
+
+A scene file says everything a :class:`~physgnn.physics.scene.Scene` holds (schema:
+:mod:`physgnn.groundtruth.scene_schema`, ``docs/scene.schema.json``; README "Scene files")::
+
+    name: throw
+    dt: 0.1                 # frame interval (s)
+    frames: 60
+    effects: {rotation: true}           # omitted effects are on
+    materials:
+      rubber: {restitution: 0.8, lateral_friction: 0.5}
+    spheres:
+      - {radius: 0.5, density: 1000, material: rubber, position: [0, 0, 3],
+         velocity: [4, 0, 2], angular_velocity: [0, 0, 1], orientation: [1, 0, 0, 0]}
+    planes:                 # bounded rectangles; the ground z = 0 is always there
+      - {kind: static, centre: [5, 0, 1], normal: [-0.5, 0, 0.87], reference: [0, 1, 0],
+         half_lengths: [2, 3]}
+
+Numbers are YAML 1.2's (``1e1``, ``1e+01`` and ``.5`` are floats, not strings as in YAML 1.1).
+:func:`load_scene` fails with one line naming the file, the place and the problem (unknown
+key, wrong type, overlapping spheres, a zero normal, a sphere inside a plane, ...).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from physgnn import SCENES_DIR
+from physgnn.files import write_text
+from physgnn.groundtruth.layouts import check_clear_of_planes, check_no_overlap
+from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
+from physgnn.physics.scene import (
+    GRAVITY,
+    GROUND,
+    PLANE_KINDS,
+    Effects,
+    Material,
+    Scene,
+    SceneError,
+    ground_plane,
+)
+
+DEFAULT_MATERIAL = "default"
+
+
+class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
+    """``yaml.safe_load`` (libyaml's parser where installed) that reads every number a person
+    writes as a number: YAML 1.1 (PyYAML) takes an exponent without a dot or without a sign
+    (``1e+01``, ``1e1``, ``1.0e5``) for a string; YAML 1.2 and JSON read a float, and so does
+    this loader."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
+
+
+def _keys(where: str, d, schema: dict) -> dict:
+    """``d`` as a dict whose keys are all known to ``schema`` and whose required keys exist."""
+    if not isinstance(d, dict):
+        raise SceneError(f"{where}: expected a mapping, got {type(d).__name__}")
+    known = schema["properties"]
+    for key in d:
+        if key not in known:
+            raise SceneError(f"{where}: unknown key '{key}'; known: {', '.join(known)}")
+    for key in schema.get("required", []):
+        if key not in d:
+            raise SceneError(f"{where}: missing key '{key}'")
+    return d
+
+
+def _number(where: str, x, positive: bool = False) -> float:
+    if isinstance(x, bool) or not isinstance(x, int | float) or not np.isfinite(x):
+        raise SceneError(f"{where}: expected a number, got {x!r}")
+    if positive and x <= 0:
+        raise SceneError(f"{where}: must be > 0, got {x}")
+    return float(x)
+
+
+def _vector(where: str, x, n: int) -> np.ndarray:
+    if not isinstance(x, list | tuple) or len(x) != n:
+        raise SceneError(f"{where}: expected a list of {n} numbers, got {x!r}")
+    return np.array([_number(where, v) for v in x], dtype=np.float64)
+
+
+def _unit(where: str, x, n: int) -> np.ndarray:
+    v = _vector(where, x, n)
+    norm = float(np.linalg.norm(v))
+    if norm < 1e-9:
+        raise SceneError(f"{where}: has length 0 (needs a direction)")
+    return v / norm
+
+
+def _materials(where: str, d) -> tuple[list[str], np.ndarray]:
+    if d is None:
+        return [DEFAULT_MATERIAL], Material().as_array()[None]
+    if not isinstance(d, dict) or not d:
+        raise SceneError(f"{where}: expected a non-empty mapping of name -> parameters")
+    rows = []
+    for name, m in d.items():
+        w = f"{where}.{name}"
+        m = _keys(w, m or {}, MATERIAL)
+        values = {k: _number(f"{w}.{k}", v) for k, v in m.items()}
+        if any(v < 0 for v in values.values()) or values.get("restitution", 0) > 1:
+            raise SceneError(f"{w}: coefficients must be >= 0 and restitution <= 1")
+        rows.append(Material(**values).as_array())
+    return [str(k) for k in d], np.stack(rows)
+
+
+def _sphere(where: str, d, names: list[str]) -> dict:
+    d = _keys(where, d, SPHERE)
+    r = _number(f"{where}.radius", d["radius"], positive=True)
+    if "mass" in d and "density" in d:
+        raise SceneError(f"{where}: give mass or density, not both")
+    if "mass" in d:
+        mass = _number(f"{where}.mass", d["mass"], positive=True)
+    else:
+        mass = _number(f"{where}.density", d.get("density", 1000.0), True) * 4 / 3 * np.pi * r**3
+    material = d.get("material", names[0])
+    if material not in names:
+        raise SceneError(f"{where}.material: unknown material '{material}'; known: {names}")
+    zero = [0.0, 0.0, 0.0]
+    return dict(
+        radius=r,
+        mass=mass,
+        material=names.index(material),
+        pos=_vector(f"{where}.position", d["position"], 3),
+        quat=_unit(f"{where}.orientation", d.get("orientation", [1.0, 0, 0, 0]), 4),
+        vel=_vector(f"{where}.velocity", d.get("velocity", zero), 3),
+        angvel=_vector(f"{where}.angular_velocity", d.get("angular_velocity", zero), 3),
+    )
+
+
+def _plane(where: str, d) -> tuple[np.ndarray, int]:
+    d = _keys(where, d, PLANE)
+    kind = d.get("kind", "static")
+    if kind not in ("wall", "static"):
+        raise SceneError(f"{where}.kind: expected 'wall' or 'static', got {kind!r}")
+    n = _unit(f"{where}.normal", d["normal"], 3)
+    ref = _unit(f"{where}.reference", d["reference"], 3)
+    if abs(float(n @ ref)) > 1e-3:
+        raise SceneError(
+            f"{where}: reference {ref.round(3).tolist()} is not perpendicular to normal"
+        )
+    ref = ref - (n @ ref) * n
+    half = _vector(f"{where}.half_lengths", d["half_lengths"], 2)
+    if np.any(half <= 0):
+        raise SceneError(f"{where}.half_lengths: must be > 0, got {half.tolist()}")
+    centre = _vector(f"{where}.centre", d["centre"], 3)
+    row = np.concatenate([centre, n, ref / np.linalg.norm(ref), half])
+    return row, PLANE_KINDS.index(kind)
+
+
+def check_above_ground(where: str, pos: np.ndarray, radius: np.ndarray) -> None:
+    below = pos[:, 2] - radius < -1e-9
+    if np.any(below):
+        i = int(np.argmax(below))
+        raise SceneError(f"{where}: spheres[{i}] reaches below the ground z = 0 (z - r < 0)")
+
+
+def scene_from_dict(d, where: str = "scene") -> Scene:
+    """A validated :class:`Scene` from a parsed scene file; ``where`` prefixes errors."""
+    d = _keys(where, d, SCHEMA)
+    names, materials = _materials(f"{where}: materials", d.get("materials"))
+    spheres = d["spheres"]
+    if not isinstance(spheres, list) or not spheres:
+        raise SceneError(f"{where}: spheres must be a non-empty list")
+    rows = [_sphere(f"{where}: spheres[{i}]", s, names) for i, s in enumerate(spheres)]
+    planes = [_plane(f"{where}: planes[{i}]", p) for i, p in enumerate(d.get("planes") or [])]
+    col = lambda k: np.stack([np.asarray(r[k]) for r in rows])  # noqa: E731
+    pos, radius = col("pos"), col("radius")
+    check_no_overlap(where, pos, radius)
+    check_above_ground(where, pos, radius)
+    plane_rows = np.stack([ground_plane().astype(np.float64), *[p for p, _ in planes]])
+    try:
+        check_clear_of_planes(where, pos, radius, plane_rows, depth=1.0)  # engine's solid
+    except SceneError as e:
+        raise SceneError(str(e).replace(f"scene '{where}'", where)) from None
+    try:
+        effects = Effects.from_dict(d.get("effects"))
+    except (SceneError, TypeError) as e:
+        raise SceneError(f"{where}: effects: {e}") from None
+    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
+    scene = Scene(
+        name=str(d.get("name", "scene")),
+        radius=f32(radius),
+        mass=f32(col("mass")),
+        material=col("material").astype(np.int64),
+        pos=f32(pos),
+        quat=f32(col("quat")),
+        vel=f32(col("vel")),
+        angvel=f32(col("angvel")),
+        planes=f32(plane_rows),
+        plane_kind=np.array([GROUND] + [k for _, k in planes], dtype=np.int64),
+        materials=f32(materials),
+        dt=_number(f"{where}: dt", d.get("dt", 0.1), positive=True),
+        n_frames=int(_number(f"{where}: frames", d.get("frames", 100), positive=True)),
+        effects=effects,
+        gravity=tuple(_vector(f"{where}: gravity", d.get("gravity", list(GRAVITY)), 3)),
+    )
+    try:
+        return scene.validate()
+    except SceneError as e:
+        raise SceneError(f"{where}: {e}") from None
+
+
+def scene_file(path: str | Path) -> Path:
+    """``path`` when it is a file, else the example scene of that name (``throw`` or
+    ``throw.yaml``: ``conf/scenes/throw.yaml``, which the installed package carries too)."""
+    path = Path(path)
+    if path.is_file():
+        return path
+    example = Path(SCENES_DIR) / f"{path.stem}.yaml"
+    if path.parent == Path(".") and example.is_file():
+        return example
+    names = ", ".join(sorted(p.stem for p in Path(SCENES_DIR).glob("*.yaml")))
+    raise SceneError(f"scene file {path} does not exist; give a YAML scene file or an example "
+                     f"scene's name ({names})")  # fmt: skip
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and check a YAML scene file (or an example scene's name, :func:`scene_file`);
+    one-line :class:`SceneError` on any problem."""
+    path = scene_file(path)
+    try:
+        d = yaml.load(path.read_text(), Loader=_Loader)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        at = f" (line {mark.line + 1})" if mark else ""
+        raise SceneError(f"{path}: not valid YAML{at}: {getattr(e, 'problem', e)}") from None
+    scene = scene_from_dict(d, where=str(path))
+    if "name" not in d:
+        scene.name = path.stem
+    return scene
+
+
+def _list(a) -> list:
+    return [round(float(x), 7) for x in np.asarray(a).ravel()]
+
+
+def scene_to_dict(scene: Scene) -> dict:
+    """The scene-file form of ``scene`` (the ground, row 0, is implicit)."""
+    keys = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
+    mats = {f"m{k}": dict(zip(keys, _list(m), strict=True)) for k, m in enumerate(scene.materials)}
+    spheres = [
+        {
+            "radius": float(round(float(scene.radius[i]), 7)),
+            "mass": float(round(float(scene.mass[i]), 7)),
+            "material": f"m{int(scene.material[i])}",
+            "position": _list(scene.pos[i]),
+            "orientation": _list(scene.quat[i]),
+            "velocity": _list(scene.vel[i]),
+            "angular_velocity": _list(scene.angvel[i]),
+        }
+        for i in range(scene.n_spheres)
+    ]
+    planes = [
+        {
+            "kind": PLANE_KINDS[int(k)],
+            "centre": _list(row[:3]),
+            "normal": _list(row[3:6]),
+            "reference": _list(row[6:9]),
+            "half_lengths": _list(row[9:11]),
+        }
+        for row, k in zip(scene.planes, scene.plane_kind, strict=True)
+        if int(k) != GROUND
+    ]
+    return {
+        "name": scene.name,
+        "dt": float(scene.dt),
+        "frames": int(scene.n_frames),
+        "gravity": _list(scene.gravity),
+        "effects": scene.effects.as_dict(),
+        "materials": mats,
+        "spheres": spheres,
+        "planes": planes,
+    }
+
+
+class _Dumper(yaml.SafeDumper):
+    """Vectors ``[x, y, z]`` on one line."""
+
+
+def _represent_list(dumper, data):
+    flow = all(not isinstance(x, dict | list) for x in data)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
+
+
+_Dumper.add_representer(list, _represent_list)
+
+
+def write_scene(path: str | Path, scene: Scene) -> Path:
+    """Write ``scene`` as a YAML scene file (vectors on one line)."""
+    text = yaml.dump(scene_to_dict(scene), Dumper=_Dumper, sort_keys=False, width=100)
+    return write_text(path, text)

@@ -1,0 +1,114 @@
+"""Inputs that state the contact, material values, and gravity as a known prior: the parts of
+the default model's input that the report's model (``model=report``) does not have.
+
+**Contact features** (``contact_features=True``): the contact is stated instead of left for
+the network to compute. pp edges add the signed gap ``(|p_i − p_j| − r_i − r_j)/ℓ`` and the
+normal relative speed ``(v_i − v_j)·n̂_ij / σ_v`` (``n̂_ij`` from j to i; negative when the pair
+closes); ps edges add the clearance ``(h − r_i)/ℓ`` (h the clipped signed height of the edge
+features), the normal speed ``v_i·n_s / σ_v`` and the tangential speed
+``|v_i − (v_i·n_s) n_s| / σ_v`` (ℓ the model's ``length_scale``, σ_v the RMS of the velocity
+std). Both pair features are the same for an edge and its reverse, so the paired layout and
+the third law hold.
+
+**Material features** (``material_features=True``): each sphere's restitution, lateral
+friction and 100 × its rolling and spinning friction as node inputs: values, not ids, so a
+material no training scene had still means something.
+
+**Gravity prior** (``gravity_prior=True``): a sphere that cannot touch anything before the
+next frame moves ballistically, ``v_{t+1} = v_t + g·dt`` and ``ω_{t+1} = ω_t`` exactly,
+whatever its mass or size; the network's output is used only for spheres *in reach* of a
+contact: with a pp edge, an edge to a wall or static plane (the graph's own reach rule), a
+ground clearance ``h − r ≤ a_i + ε + g·dt²`` (the reach rule plus the fall that gravity adds
+within the frame), or a contact during the last frame, seen in the velocity history as
+``|v_t − v_{t−1} − g·dt| > RECENT_TOL`` (needs H ≥ 1). The last one matters: a sphere that
+bounced inside the last frame interval has a finite-difference velocity that is not its
+physical one (the mean over a frame that held the impact), and only the network can tell
+what comes next. The network so learns contacts only, and free flight is exact.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from physgnn.data.state import scene_of_sphere
+from physgnn.physics.energy import G
+from physgnn.physics.geometry import edge_plane_depth
+from physgnn.physics.scene import EFFECT_NAMES, GROUND
+
+GRAVITY = EFFECT_NAMES.index("gravity")
+PP_CONTACT, PS_CONTACT = 2, 3  # features the contact inputs add per pp / ps edge
+# m/s: a velocity change this far from g·dt within one frame was a contact (ballistic frames
+# of the data and of rollouts agree with g·dt to float rounding, about 1e-4 m/s)
+RECENT_TOL = 0.01
+# Scale of the material parameters (restitution, lateral, rolling, spinning friction) as node
+# inputs: rolling and spinning coefficients are ~0.01, the others ~0.5.
+MATERIAL_SCALE = (1.0, 1.0, 100.0, 100.0)
+
+
+def pp_contact(graph, state, length_scale, speed_scale) -> torch.Tensor:
+    """``[E, 2]``: gap / ℓ and ``(v_i − v_j)·n̂_ij`` / σ_v (i the target; a pair of coincident
+    spheres has ``n̂ = 0``)."""
+    src, dst = graph.pp_index
+    rel, dist = graph.pp_attr[:, :3], graph.pp_attr[:, 3:4]
+    gap = dist - (state.radius[src] + state.radius[dst])[:, None]
+    vel = state.vel[:, 0]
+    normal = rel / dist.clamp_min(1e-12)
+    closing = ((vel[dst] - vel[src]) * normal).sum(1, keepdim=True)
+    return torch.cat([gap / length_scale, closing / speed_scale], 1)
+
+
+def ps_contact(graph, state, length_scale, speed_scale) -> torch.Tensor:
+    """``[F, 3]``: clearance ``(h − r)`` / ℓ, ``v·n`` / σ_v and the tangential speed / σ_v."""
+    ps = graph.ps_attr
+    vel, normal, height = ps[:, :3], ps[:, 3:6], ps[:, 9:10]
+    clearance = height - state.radius[graph.ps_index[1]][:, None]
+    along = (vel * normal).sum(1, keepdim=True)
+    across = torch.linalg.vector_norm(vel - along * normal, dim=1, keepdim=True)
+    return torch.cat([clearance / length_scale, along / speed_scale, across / speed_scale], 1)
+
+
+def material_features(state) -> torch.Tensor:
+    """``[N, 4]``: the material rows scaled by :data:`MATERIAL_SCALE`."""
+    params = state.material_params
+    return params * params.new_tensor(MATERIAL_SCALE)
+
+
+def in_reach(state, graph, builder) -> torch.Tensor:
+    """``[N]`` bool: spheres that may touch something before the next frame or touched
+    something during the last one (module doc): a pp edge, a wall / static ps edge, the ground
+    within ``a_i + ε + g·dt²``, or :func:`recent_contact`. ``builder`` is
+    the :class:`~physgnn.graph.builder.GraphBuilder` that built ``graph`` (its ε)."""
+    n = state.pos.shape[0]
+    touched = state.pos.new_zeros(n)
+    touched.index_add_(0, graph.pp_index[1], state.pos.new_ones(graph.pp_index.shape[1]))
+    plane, sphere = graph.ps_index
+    bounded = state.plane_kind[plane] != GROUND
+    dt = state.scene_dt[sphere]
+    limit = graph.allowance[sphere] + builder.epsilon
+    # the edge features' heights are clipped: the clearance from the geometry itself
+    depth = edge_plane_depth(
+        state.pos, state.radius, state.planes, state.plane_kind, graph.ps_index
+    )
+    near = bounded | (-depth <= limit + G * dt * dt)
+    touched.index_add_(0, sphere, near.to(touched.dtype))
+    return (touched > 0) | recent_contact(state)
+
+
+def recent_contact(state) -> torch.Tensor:
+    """``[N]`` bool: spheres whose last frame was not ballistic,
+    ``|v_t − v_{t−1} − g·dt| > RECENT_TOL`` (all False without a velocity history)."""
+    if state.vel.dim() < 3 or state.vel.shape[1] < 2:
+        return torch.zeros(state.pos.shape[0], dtype=torch.bool, device=state.pos.device)
+    gravity = state.effects[scene_of_sphere(state), GRAVITY].to(state.pos.dtype)
+    change = state.vel[:, 0] - state.vel[:, 1]
+    change[:, 2] = change[:, 2] + G * state.scene_dt * gravity
+    return torch.linalg.vector_norm(change, dim=1) > RECENT_TOL
+
+
+def free_flight(state) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(v_t + g·dt, ω_t)`` ``[N, 3]`` each: the ballistic next velocities (g only in scenes
+    with gravity)."""
+    gravity = state.effects[scene_of_sphere(state), GRAVITY].to(state.pos.dtype)
+    vel = state.vel[:, 0].clone()
+    vel[:, 2] = vel[:, 2] - G * state.scene_dt * gravity
+    return vel, state.angvel[:, 0]

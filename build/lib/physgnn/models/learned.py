@@ -1,0 +1,296 @@
+"""The learned simulator: scene state → graph → network → next velocities (physical units).
+
+:class:`LearnedSimulator` joins the physics side (:mod:`physgnn.graph.builder`) and the network
+(:mod:`physgnn.nn.epd`) and owns every normalisation, so the rest of physgnn (Lightning module,
+rollout, evaluation) speaks physical units only.
+
+**Target choice.** The network predicts the normalised *change* of the velocities,
+``((v_{t+1} − v_t) − μ_Δv) / σ_Δv`` and ``((ω_{t+1} − ω_t) − μ_Δω) / σ_Δω`` (``delta_vel`` /
+``delta_angvel`` statistics of the training split), as GNS does with accelerations. For a given
+input state ``v_t`` is known, so this is an affine map of the report's target ``v_{t+1}``: the
+same function is learned, but the regression target has unit scale whatever the speed, and
+"nothing changes" is the output ``−μ/σ`` rather than a copy of the input. With input noise the
+target ``v_{t+1}`` stays the clean one while ``v_t`` is the noisy input, so the network also
+learns to undo the noise.
+
+**Contact inputs, material values, gravity prior** (``contact_features``,
+``material_features``, ``gravity_prior``; the default model has all three, ``model=report``
+none): :mod:`physgnn.models.contact_inputs`.
+
+**Boundary features** (``boundary_features=True``, the GNS-style baseline that has no ps edges):
+as in GNS (Sanchez-Gonzalez et al. 2020), every sphere also sees how far the boundaries are,
+``clip(h / R, 0, 1)`` for each of the 6 axis directions, so the network can see the ground and
+the walls without surface edges.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from physgnn.data.state import scene_of_sphere
+from physgnn.errors import PhysgnnError
+from physgnn.graph.builder import GraphBuilder
+from physgnn.models import contact_inputs
+from physgnn.nn.epd import EncodeProcessDecode
+from physgnn.nn.padding import pad_graph
+from physgnn.physics.scene import EFFECT_NAMES
+
+ROTATION = EFFECT_NAMES.index("rotation")
+
+VECTOR_STATS = ("vel", "angvel", "delta_vel", "delta_angvel")
+SCALAR_STATS = ("radius", "mass")
+# The 6 axis directions of the boundary features, in order +x, −x, +y, −y, +z, −z.
+DIRECTIONS = torch.tensor(
+    [[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]]
+)
+
+
+class StatsError(PhysgnnError, ValueError):
+    """``stats.json`` lacks a field the simulator needs (one-line message)."""
+
+
+def _stat(stats: dict, key: str, part: str, size: int | None) -> torch.Tensor:
+    try:
+        value = torch.as_tensor(stats[key][part], dtype=torch.float32)
+    except (KeyError, TypeError) as err:
+        raise StatsError(
+            f"normalisation stats lack '{key}.{part}' (regenerate stats.json)"
+        ) from err
+    if size is not None and value.shape != (size,):
+        raise StatsError(f"stats '{key}.{part}' has shape {tuple(value.shape)}, expected ({size},)")
+    return value
+
+
+class LearnedSimulator(nn.Module):
+    """Graph network simulator with the normalisation of its training set kept in buffers.
+
+    Constructor arguments are the ``model`` config keys (``conf/model/*.yaml``); ``stats`` is
+    the dataset's ``stats.json`` dict (runtime object). ``length_scale`` divides every length
+    of the edge features (``None``: the mean sphere diameter of the training set); velocities
+    in edge features are divided by the velocity std. Node input per sphere:
+    ``[(v − μ_v)/σ_v for the H+1 latest v, (ω − μ_ω)/σ_ω likewise, radius, mass (standardised)]``
+    = ``6·(H+1) + 2`` numbers, plus 4 with ``material_features``, plus 6 with
+    ``boundary_features`` (:meth:`boundary_features`, ``boundary_radius`` R in metres);
+    absolute position and orientation are masked. ``contact_features``, ``gravity_prior``: see
+    the module doc; ``layer_norm``: see :class:`~physgnn.nn.epd.EncodeProcessDecode`;
+    ``pad_to_buckets``: the network sees graphs padded to capacity buckets (opt-in capture
+    path, :mod:`physgnn.nn.padding`).
+    """
+
+    def __init__(
+        self,
+        stats: dict,
+        H: int = 2,
+        M: int = 5,
+        hidden: int = 128,
+        connectivity: str = "vi",
+        epsilon: float = 0.01,
+        factor: float = 1.0,
+        third_law: bool = True,
+        use_surfaces: bool = True,
+        num_materials: int = 0,
+        material_dim: int = 0,
+        neighbor_backend: str = "auto",
+        length_scale: float | None = None,
+        clip_margin: float = 0.0,
+        boundary_features: bool = False,
+        boundary_radius: float = 2.0,
+        contact_features: bool = False,
+        material_features: bool = False,
+        gravity_prior: bool = False,
+        layer_norm: bool = False,
+        pad_to_buckets: bool = False,
+    ):
+        super().__init__()
+        _check_sizes(H, M, boundary_radius)
+        self.H, self.M, self.pad_to_buckets = int(H), int(M), bool(pad_to_buckets)
+        self.use_boundary, self.boundary_radius = bool(boundary_features), float(boundary_radius)
+        self.contact_features = bool(contact_features)
+        self.material_features = bool(material_features)
+        self.gravity_prior = bool(gravity_prior)
+        self._register_stats(stats, length_scale)
+        self.use_surfaces = bool(use_surfaces)
+        self.num_materials = int(num_materials)
+        self.graph_builder = GraphBuilder(
+            connectivity, epsilon, factor, neighbor_backend, clip_margin
+        )
+        self.network = EncodeProcessDecode(
+            node_in=self.node_in,
+            pp_in=4 + (contact_inputs.PP_CONTACT if self.contact_features else 0),
+            ps_in=10 + (contact_inputs.PS_CONTACT if self.contact_features else 0),
+            hidden=hidden,
+            M=M,
+            out_dim=6,
+            third_law=third_law,
+            use_surfaces=use_surfaces,
+            num_materials=num_materials,
+            material_dim=material_dim,
+            layer_norm=layer_norm,
+        )
+
+    def _register_stats(self, stats: dict, length_scale: float | None) -> None:
+        """The training set's normalisation, the length scale and the effects trained on as
+        buffers (saved in checkpoints)."""
+        for key in VECTOR_STATS:
+            self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", 3))
+            self.register_buffer(f"{key}_std", _stat(stats, key, "std", 3))
+        for key in SCALAR_STATS:
+            self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", None).reshape(()))
+            self.register_buffer(f"{key}_std", _stat(stats, key, "std", None).reshape(()))
+        scale = 2.0 * float(self.radius_mean) if length_scale is None else float(length_scale)
+        if not scale > 0:
+            raise ValueError(f"length_scale must be > 0 (got {scale})")
+        self.register_buffer("length_scale", torch.tensor(scale))
+        self.register_buffer("effects_trained", torch.zeros(len(EFFECT_NAMES), dtype=torch.bool))
+
+    @property
+    def node_in(self) -> int:
+        extra = (4 if self.material_features else 0) + (6 if self.use_boundary else 0)
+        return 6 * (self.H + 1) + 2 + extra
+
+    @property
+    def speed_scale(self) -> torch.Tensor:
+        """σ_v of the contact features: the RMS of the three velocity stds (m/s)."""
+        return self.vel_std.square().mean().sqrt()
+
+    @property
+    def delta_speed_scale(self) -> torch.Tensor:
+        """σ_Δv of the contact penalty: the RMS of the three velocity-change stds (m/s)."""
+        return self.delta_vel_std.square().mean().sqrt()
+
+    @staticmethod
+    def stats_from_state_dict(state_dict: dict, prefix: str = "") -> dict:
+        """The ``stats`` dict stored in a checkpoint's buffers (to rebuild the simulator)."""
+        stats = {}
+        for key in VECTOR_STATS + SCALAR_STATS:
+            stats[key] = {
+                part: state_dict[f"{prefix}{key}_{part}"].tolist() for part in ("mean", "std")
+            }
+        return stats
+
+    # ----- features ---------------------------------------------------------------------------
+    def node_features(self, state) -> torch.Tensor:
+        """``[N, node_in]``: ``[N, 6·(H+1) + 2]`` then, with ``boundary_features``, the
+        ``[N, 6]`` of :meth:`boundary_features`; a state with a longer history uses its H+1
+        latest velocities."""
+        vel = state.vel[:, : self.H + 1]
+        angvel = state.angvel[:, : self.H + 1]
+        if vel.shape[1] != self.H + 1:
+            raise ValueError(
+                f"state has {vel.shape[1]} velocities of history, model needs {self.H + 1}"
+            )
+        vel = (vel - self.vel_mean) / self.vel_std
+        angvel = (angvel - self.angvel_mean) / self.angvel_std
+        radius = (state.radius - self.radius_mean) / self.radius_std
+        mass = (state.mass - self.mass_mean) / self.mass_std
+        parts = [vel.flatten(1), angvel.flatten(1), radius[:, None], mass[:, None]]
+        if self.material_features:
+            parts.append(contact_inputs.material_features(state))
+        if self.use_boundary:
+            parts.append(self.boundary_features(state))
+        return torch.cat(parts, 1)
+
+    def boundary_features(self, state) -> torch.Tensor:
+        """``[N, 6]``: for each direction d of ``DIRECTIONS`` (+x, −x, +y, −y, +z, −z), the
+        height ``h = n·(p − p_0) − r`` of the sphere's surface above the nearest plane of its
+        scene whose inward normal n is closest to d (``argmax_d n·d``, the first on a tie: the
+        ground, +z; a wall facing −x, −x; a ramp tilted 30°, +z), as ``clip(h, 0, R) / R`` with
+        R = ``boundary_radius``. Planes are infinite, a sphere behind one gives 0, and 1 means
+        no such plane within R."""
+        planes = state.planes.to(state.pos.dtype)
+        normal = planes[:, 3:6]
+        slot = (normal @ DIRECTIONS.to(normal).T).argmax(1)  # [S]
+        offset = state.pos[:, None, :] - planes[None, :, 0:3]  # [N, S, 3]
+        height = (offset * normal).sum(-1) - state.radius[:, None]  # [N, S]
+        height = height.clamp(0.0, self.boundary_radius) / self.boundary_radius
+        same = scene_of_sphere(state)[:, None] == state.plane_batch.long()[None, :]
+        height = torch.where(same, height, torch.ones_like(height))
+        out = height.new_ones(height.shape[0], len(DIRECTIONS))
+        return out.scatter_reduce(1, slot.expand_as(height), height, "amin")
+
+    def edge_features(self, graph, state=None) -> tuple[torch.Tensor, torch.Tensor]:
+        """pp ``[E, 4]`` (lengths / length_scale); ps ``[F, 10]`` (velocity / σ_v, normal
+        unchanged, lengths / length_scale); with ``contact_features`` (needs ``state``) pp
+        ``[E, 6]`` and ps ``[F, 13]``, the contact columns of the module doc appended."""
+        pp_attr = graph.pp_attr / self.length_scale
+        ps = graph.ps_attr
+        ps_attr = torch.cat(
+            [ps[:, :3] / self.vel_std, ps[:, 3:6], ps[:, 6:] / self.length_scale], 1
+        )
+        if self.contact_features:
+            scales = self.length_scale, self.speed_scale
+            pp_attr = torch.cat([pp_attr, contact_inputs.pp_contact(graph, state, *scales)], 1)
+            ps_attr = torch.cat([ps_attr, contact_inputs.ps_contact(graph, state, *scales)], 1)
+        return pp_attr, ps_attr
+
+    def in_reach(self, state, graph) -> torch.Tensor:
+        """``[N]`` bool: spheres that may touch something before the next frame
+        (:func:`~physgnn.models.contact_inputs.in_reach`)."""
+        return contact_inputs.in_reach(state, graph, self.graph_builder)
+
+    def rotating(self, state) -> torch.Tensor:
+        """``[N]`` bool: spheres whose scene has the rotation effect on."""
+        return state.effects[scene_of_sphere(state), ROTATION]
+
+    # ----- prediction -------------------------------------------------------------------------
+    def normalized_prediction(self, state):
+        """Network output ``[N, 6]`` (normalised Δv, Δω) and the graph it was computed on."""
+        graph = self.graph_builder(state)
+        pp_attr, ps_attr = self.edge_features(graph, state)
+        material = state.material if self.num_materials > 0 else None
+        args = (self.node_features(state), graph.pp_index, pp_attr, graph.ps_index, ps_attr)
+        if self.pad_to_buckets:  # fixed shapes for a captured step (physgnn/nn/padding.py)
+            padded, n = pad_graph(*args, material)
+            return self.network(*padded)[:n], graph
+        return self.network(*args, material), graph
+
+    def normalized_target(self, state) -> torch.Tensor:
+        """``[N, 6]``: the normalised change from the state's (possibly noisy) ``v_t, ω_t`` to
+        its targets ``v_{t+1}, ω_{t+1}``."""
+        if getattr(state, "target_vel", None) is None:
+            raise ValueError(
+                "state has no target_vel / target_angvel (last frame of a trajectory?)"
+            )
+        dvel = (state.target_vel - state.vel[:, 0] - self.delta_vel_mean) / self.delta_vel_std
+        dang = state.target_angvel - state.angvel[:, 0]
+        dang = (dang - self.delta_angvel_mean) / self.delta_angvel_std
+        return torch.cat([dvel, dang], 1)
+
+    def to_physical(
+        self, state, pred: torch.Tensor, reach: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Normalised output ``[N, 6]`` → ``(v_{t+1} [N, 3], ω_{t+1} [N, 3])``; spheres of a
+        scene without rotation keep ``ω_t``. With ``gravity_prior``, spheres outside
+        ``reach [N]`` (:meth:`in_reach` of the prediction's graph) fly ballistically."""
+        vel_next = state.vel[:, 0] + pred[:, :3] * self.delta_vel_std + self.delta_vel_mean
+        angvel_next = (
+            state.angvel[:, 0] + pred[:, 3:] * self.delta_angvel_std + self.delta_angvel_mean
+        )
+        if self.gravity_prior:
+            if reach is None:
+                raise ValueError("gravity_prior needs the spheres in reach of a contact")
+            vel_free, angvel_free = contact_inputs.free_flight(state)
+            vel_next = torch.where(reach[:, None], vel_next, vel_free)
+            angvel_next = torch.where(reach[:, None], angvel_next, angvel_free)
+        angvel_next = torch.where(self.rotating(state)[:, None], angvel_next, state.angvel[:, 0])
+        return vel_next, angvel_next
+
+    def forward(self, state) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(vel_next [N, 3], angvel_next [N, 3])`` in physical units (m/s, rad/s, world frame)."""
+        vel_next, angvel_next, _ = self.predict(state)
+        return vel_next, angvel_next
+
+    def predict(self, state):
+        """``(vel_next [N, 3], angvel_next [N, 3], graph)``: :meth:`forward` and the graph it
+        was computed on (for a constraint stage, :mod:`physgnn.models.constrained`)."""
+        pred, graph = self.normalized_prediction(state)
+        reach = self.in_reach(state, graph) if self.gravity_prior else None
+        return (*self.to_physical(state, pred, reach), graph)
+
+
+def _check_sizes(H: int, M: int, boundary_radius: float) -> None:
+    if H < 0 or M < 1:
+        raise ValueError(f"need H >= 0 and M >= 1 (got H={H}, M={M})")
+    if not boundary_radius > 0:
+        raise ValueError(f"boundary_radius must be > 0 (got {boundary_radius})")

@@ -1,0 +1,3 @@
+"""Physics rules of spheres: scenes and trajectories, quaternions, kinematics, energy, integration,
+geometry. numpy and torch only.
+"""

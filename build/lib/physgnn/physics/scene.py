@@ -1,0 +1,150 @@
+"""Initial conditions of a scene (spheres, planes, materials, effects), shared by the generator,
+the data files and the simulator. Pure numpy; knows nothing of pybullet or of the network.
+
+Planes are rows of ``PLANE_DIM = 11`` numbers: centre ``p_s`` (3), unit normal ``n_s`` (3),
+unit reference direction ``d_s`` (3, perpendicular to ``n_s``), and the **half** lengths
+``L_x`` along ``d_s`` and ``L_y`` along ``n_s × d_s``. The ground is the plane ``z = 0`` with
+infinite half lengths; it is always row 0 of a scene's planes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from physgnn.errors import PhysgnnError
+
+PLANE_DIM = 11
+PLANE_KINDS = ("ground", "wall", "static")
+GROUND, WALL, STATIC = 0, 1, 2
+GRAVITY = (0.0, 0.0, -9.81)
+EFFECT_NAMES = ("gravity", "sphere_contact", "surface_contact", "friction", "rotation")
+
+
+class SceneError(PhysgnnError, ValueError):
+    """Invalid scene or trajectory description (message is one line naming the problem)."""
+
+
+@dataclass(frozen=True)
+class Effects:
+    """What a scene contains; the generator and the learned simulator compute only these."""
+
+    gravity: bool = True
+    sphere_contact: bool = True
+    surface_contact: bool = True
+    friction: bool = True
+    rotation: bool = True
+
+    def as_dict(self) -> dict[str, bool]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> Effects:
+        d = dict(d or {})
+        unknown = set(d) - set(EFFECT_NAMES)
+        if unknown:
+            raise SceneError(f"unknown effect(s) {sorted(unknown)}; known: {list(EFFECT_NAMES)}")
+        return cls(**{k: bool(v) for k, v in d.items()})
+
+
+@dataclass(frozen=True)
+class Material:
+    """Contact parameters of one material id (pybullet's names)."""
+
+    restitution: float = 0.5
+    lateral_friction: float = 0.5
+    rolling_friction: float = 0.001
+    spinning_friction: float = 0.001
+
+    def as_array(self) -> np.ndarray:
+        return np.array(dataclasses.astuple(self), dtype=np.float32)
+
+
+def make_plane(centre, normal, ref_dir, half_x: float, half_y: float) -> np.ndarray:
+    """One plane row ``[11]``; normal and reference direction are normalised, checked ⟂."""
+    n = np.asarray(normal, dtype=np.float64)
+    d = np.asarray(ref_dir, dtype=np.float64)
+    n, d = n / np.linalg.norm(n), d / np.linalg.norm(d)
+    if abs(float(n @ d)) > 1e-6:
+        raise SceneError(
+            f"plane reference direction {d.tolist()} is not perpendicular to its normal"
+        )
+    row = np.concatenate([np.asarray(centre, dtype=np.float64), n, d, [half_x, half_y]])
+    return row.astype(np.float32)
+
+
+def ground_plane() -> np.ndarray:
+    """The ground ``z = 0`` as a plane row ``[11]`` (infinite half lengths)."""
+    return make_plane((0, 0, 0), (0, 0, 1), (1, 0, 0), np.inf, np.inf)
+
+
+@dataclass
+class Scene:
+    """Initial conditions of one scene; arrays are float32 unless stated.
+
+    radius, mass ``[N]``; material ``[N]`` int; pos ``[N, 3]``; quat ``[N, 4]`` (w, x, y, z);
+    vel, angvel ``[N, 3]``; planes ``[S, 11]`` (row 0 the ground); plane_kind ``[S]`` int;
+    materials ``[K, 4]`` (restitution, lateral, rolling, spinning friction).
+    """
+
+    name: str
+    radius: np.ndarray
+    mass: np.ndarray
+    material: np.ndarray
+    pos: np.ndarray
+    quat: np.ndarray
+    vel: np.ndarray
+    angvel: np.ndarray
+    planes: np.ndarray
+    plane_kind: np.ndarray
+    materials: np.ndarray
+    dt: float
+    n_frames: int
+    effects: Effects = field(default_factory=Effects)
+    gravity: tuple[float, float, float] = GRAVITY
+
+    @property
+    def n_spheres(self) -> int:
+        return int(self.radius.shape[0])
+
+    def validate(self) -> Scene:
+        """Raise :class:`SceneError` with one line naming the first problem found."""
+        n = self.n_spheres
+        if n < 1:
+            raise SceneError(f"scene '{self.name}' has no sphere (a scene needs at least one)")
+        shapes = {
+            "mass": (n,),
+            "material": (n,),
+            "pos": (n, 3),
+            "quat": (n, 4),
+            "vel": (n, 3),
+            "angvel": (n, 3),
+        }
+        for key, shape in shapes.items():
+            if getattr(self, key).shape != shape:
+                raise SceneError(
+                    f"scene '{self.name}': {key} has shape "
+                    f"{getattr(self, key).shape}, expected {shape}"
+                )
+        if not np.all(self.radius > 0):
+            raise SceneError(
+                f"scene '{self.name}': radius must be > 0 (got min {self.radius.min()})"
+            )
+        if not np.all(self.mass > 0):
+            raise SceneError(f"scene '{self.name}': mass must be > 0 (got min {self.mass.min()})")
+        if self.planes.ndim != 2 or self.planes.shape[1] != PLANE_DIM:
+            raise SceneError(f"scene '{self.name}': planes must be [S, {PLANE_DIM}]")
+        if self.plane_kind.shape != (self.planes.shape[0],):
+            raise SceneError(f"scene '{self.name}': plane_kind must have one entry per plane")
+        if self.dt <= 0 or self.n_frames < 2:
+            raise SceneError(f"scene '{self.name}': need dt > 0 and n_frames >= 2")
+        if self.material.min() < 0 or self.material.max() >= len(self.materials):
+            raise SceneError(
+                f"scene '{self.name}': material id out of range [0, {len(self.materials)})"
+            )
+        for key in ("radius", "mass", "pos", "quat", "vel", "angvel"):
+            if not np.all(np.isfinite(getattr(self, key))):
+                raise SceneError(f"scene '{self.name}': {key} contains NaN or inf")
+        return self

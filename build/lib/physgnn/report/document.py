@@ -1,0 +1,116 @@
+"""``report.md`` and its figures from ``metrics.csv`` (written by the eval), the stability
+table and the bench results."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from physgnn.files import write_text
+from physgnn.report import bounce, freefall, pareto, stability
+from physgnn.report.sections import (
+    baselines_table,
+    components_section,
+    sleeping_section,
+    table1,
+)
+from physgnn.report.sweeps import fps_figure, rel, sweep_sections
+from physgnn.report.table import SLEEP_SCENE, group_rows, read_csv
+
+
+def pareto_section(
+    rows: list[dict], bench_dir: str | Path | None, fig_dir: Path, root: Path
+) -> str:
+    """Accuracy against ms per frame (learned runs and pybullet), when ``make bench`` ran."""
+    if bench_dir is None or not (Path(bench_dir) / "bench.json").exists():
+        return "No bench results (`make bench` writes them; then run `make eval` again)."
+    paths = pareto.pareto_figures(rows, bench_dir, fig_dir)
+    return "\n\n".join(f"![{p.stem}]({rel(p, root)})" for p in paths)
+
+
+def stability_section(root: Path) -> str:
+    """The stability table from ``root/stability.csv`` (written by the eval's ``stability``)."""
+    path = root / "stability.csv"
+    if not path.exists():
+        return "No stability measurements (`make eval` with `stability=true` writes them)."
+    return stability.section(stability.read_csv(path))
+
+
+def freefall_section(root: Path) -> str:
+    """The free-fall table from ``root/freefall.csv`` (written by the eval)."""
+    path = root / "freefall.csv"
+    return freefall.section(freefall.read_csv(path) if path.exists() else [])
+
+
+def bounce_section(root: Path) -> str:
+    """The bounce table from ``root/bounce.csv`` (written by the eval)."""
+    path = root / "bounce.csv"
+    return bounce.section(bounce.read_csv(path) if path.exists() else [])
+
+
+def write_report(
+    report_dir: str | Path,
+    rows: list[dict] | None = None,
+    bench_dir: str | Path | None = None,
+    skipped: list[str] | None = None,
+) -> Path:
+    """Write ``report.md`` (and the sweep / FPS / Pareto figures) from ``report_dir/metrics.csv``.
+
+    Figures the eval already wrote (``figures/energy_ood.png``, ``videos/*.gif`` and
+    ``.mp4``) are linked; the Pareto view needs ``bench_dir/bench.json``.
+    """
+    root = Path(report_dir)
+    rows = read_csv(root / "metrics.csv") if rows is None else rows
+    fig_dir = root / "figures"
+    parts = [
+        "# physgnn evaluation report",
+        f"{len({r['run'] for r in rows})} runs (with the references ground_truth, static, "
+        "gravity_only), metrics per rollout in `metrics.csv`. Every cell is the mean ± std "
+        "over the rollouts of a group (trajectories × seeds). ⚠ marks a group where a "
+        "rollout diverged: its metrics are computed on the finite prefix.",
+        "## Table 1: ground truth",
+        table1(rows),
+        "## Learned simulators against the trivial baselines",
+        baselines_table(rows),
+        "## Table 2: ablation of components (OOD first)",
+        components_section(rows),
+        "## Experiments and sweeps",
+        *sweep_sections(rows, fig_dir, root),
+        f"## OOD (c) `{SLEEP_SCENE}` with sleeping off and on",
+        sleeping_section(rows),
+        "## Stability on hard scenes",
+        stability_section(root),
+        "## Free fall against ½gt²",
+        freefall_section(root),
+        "## Bounces against restitution",
+        bounce_section(root),
+    ]
+    parts += _figures(rows, bench_dir, root)
+    if skipped:
+        parts += ["## Runs not evaluated", "\n".join(f"- {s}" for s in skipped)]
+    return write_text(root / "report.md", "\n\n".join(parts) + "\n")
+
+
+def _video_line(gif: Path, root: Path) -> str:
+    """``- [scene](videos/scene.gif) ([MP4](videos/scene.mp4))``, the MP4 when there is one."""
+    mp4 = gif.with_suffix(".mp4")
+    return f"- [{gif.stem}]({rel(gif, root)})" + (
+        f" ([MP4]({rel(mp4, root)}))" if mp4.exists() else ""
+    )
+
+
+def _figures(rows: list[dict], bench_dir, root: Path) -> list[str]:
+    """The sections of figures and videos: runtime, Pareto view, OOD energy, videos."""
+    fig_dir = root / "figures"
+    fps = fps_figure(fig_dir / "fps.png", group_rows(rows))
+    energy = fig_dir / "energy_ood.png"
+    videos = sorted((root / "videos").glob("*.gif"))
+    return [
+        "## Runtime (the report's Figure 18)",
+        f"![fps]({rel(fps, root)})" if fps else "No learned rollout timed.",
+        "## Accuracy versus time (Pareto view)",
+        pareto_section(rows, bench_dir, fig_dir, root),
+        "## Energy over time on the OOD scenes",
+        f"![energy]({rel(energy, root)})" if energy.exists() else "No OOD energy figure.",
+        "## Videos (ground truth left, prediction right; shaded 3-D)",
+        "\n".join(_video_line(v, root) for v in videos) or "No videos.",
+    ]

@@ -1,0 +1,220 @@
+"""Checks of a training config before anything is built or trained, each failing in one line
+that names the key or the file: values against the types of the constructor arguments they
+feed, the step budget, the checkpoint to resume from and whether it fits the model."""
+
+from __future__ import annotations
+
+import inspect
+import socket
+import types
+import typing
+from pathlib import Path
+
+import torch
+from hydra.utils import get_class
+from lightning.pytorch.utilities.rank_zero import rank_zero_only
+from omegaconf import DictConfig, OmegaConf
+
+from physgnn.errors import ConfigError
+from physgnn.files import process_alive
+from physgnn.training.runs import RUN_JSON, read_run_json, run_status
+
+HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
+# A run folder in one of these states is resumed from its last.ckpt when trained again (a
+# requeued cluster job; a run killed outright; a run whose restart had a config mistake); any
+# other run with checkpoints (finished, truncated, diverged, debug) is never trained over.
+RESUMABLE = ("interrupted", "running", "failed")
+MAX_SEED = 2**32 - 1
+# What the rollout callback logs (physgnn/training/callbacks.py)
+ROLLOUT_METRICS = ("val/rollout_score", "val/rollout_mse", "val/chamfer", "val/energy_gain",
+                   "val/max_depth", "val/tunnelled", "val/rest_drift")  # fmt: skip
+WORDS = {int: "a whole number", float: "a number", bool: "true or false", str: "a string"}
+
+
+def _fits(value, hint) -> bool:
+    """Whether ``value`` has the annotated type (only ``int``, ``float``, ``bool``, ``str``,
+    None and their unions are checked; anything else fits)."""
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return any(_fits(value, h) for h in typing.get_args(hint))
+    if hint is type(None):
+        return value is None
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if hint is float:
+        return isinstance(value, int | float) and not isinstance(value, bool)
+    if hint in (bool, str):
+        return isinstance(value, hint)
+    return True
+
+
+def _words(hint) -> str:
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return " or ".join(_words(h) for h in typing.get_args(hint))
+    return "null" if hint is type(None) else WORDS.get(hint, str(hint))
+
+
+def check_arguments(cfg: DictConfig, sections=("model", "datamodule", "lit")) -> None:
+    """Every key of each ``_target_`` section is an argument of its constructor, of the
+    annotated type (``model.M=abc``: ``model.M must be a whole number, got 'abc'``)."""
+    for section in sections:
+        node = cfg.get(section)
+        if not isinstance(node, DictConfig) or "_target_" not in node:
+            continue
+        target = get_class(node._target_)
+        params = inspect.signature(target).parameters
+        try:
+            hints = typing.get_type_hints(target.__init__)
+        except (NameError, TypeError):
+            hints = {}
+        for key in node:
+            if key in HYDRA_KEYS:
+                continue
+            if key not in params:
+                known = ", ".join(k for k in params if k not in ("self", "stats", "simulator"))
+                raise ConfigError(
+                    f"{section}.{key} is not an argument of {target.__name__} (known: {known})"
+                )
+            value = OmegaConf.select(node, key)
+            if not isinstance(value, DictConfig) and not _fits(value, hints.get(key)):
+                raise ConfigError(f"{section}.{key} must be {_words(hints[key])}, got {value!r}")
+
+
+def check_seed(seed) -> None:
+    """``seed`` is a whole number that numpy, torch and Python all take: 0 to 2³² − 1."""
+    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= MAX_SEED:
+        raise ConfigError(
+            f"seed must be a whole number from 0 to {MAX_SEED}, got {seed!r} (conf/train.yaml: "
+            "seed; e.g. seed=0)"
+        )
+
+
+def check_optimizer(lit_cfg: DictConfig | None) -> None:
+    """``lit.optimizer.lr`` is a positive number (torch's optimizers fail deep inside
+    ``fit`` otherwise)."""
+    lr = OmegaConf.select(lit_cfg, "optimizer.lr") if lit_cfg is not None else None
+    if lr is None:
+        return
+    if not isinstance(lr, int | float) or isinstance(lr, bool) or not 0 < lr < float("inf"):
+        raise ConfigError(
+            f"lit.optimizer.lr must be a number > 0, got {lr!r} (conf/train.yaml: "
+            "lit.optimizer.lr, default 1.0e-3)"
+        )
+
+
+def check_budget(trainer_cfg: DictConfig) -> None:
+    """``trainer.max_epochs`` and ``trainer.max_steps`` train something: >= 1, or -1 (no
+    limit) or null."""
+    for key in ("max_epochs", "max_steps"):
+        value = trainer_cfg.get(key)
+        if value is not None and value != -1 and value < 1:
+            raise ConfigError(
+                f"trainer.{key}={value} trains nothing: give at least 1 (-1: no limit)"
+            )
+
+
+def check_monitors(callbacks_cfg: DictConfig | None) -> None:
+    """A callback that watches a ``val/rollout…`` or other rollout metric needs the rollout
+    callback, the only one that logs them (else Lightning fails at the first validation)."""
+    callbacks = dict(callbacks_cfg or {})
+    rollout = any(str(c.get("_target_", "")).endswith("RolloutCallback") for c in
+                  callbacks.values() if c)  # fmt: skip
+    for name, c in callbacks.items():
+        watched = str((c or {}).get("monitor") or "")
+        if (watched in ROLLOUT_METRICS or watched.startswith("ood/")) and not rollout:
+            raise ConfigError(
+                f"callbacks.{name}.monitor={watched} is logged by the rollout callback only: "
+                f"keep callbacks.rollout, or set callbacks.{name}.monitor=val/loss"
+            )
+
+
+def check_not_running(run_dir: Path) -> None:
+    """A ``run_dir`` whose run.json says ``running`` for a process alive on this host is in
+    use: refused in one line naming it. A ``running`` record of a dead process (a run killed
+    outright), or of another host (a requeued cluster job), is taken over."""
+    if rank_zero_only.rank != 0:  # DDP's other processes: rank 0 holds the folder for them
+        return
+    info = read_run_json(run_dir) if run_status(run_dir) == "running" else {}
+    if info.get("host") == socket.gethostname() and process_alive(info.get("pid")):
+        raise ConfigError(
+            f"run_dir {run_dir} is in use: a training started {info.get('started')} runs there "
+            f"(pid {info['pid']} on {info['host']}): wait for it to end, stop it (kill "
+            f"{info['pid']}: it saves last.ckpt, then train again there to resume), or choose "
+            "another run_dir"
+        )
+
+
+def check_run_dir(cfg: DictConfig, run_dir: Path) -> None:
+    """A ``run_dir`` in use by a live training is refused (:func:`check_not_running`); one
+    holding another run's checkpoints is never trained over: only an interrupted run there is
+    resumed, from its own ``last.ckpt``."""
+    check_not_running(run_dir)
+    status = run_status(run_dir) if (run_dir / RUN_JSON).exists() else None
+    last = run_dir / "checkpoints" / "last.ckpt"
+    if not any((run_dir / "checkpoints").glob("*.ckpt")):
+        return
+    explicit = cfg.get("ckpt_path")
+    if status not in RESUMABLE or explicit and Path(explicit).resolve() != last.resolve():
+        raise ConfigError(
+            f"run_dir {run_dir} already holds a {status or 'training'} run with checkpoints "
+            f"and is never trained over: choose another run_dir (to train that run further, "
+            f"ckpt_path={last} in a new run_dir)"
+        )
+
+
+def resume_from(cfg: DictConfig, run_dir: Path) -> str | None:
+    """The checkpoint this run starts from: ``ckpt_path`` (checked), else the ``last.ckpt``
+    of an interrupted run in ``run_dir`` itself (:func:`check_run_dir`), else None."""
+    explicit = cfg.get("ckpt_path")
+    if explicit:
+        if not Path(explicit).is_file():
+            raise ConfigError(
+                f"ckpt_path={explicit}: no such file (a run keeps its checkpoints in "
+                "<run_dir>/checkpoints/, last.ckpt the latest)"
+            )
+        return str(explicit)
+    status = run_status(run_dir) if (run_dir / RUN_JSON).exists() else None
+    last = run_dir / "checkpoints" / "last.ckpt"
+    return str(last) if status in RESUMABLE and last.is_file() else None
+
+
+def check_checkpoint(path: str | None, lit: torch.nn.Module, model_cfg=None) -> int:
+    """The global step of the checkpoint at ``path`` (0 without one), after checking that
+    its weights fit ``lit`` (same names and shapes), naming the keys of ``model_cfg`` that
+    differ from its run's config."""
+    if path is None:
+        return 0
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+        state = ckpt["state_dict"]
+    except Exception as err:  # not a zip, not a Lightning checkpoint, ...
+        first = (str(err).splitlines() or [type(err).__name__])[0]
+        raise ConfigError(f"ckpt_path={path} is not a training checkpoint ({first})") from None
+    model = lit.state_dict()
+    wrong = sorted(set(model) ^ set(state))
+    wrong += [k for k in model if k in state and model[k].shape != state[k].shape]
+    if wrong:
+        raise ConfigError(
+            f"ckpt_path={path} does not fit this model ({_model_difference(path, model_cfg)}"
+            f"{len(wrong)} weights differ, e.g. {wrong[0]}): resume with the model settings "
+            "it was trained with"
+        )
+    return int(ckpt.get("global_step", 0))
+
+
+def _model_difference(path: str, model_cfg) -> str:
+    """``"model.M is 1 there, 2 here; "``: the model keys in which the config of the
+    checkpoint's run (``<run>/.hydra/config.yaml``) and ``model_cfg`` differ."""
+    saved = Path(path).parent.parent / ".hydra" / "config.yaml"
+    if model_cfg is None or not saved.is_file():
+        return ""
+    try:
+        then = OmegaConf.to_container(OmegaConf.load(saved).model, resolve=True)
+    except Exception:  # an unreadable or foreign config: no detail to give
+        return ""
+    now = OmegaConf.to_container(model_cfg, resolve=True)
+    keys = sorted(set(then) | set(now))
+    return "".join(
+        f"model.{k} is {then.get(k)!r} there, {now.get(k)!r} here; "
+        for k in keys
+        if then.get(k) != now.get(k)
+    )

@@ -1,0 +1,97 @@
+"""Shipping a trained run: a small run folder of weights only, loadable wherever a run is.
+
+``python -m physgnn.training.export RUN_DIR [OUT_DIR] [CHECKPOINT]`` (``make ship RUN=...``)
+writes ``OUT_DIR`` (default ``physgnn/pretrained``, what ``run=pretrained`` names) as a run
+folder holding only what the trained simulator needs:
+
+- ``.hydra/config.yaml``: the run's own config (model, training recipe, dataset preset; its
+  paths are interpolations, no machine's path);
+- ``checkpoints/best-stepNNNNNN.ckpt``: the simulator's weights and normalisation buffers of
+  the run's best checkpoint (or ``CHECKPOINT``), without the optimiser state (about a third of
+  a training checkpoint);
+- ``run.json``: status ``finished``, the run's experiment, overrides, seed, steps, training
+  time, sessions and threads, the machine, the commit it was exported at, the source
+  checkpoint, and ``weights_format`` (:data:`~physgnn.training.runs.WEIGHTS_FORMAT`), which
+  :func:`~physgnn.training.runs.load_run` checks.
+"""
+
+from __future__ import annotations
+
+import platform
+import subprocess
+import sys
+from datetime import datetime
+from pathlib import Path
+
+import torch
+
+from physgnn.errors import PhysgnnError
+from physgnn.files import atomic_path, claim_folder, portable, write_text
+from physgnn.training.runs import (
+    PRETRAINED_DIR,
+    WEIGHTS_FORMAT,
+    checkpoint_of,
+    read_run_json,
+    write_run_json,
+)
+
+KEPT = ("experiment", "overrides", "seed", "epochs", "max_epochs", "global_step",
+        "train_time_s", "sessions", "threads", "host", "pairs_seen")  # fmt: skip
+
+
+def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path | None = None):
+    """Write ``out_dir`` from ``run_dir`` (module doc); returns the weights file."""
+    run_dir, out_dir = Path(run_dir), Path(out_dir)
+    source = Path(checkpoint) if checkpoint else checkpoint_of(run_dir)
+    full = torch.load(source, map_location="cpu", weights_only=True)
+    weights = {k: v for k, v in full["state_dict"].items() if k.startswith("simulator.")}
+    step = int(full.get("global_step", 0))
+    claim_folder(out_dir, "OUT_DIR")
+    for old in (out_dir / "checkpoints").glob("*.ckpt"):
+        old.unlink()  # one set of weights per folder
+    target = out_dir / "checkpoints" / f"best-step{step:06d}.ckpt"
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(target) as tmp:
+        torch.save({"state_dict": weights, "global_step": step, "epoch": full.get("epoch")}, tmp)
+    write_text(out_dir / ".hydra" / "config.yaml", (run_dir / ".hydra" / "config.yaml").read_text())
+    info = {k: v for k, v in read_run_json(run_dir).items() if k in KEPT}
+    info |= {"status": "finished", "weights_format": WEIGHTS_FORMAT, "checkpoint_step": step,
+             "exported_from": f"{portable(run_dir)} ({source.name})", "commit": _commit(),
+             "machine": f"{platform.machine()} {platform.processor() or platform.system()}",
+             "exported": datetime.now().isoformat(timespec="seconds")}  # fmt: skip
+    write_run_json(out_dir, info)
+    return target
+
+
+def _commit() -> str | None:
+    """The commit of the working folder's checkout, when there is one."""
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True)
+    except OSError:
+        return None
+    return out.stdout.strip() or None
+
+
+USAGE = "usage: python -m physgnn.training.export RUN_DIR [OUT_DIR] [CHECKPOINT]"
+
+
+def main(argv: list[str]) -> int:
+    if argv and argv[0] in ("-h", "--help"):
+        print(f"{USAGE}\n\n{__doc__.strip()}")
+        return 0
+    if not 1 <= len(argv) <= 3:
+        print(USAGE)
+        return 2
+    out = Path(argv[1]) if len(argv) > 1 else PRETRAINED_DIR
+    try:
+        target = export_run(Path(argv[0]), out, Path(argv[2]) if len(argv) > 2 else None)
+    except (OSError, PhysgnnError) as err:  # a missing run or checkpoint, a foreign folder
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    size = target.stat().st_size / 1e6
+    print(f"exported {argv[0]} to {portable(out)} ({target.name}, {size:.1f} MB)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,291 @@
+"""Lightning module: one-step loss, energy-increase penalty and input noise.
+
+Loss of a batch of state pairs:
+
+``L = MSE(normalised prediction, normalised target)
++ λ · mean_scenes max(E_{t+1} − E_t, 0) / Σ m g + λ_c · contact penalty``
+
+- MSE over the 6 normalised outputs of every sphere (:mod:`physgnn.models.learned` explains the
+  target); the 3 angular outputs of spheres whose scene has rotation off are left out, and
+  with the simulator's gravity prior so is every sphere out of reach of a contact (its next
+  velocity is ballistic, not the network's).
+- The contact penalty and the contact noise: :mod:`physgnn.training.contacts` (lengths in
+  units of the simulator's ``length_scale``, the mean sphere diameter).
+- ``E`` = kinetic + potential energy of a scene (:mod:`physgnn.physics.energy`, potential
+  from the ground contact height); ``E_{t+1}`` is the energy after integrating the predicted
+  ``v̂_{t+1}`` with :func:`physgnn.physics.integrator.euler_step`. Dividing a scene's energy
+  increase by its weight ``Σ m·g`` turns joules into *metres of height gained per sphere
+  mass*, so ``λ`` means the same for a scene of 1 or 300 spheres, light or heavy.
+- Noise (training only), shaped like the errors a rollout feeds back: a random walk along
+  each velocity history (``σ · std(v)`` at the latest velocity, ``σ`` in normalised units),
+  integrated into the position, so the noisy ``p̃_t`` and ``ṽ`` are again finite differences of
+  one another, as in a rollout; likewise ``σ · std(ω)`` on angular velocity histories, and
+  ``σ`` per quaternion component then renormalised. Spheres of scenes without rotation keep
+  their orientation and angular velocity. The velocity target is the one that brings the
+  noisy position back onto the truth, ``v*_{t+1} = (p_{t+1} − p̃_t)/dt`` (as GNS does with
+  accelerations): the model learns to undo its own drift, e.g. to push apart spheres that a
+  rollout let overlap. ``ω_{t+1}`` stays the clean one.
+- Push-forward (training only, ``pushforward_steps`` = K > 0): each batch first runs
+  ``k ~ U{0..K}`` steps of the model itself, without gradients, from the noisy state, then
+  takes the loss of the next step against ``(p_{t+k+1} − p̂_{t+k})/dt`` and ``ω_{t+k+1}``. The
+  model so sees, and learns to correct, the states its own rollouts reach.
+"""
+
+from __future__ import annotations
+
+import random
+
+import lightning as L
+import torch
+
+from physgnn.data.state import scene_of_sphere
+from physgnn.models.learned import LearnedSimulator
+from physgnn.physics import quaternion as Q
+from physgnn.physics.energy import scene_energy, scene_weight
+from physgnn.physics.integrator import euler_step, step
+from physgnn.training.contacts import contact_penalty, perturb_contacts
+from physgnn.training.epoch_means import EpochMeans
+from physgnn.training.finite import FiniteWatch, NonFiniteLossError  # noqa: F401 (its home)
+
+
+def add_noise(state, simulator: LearnedSimulator, std: float, generator=None):
+    """A copy of ``state`` with rollout-shaped noise and the matching velocity target (see the
+    module doc). ``state.vel`` / ``angvel`` are ``[N, H+1, 3]``, latest first."""
+
+    def randn_like(x: torch.Tensor) -> torch.Tensor:
+        return torch.randn(x.shape, generator=generator, dtype=x.dtype, device=x.device)
+
+    def random_walk(x: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
+        """``[N, H+1, 3]`` cumulative noise from the oldest entry to the latest (std scale)."""
+        steps = randn_like(x) * (scale / x.shape[1] ** 0.5)
+        return torch.cumsum(steps.flip(1), dim=1).flip(1)
+
+    noisy = state.clone()
+    rot = simulator.rotating(state)[:, None]
+    dt = state.scene_dt[:, None]
+    dv = random_walk(state.vel, std * simulator.vel_std)
+    noisy.vel = state.vel + dv
+    dp = dt * dv.sum(1)  # p̃_t − p_t: the velocity noise integrated along the history
+    noisy.pos = state.pos + dp
+    if getattr(state, "target_vel", None) is not None:
+        noisy.target_vel = state.target_vel - dp / dt
+    quat = Q.normalize(state.quat + std * randn_like(state.quat))
+    noisy.quat = torch.where(rot, quat, state.quat)
+    angvel = state.angvel + random_walk(state.angvel, std * simulator.angvel_std)
+    noisy.angvel = torch.where(rot[:, :, None], angvel, state.angvel)
+    return noisy
+
+
+@torch.no_grad()
+def push_forward(state, simulator: LearnedSimulator, steps: int):
+    """The state after ``steps`` frames of the simulator's own rollout from ``state``, with
+    the targets of the frame after: ``(p_{t+k+1} − p̂_{t+k})/dt`` and ``ω_{t+k+1}``
+    (``state.future_pos`` / ``future_angvel [N, K+1, 3]``, K ≥ steps)."""
+    out = state.clone()
+    dt = state.scene_dt
+    for _ in range(steps):  # the rollout's own integration step
+        vel_next, angvel_next = simulator(out)
+        out.pos, out.quat, out.vel, out.angvel = step(
+            out.pos, out.quat, out.vel, out.angvel, vel_next, angvel_next, dt,
+            simulator.rotating(out),
+        )  # fmt: skip
+    out.target_vel = (state.future_pos[:, steps] - out.pos) / dt[:, None]
+    out.target_angvel = state.future_angvel[:, steps]
+    return out
+
+
+def energy_increase(state, vel_next: torch.Tensor) -> torch.Tensor:
+    """``[B]``: ``max(E_{t+1} − E_t, 0) / Σ m g`` of every scene (metres of height).
+
+    ``vel_next [N, 3]`` is the predicted ``v̂_{t+1}``; ``E_{t+1}`` uses the Euler-integrated
+    position ``p_t + dt·v̂_{t+1}`` and ``v̂_{t+1}``; ``E_t`` uses ``p_t`` and ``v_t``."""
+    n_scenes = state.num_graphs if hasattr(state, "num_graphs") else 1
+    batch = scene_of_sphere(state)
+    pos_next, _ = euler_step(
+        state.pos, state.quat, vel_next, vel_next, state.scene_dt, rotate=False
+    )
+    args = (state.mass, state.radius, batch, n_scenes)
+    e_now = scene_energy(state.pos, state.vel[:, 0], *args)
+    e_next = scene_energy(pos_next, vel_next, *args)
+    return torch.relu(e_next - e_now) / scene_weight(state.mass, batch, n_scenes)
+
+
+def masked_mse(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    rotating: torch.Tensor,
+    counted: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """Mean squared error of ``[N, 6]`` outputs, angular part only where ``rotating [N]``, and
+    only spheres of ``counted [N]`` (bool, default all; 0 when none is)."""
+    weight = torch.ones_like(pred)
+    weight[:, 3:] = rotating[:, None].to(pred.dtype)
+    if counted is not None:
+        weight = weight * counted[:, None].to(pred.dtype)
+    return ((pred - target) ** 2 * weight).sum() / weight.sum().clamp_min(1.0)
+
+
+class LitSimulator(L.LightningModule):
+    """Trains a :class:`LearnedSimulator` on one-step pairs.
+
+    ``optimizer``: a partial (``_partial_: true``) taking the parameters; ``scheduler``: an
+    optional partial taking the optimizer, stepped once per epoch. ``seed`` seeds the noise and
+    the push-forward length of each step together with the step number.
+    ``pushforward_steps`` = K (0: one-step training only) starts at step ``pushforward_after``;
+    with ``pushforward_growth`` = G > 0 the longest unroll grows, 1 from ``pushforward_after``,
+    then one more every G steps up to K (longer unrolls once the model is good enough to make
+    them meaningful).
+    ``lambda_contact`` weighs the contact penalty (tolerance ``contact_tol``); contact noise
+    pushes contacts within ``contact_touch`` in by up to ``contact_noise_depth`` with
+    probability ``contact_noise_prob`` (0: off); all three lengths in units of the simulator's
+    ``length_scale`` (:mod:`physgnn.training.contacts`).
+    ``compile``: the network is compiled in place (``torch.compile``, dynamic shapes; fixed
+    ones when the simulator pads to buckets) for every call, training, validation and
+    rollouts alike; the weights and checkpoints are the same as without (docs/PERFORMANCE.md
+    has what it gains and costs).
+    """
+
+    def __init__(
+        self,
+        simulator: LearnedSimulator,
+        optimizer,
+        scheduler=None,
+        lambda_energy: float = 0.0,
+        noise_std: float = 0.01,
+        seed: int = 0,
+        pushforward_steps: int = 0,
+        pushforward_after: int = 0,
+        pushforward_growth: int = 0,
+        lambda_contact: float = 0.0,
+        contact_tol: float = 0.02,
+        contact_noise_depth: float = 0.0,
+        contact_noise_prob: float = 0.5,
+        contact_touch: float = 0.05,
+        compile: bool = False,
+    ):
+        super().__init__()
+        values = dict(
+            lambda_energy=lambda_energy, noise_std=noise_std, pushforward_steps=pushforward_steps,
+            pushforward_after=pushforward_after, pushforward_growth=pushforward_growth,
+            lambda_contact=lambda_contact,
+            contact_tol=contact_tol, contact_noise_depth=contact_noise_depth,
+            contact_touch=contact_touch,
+        )  # fmt: skip
+        negative = [name for name, value in values.items() if value < 0]
+        if negative or not 0 <= contact_noise_prob <= 1:
+            raise ValueError(
+                f"lit.{(negative or ['contact_noise_prob'])[0]} out of range: lengths, weights "
+                "and step counts must be >= 0, contact_noise_prob in [0, 1]"
+            )
+        self.save_hyperparameters(ignore=["simulator", "optimizer", "scheduler"])
+        self.simulator = simulator
+        self.optimizer_factory = optimizer
+        self.scheduler_factory = scheduler
+        self.lambda_energy = float(lambda_energy)
+        self.noise_std = float(noise_std)
+        self.seed = int(seed)
+        self.pushforward_steps = int(pushforward_steps)
+        self.pushforward_after = int(pushforward_after)
+        self.pushforward_growth = int(pushforward_growth)
+        self.lambda_contact = float(lambda_contact)
+        self.contact_tol = float(contact_tol)
+        self.contact_noise = (float(contact_noise_depth), float(contact_touch))
+        self.contact_noise_prob = float(contact_noise_prob)
+        if compile:  # padded to buckets: a few fixed shapes, compiled each once
+            simulator.network.compile(dynamic=not getattr(simulator, "pad_to_buckets", False))
+        self.pairs_seen = self.nodes_seen = 0
+        self._finite, self._train_means = FiniteWatch(), EpochMeans()
+
+    def losses(self, state) -> dict[str, torch.Tensor]:
+        """``{"loss", "loss_mse", "loss_energy", "energy_share", "loss_contact"}`` of a batch
+        (no noise added here); ``energy_share`` = ``λ·energy / loss``, the part of the loss the
+        energy term is (logged, so that a λ sweep shows whether the term mattered at all)."""
+        sim = self.simulator
+        pred, graph = sim.normalized_prediction(state)
+        target = sim.normalized_target(state)
+        reach = sim.in_reach(state, graph) if sim.gravity_prior else None
+        mse = masked_mse(pred, target, sim.rotating(state), reach)
+        vel_next, _ = sim.to_physical(state, pred, reach)
+        energy = energy_increase(state, vel_next).mean()
+        weighted = self.lambda_energy * energy
+        tol = self.contact_tol * sim.length_scale
+        contact = contact_penalty(state, vel_next, graph, tol, sim.delta_speed_scale)
+        loss = mse + weighted + self.lambda_contact * contact
+        share = (weighted / loss.clamp_min(1e-30)).detach()
+        return {"loss": loss, "loss_mse": mse, "loss_energy": energy, "energy_share": share,
+                "loss_contact": contact}  # fmt: skip
+
+    def _log_all(self, prefix: str, losses: dict, batch_size: int) -> None:
+        """Epoch means under the exact names ``{prefix}/loss`` etc. (weighted by scene count;
+        with DDP, averaged over the processes)."""
+        for name, value in losses.items():
+            self.log(
+                f"{prefix}/{name}",
+                value,
+                batch_size=batch_size,
+                on_step=False,
+                on_epoch=True,
+                prog_bar=name == "loss",
+                sync_dist=True,
+            )
+
+    def _noise_generator(self) -> torch.Generator:
+        """Seeded by (seed, global step): a resumed run draws the same noise as a straight one."""
+        generator = torch.Generator(device=self.device)
+        return generator.manual_seed(self.seed * 1_000_003 + self.global_step)
+
+    def _unroll_length(self) -> int:
+        """Push-forward steps of this batch, ``U{0..K}`` (0 before ``pushforward_after``; K
+        grown as the class doc says), drawn on the host from (seed, global step): no value of
+        the device is read for it."""
+        if self.pushforward_steps == 0 or self.global_step < self.pushforward_after:
+            return 0
+        high = self.pushforward_steps + 1
+        if self.pushforward_growth > 0:
+            grown = 2 + (self.global_step - self.pushforward_after) // self.pushforward_growth
+            high = min(high, grown)
+        return random.Random(self.seed * 1_000_003 + self.global_step).randrange(high)
+
+    def training_step(self, batch, batch_idx: int) -> torch.Tensor:
+        generator = self._noise_generator()
+        if self.noise_std > 0:
+            batch = add_noise(batch, self.simulator, self.noise_std, generator)
+        if self.contact_noise[0] > 0 and self.contact_noise_prob > 0:
+            scale = self.simulator.length_scale  # a tensor: no read-back to the host
+            depth, touch = (scale * x for x in self.contact_noise)
+            graph = self.simulator.graph_builder(batch)
+            batch = perturb_contacts(batch, graph, depth, touch, self.contact_noise_prob, generator)
+        steps = self._unroll_length()
+        if steps > 0:
+            batch = push_forward(batch, self.simulator, steps)
+        losses = self.losses(batch)
+        loss = losses["loss"]
+        last = self._trainer is not None and self.trainer.is_last_batch
+        self._finite.update(loss, self.current_epoch, self.global_step, last)
+        self.pairs_seen += batch.num_graphs
+        self.nodes_seen += batch.num_nodes
+        self._train_means.add(losses, batch.num_graphs)
+        if (
+            self._trainer is not None
+            and (self.global_step + 1) % self.trainer.log_every_n_steps == 0
+        ):
+            self.log("train/loss_step", loss, batch_size=batch.num_graphs, on_step=True)
+        return loss
+
+    def on_train_epoch_end(self) -> None:
+        """The epoch means of the training losses (:mod:`physgnn.training.epoch_means`)."""
+        for name, value in self._train_means.pop().items():
+            self.log(f"train/{name}", value, prog_bar=name == "loss", sync_dist=True)
+
+    def validation_step(self, batch, batch_idx: int) -> None:
+        self._log_all("val", self.losses(batch), batch.num_graphs)
+
+    def configure_optimizers(self):
+        optimizer = self.optimizer_factory(self.parameters())
+        if self.scheduler_factory is None:
+            return optimizer
+        scheduler = self.scheduler_factory(optimizer)
+        return {
+            "optimizer": optimizer,
+            "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"},
+        }
