@@ -80,8 +80,9 @@ def _fresh_venv(folder: Path) -> Path:
     from the wheel: the dependencies' folder is a plain path, so no editable hook runs)."""
     subprocess.run([sys.executable, "-m", "venv", str(folder)], check=True)
     python = folder / "bin" / "python"
-    purelib = subprocess.run([python, "-c", "import sysconfig;print(sysconfig.get_path('purelib'))"],
-                             capture_output=True, text=True, check=True).stdout.strip()  # fmt: skip
+    ask = "import sysconfig; print(sysconfig.get_path('purelib'))"
+    purelib = subprocess.run([python, "-c", ask], capture_output=True, text=True, check=True)
+    purelib = purelib.stdout.strip()
     deps = {sysconfig.get_path("purelib"), sysconfig.get_path("platlib")}
     (Path(purelib) / "physgnn_test_deps.pth").write_text("\n".join(sorted(deps)) + "\n")
     return python
