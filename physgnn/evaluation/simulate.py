@@ -38,7 +38,7 @@ from physgnn import CONF_DIR, metrics
 from physgnn.data.dataset import write_split
 from physgnn.errors import PhysgnnError
 from physgnn.evaluation import rerun_log
-from physgnn.evaluation.ood import outside
+from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.files import claim_folder, portable, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
@@ -171,9 +171,7 @@ def simulate(args: DictConfig | dict) -> dict:
     pred, source = (None, {}) if not args["run"] else learned(args["run"], truth, steps)
     warnings = outside(scene, source.get("cfg")) if pred is not None else []
     if warnings:
-        lines = "; ".join(warnings)
-        print(f"warning: {scene.name} lies outside what the run was trained on: {lines}; its "
-              "rollout is extrapolation", file=sys.stderr)  # fmt: skip
+        print(f"warning: {warning_text(scene.name, warnings)}", file=sys.stderr)
     trajs = [truth] if pred is None else [truth, with_provenance(pred, truth, source)]
     h5 = write_split(out / "simulate.h5", trajs, {"split": "simulate", "preset": scene.name})
     result = {
