@@ -1,3 +1,0 @@
-"""make bench: what accuracy costs in time (machine, learned steps, pybullet, training throughput,
-activity).
-"""

@@ -1,3 +1,0 @@
-"""Ground truth: scene families, the pybullet engine, dataset generation and the cached hard
-scenes.
-"""

@@ -1,1 +1,0 @@
-"""Reports: metrics.csv and stability.csv, report.md with its figures, the Pareto view."""
