@@ -4,6 +4,7 @@ simulates from another folder."""
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -66,10 +67,19 @@ def test_every_kind_of_command_answers_help(name, monkeypatch, capsys):
     assert capsys.readouterr().out.strip()
 
 
+# Left out of the copy a wheel is built from: outputs, environments and build leftovers (a
+# stale build/lib would put files into the wheel that the checkout no longer has).
+NOT_SOURCES = shutil.ignore_patterns(".git", ".venv", "outputs", "build", "dist", "*.egg-info",
+                                     "__pycache__", ".*_cache", ".hypothesis")  # fmt: skip
+
+
 def _wheel(tmp: Path) -> Path:
-    """The wheel built from this checkout (no build isolation: offline)."""
+    """The wheel built from a clean copy of this checkout (no build isolation: offline; the
+    checkout itself gets no build/ folder)."""
+    source = tmp / "source"
+    shutil.copytree(ROOT, source, ignore=NOT_SOURCES)
     subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps",
-                    "--no-build-isolation", "-w", str(tmp), str(ROOT)], check=True)  # fmt: skip
+                    "--no-build-isolation", "-w", str(tmp), str(source)], check=True)  # fmt: skip
     (wheel,) = tmp.glob("physgnn-*.whl")
     return wheel
 
