@@ -29,12 +29,12 @@ test-slow: ## Run only the slow tests
 	$(PY) -m pytest -m slow $(ARGS)
 
 lint: ## Lint and check formatting with ruff
-	$(VENV)/bin/ruff check physgnn tests
-	$(VENV)/bin/ruff format --check physgnn tests
+	$(VENV)/bin/ruff check physgnn tests examples
+	$(VENV)/bin/ruff format --check physgnn tests examples
 
 format: ## Format and autofix with ruff
-	$(VENV)/bin/ruff format physgnn tests
-	$(VENV)/bin/ruff check --fix physgnn tests
+	$(VENV)/bin/ruff format physgnn tests examples
+	$(VENV)/bin/ruff check --fix physgnn tests examples
 
 data: ## Generate the dataset (PRESET=small|tiny|paper) under outputs/data/<preset>
 	$(PY) -m physgnn.generate data=$(PRESET) $(ARGS)

@@ -5,9 +5,21 @@ __version__ = "0.1.0"
 import os as _os
 from pathlib import Path as _Path
 
-# The Hydra configs live beside the package (editable install); an absolute path lets
-# `main` run from `python -m`, from a console script or from a test alike.
-CONF_DIR = str(_Path(__file__).resolve().parent.parent / "conf")
+
+def _conf_dir() -> str:
+    """The Hydra configs: a checkout's top-level ``conf/`` (beside ``pyproject.toml``), else the
+    copy an installed wheel carries as ``physgnn/conf``. Absolute, so that ``main`` runs alike
+    from ``python -m``, the ``physgnn`` console script or a test."""
+    package = _Path(__file__).resolve().parent
+    checkout = package.parent
+    if (checkout / "pyproject.toml").is_file() and (checkout / "conf").is_dir():
+        return str(checkout / "conf")
+    return str(package / "conf")
+
+
+CONF_DIR = _conf_dir()
+# The example scene files (``simulate scene=throw`` finds ``throw.yaml`` here).
+SCENES_DIR = str(_Path(CONF_DIR) / "scenes")
 
 # OpenMP threads that wait for work spin 300 000 rounds by default (GNU OpenMP, which torch's
 # CPU wheel uses) before they sleep. When other processes keep the cores busy, those spinning

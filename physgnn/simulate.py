@@ -7,9 +7,10 @@ a Rerun recording. Arguments are ``key=value`` (not Hydra: ``scene=`` names a fi
 """
 
 from physgnn.cli import command
-from physgnn.evaluation.simulate import parse_args, simulate, summary
+from physgnn.evaluation import simulate as work
 
-main = command("simulate", simulate, done=summary, parse=parse_args)
+main = command("simulate", work.simulate, done=work.summary, parse=work.parse_args,
+               usage=f"{__doc__}\n{work.__doc__}")  # fmt: skip
 
 if __name__ == "__main__":
     main()

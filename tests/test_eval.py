@@ -25,6 +25,7 @@ from physgnn.evaluation.rerun_log import RerunMissing
 from physgnn.models.baselines import GravityOnlySimulator
 from physgnn.report import table as report_table
 from physgnn.report.table import read_csv
+from physgnn.rollout import rollout
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -189,8 +190,25 @@ def evaluate_fake_runs(outputs: Path, *overrides: str) -> Path:
 def evaluated(tmp_path_factory):
     """metrics.csv and report.md of the fake runs (:func:`evaluate_fake_runs`)."""
     outputs = tmp_path_factory.mktemp("eval") / "outputs"
-    path = evaluate_fake_runs(outputs, "video_frames=5")
+    path = evaluate_fake_runs(outputs, "video_frames=5", "save_rollouts=true")
     return outputs, read_csv(outputs / "report" / "metrics.csv"), path.read_text()
+
+
+def test_save_rollouts_writes_each_learned_run_in_the_dataset_schema(evaluated):
+    outputs, rows, _ = evaluated
+    saved = outputs / "report" / "rollouts" / "runs" / "baseline" / "2026-01-01_00-00-00"
+    truth = read_split(outputs / "data" / "hand" / "test.h5")
+    preds = read_split(saved / "test.h5")
+    assert [p.name for p in preds] == [t.name for t in truth]
+    expected = rollout(Falling(), truth)
+    for pred, want in zip(preds, expected, strict=True):
+        torch.testing.assert_close(torch.as_tensor(pred.pos), torch.as_tensor(want.pos))
+        assert pred.attrs["run"] == "runs/baseline/2026-01-01_00-00-00"
+        assert int(pred.attrs["diverged_at"]) == -1 and int(pred.attrs["start"]) == want.start
+    diverging = outputs / "report" / "rollouts" / "multirun" / "ablation_M" / "t0"
+    bad = read_split(diverging / "model.M=3,seed=1" / "ood.h5")
+    assert all(int(p.attrs["diverged_at"]) == p.n_frames for p in bad)
+    assert not (outputs / "report" / "rollouts" / "ground_truth").exists()
 
 
 def test_eval_writes_one_row_per_run_split_and_trajectory(evaluated):

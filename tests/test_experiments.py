@@ -120,7 +120,6 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
             "model.boundary_features": True,
             **REPORT_INPUTS,
         },
-        "report": REPORT_INPUTS,
     }
     stats = build(baseline)[0].stats()
     for variant, changes in expected.items():

@@ -160,11 +160,13 @@ def command(
     done: Callable[[object], str] | None = None,
     parse: Callable[[list[str]], DictConfig] | None = None,
     before: Callable[[list[str]], None] | None = None,
+    usage: str = "",
 ) -> Callable:
     """``main`` of ``python -m physgnn.<name>`` (config ``conf/<name>.yaml``); it returns what
     ``run`` returns (a Hydra sweeper optimises it). ``main.__wrapped__(cfg)`` is the body
-    without Hydra (for tests). With ``parse`` there is no Hydra (module doc). ``before(argv)``
-    checks the command line before Hydra writes anything (its error printed as one line)."""
+    without Hydra (for tests). With ``parse`` there is no Hydra (module doc); ``--help`` then
+    prints ``usage``. ``before(argv)`` checks the command line before Hydra writes anything
+    (its error printed as one line)."""
 
     def main(cfg: DictConfig):
         free_threads()
@@ -192,7 +194,7 @@ def command(
     # Hydra names the job (and its log file) after the module of the task function.
     main.__module__ = f"physgnn.{name}"
     if parse is not None:
-        return _parsed(main, parse)
+        return _parsed(main, parse, usage)
     return _outputs_checked(
         hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main), before
     )
@@ -266,12 +268,17 @@ def _report_failed_job(err: Exception) -> None:
     print(f"error: {one_line(err)} (this job failed; the sweep goes on)", file=sys.stderr)
 
 
-def _parsed(body: Callable, parse: Callable[[list[str]], DictConfig]) -> Callable:
-    """``main(argv=None)``: ``body(parse(argv))``, a parse error printed as one line."""
+def _parsed(body: Callable, parse: Callable[[list[str]], DictConfig], usage: str) -> Callable:
+    """``main(argv=None)``: ``body(parse(argv))``, a parse error printed as one line;
+    ``-h`` or ``--help`` prints ``usage`` and exits 0."""
 
     def main(argv: list[str] | None = None):
+        argv = sys.argv[1:] if argv is None else list(argv)
+        if "-h" in argv or "--help" in argv:
+            print(usage.strip())
+            sys.exit(0)
         try:
-            cfg = parse(sys.argv[1:] if argv is None else list(argv))
+            cfg = parse(argv)
         except USER_ERRORS as err:
             fail(err)
         return body(cfg)

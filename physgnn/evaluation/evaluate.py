@@ -17,11 +17,15 @@ A ``report_dir`` holding files physgnn did not write is refused unless ``overwri
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
+import shutil
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
+from physgnn.data.dataset import write_split
 from physgnn.errors import ConfigError
 from physgnn.evaluation import rerun_log
 from physgnn.evaluation.bounce import bounce_rows
@@ -51,7 +55,7 @@ from physgnn.report.document import write_report
 
 # What an eval writes into its report_dir (replaced whole by the next eval).
 REPORT_OUTPUTS = ("report.md", "metrics.csv", "stability.csv", "freefall.csv", "bounce.csv",
-                  "figures", "videos")  # fmt: skip
+                  "figures", "videos", "rollouts")  # fmt: skip
 MATERIAL_KEYS = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
 
 
@@ -109,7 +113,10 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
     filmed = [r for r in runs if film and r.name in (film.name, f"{film.name} + constraints")]
     batched = bool(OmegaConf.select(cfg, "rollout.batch_scenes", default=True))
     collected = Collected(keep, filmed, cfg.tol, stab, rest_tol(cfg))
+    collected.saved = {} if cfg.get("save_rollouts") else None
     out = roll_all(jobs, data, collected, settings, batch_scenes=batched)
+    if out.saved:
+        write_rollouts(report_dir / "rollouts", out.saved)
     if film is not None and cfg.sleeping_compare and not settings["sleeping"]:
         out.rows += sleeping_rows(film, data[film.dataset]["ood"], cfg.tol, settings["sleep"])
     table.write_csv(report_dir / "metrics.csv", out.rows)
@@ -172,3 +179,23 @@ def write_videos(video_dir: Path, films: dict, max_frames: int) -> list[Path]:
         render_side_by_side(stem, traj, labelled, title=scene, max_frames=max_frames)
         paths.append(stem.with_name(f"{scene}.gif"))
     return paths
+
+
+def write_rollouts(folder: Path, saved: dict) -> list[Path]:
+    """``<folder>/<run name>/<split>.h5`` per learned run and split: its rollouts in the dataset
+    schema (groups named as the truth's), with what made them in each group's attributes."""
+    paths = []
+    for (name, split), preds in sorted(saved.items()):
+        trajs = [dataclasses.replace(p, attrs=p.attrs | made_by(p, name)) for p in preds]
+        path = folder / name.replace(" ", "") / f"{split}.h5"
+        paths.append(write_split(path, trajs, {"split": split, "preset": f"rollouts of {name}"}))
+    return paths
+
+
+def made_by(pred, run: str) -> dict:
+    """A saved rollout's attributes: the run, its first predicted frame - 1 (``start``), where
+    it diverged (-1: it did not) and how its velocities were obtained."""
+    diverged = -1 if pred.diverged_at is None else int(pred.diverged_at)
+    velocity = "finite differences of the predicted positions"
+    return {"made_by": "physgnn learned simulator", "run": run, "start": int(pred.start),
+            "diverged_at": diverged, "velocity": velocity}  # fmt: skip

@@ -60,3 +60,10 @@ def outside(scene, cfg) -> list[str]:
         if lo < low - MARGIN * abs(low) - 1e-12 or hi > high + MARGIN * abs(high) + 1e-12:
             found.append(f"{name} {lo:.3g}–{hi:.3g} (trained on {low:.3g}–{high:.3g})")
     return found
+
+
+def warning_text(name: str, found: list[str]) -> str:
+    """The one line that says ``name`` lies outside the training ranges (``found``: what
+    :func:`outside` returned)."""
+    return (f"{name} lies outside what the run was trained on: {'; '.join(found)}; its rollout "
+            "is extrapolation")  # fmt: skip

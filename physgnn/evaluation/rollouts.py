@@ -74,8 +74,9 @@ class Collected:
     """What the rollouts of an evaluation leave: metrics rows, OOD energy series
     (``{scene: {label: E [T]}}``: the ground truth and the runs named in ``keep``), the OOD
     rollouts of the filmed runs ``film`` (``{scene: (truth, [(rollout, run name), ...])}``, in
-    the order the runs were rolled out) and, with ``stab`` a list, the
-    stability rows of the ground truth's and the learned runs' OOD rollouts."""
+    the order the runs were rolled out), with ``stab`` a list, the
+    stability rows of the ground truth's and the learned runs' OOD rollouts and, with ``saved``
+    a dict, every learned run's rollouts (``{(run name, split): [rollout, ...]}``)."""
 
     keep: set[str]
     film: list[RunInfo]
@@ -85,9 +86,12 @@ class Collected:
     rows: list[dict] = field(default_factory=list)
     energies: dict = field(default_factory=dict)
     films: dict = field(default_factory=dict)
+    saved: dict | None = None
 
     def add(self, job: RunInfo, split: str, traj: Trajectory, pred: Trajectory) -> None:
         self.rows.append(metrics_row(job, split, traj, pred, self.tol))
+        if self.saved is not None and job.run_dir is not None:
+            self.saved.setdefault((job.name, split), []).append(pred)
         if split != "ood":
             return
         truth = job.simulator is None

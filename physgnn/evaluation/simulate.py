@@ -41,11 +41,11 @@ from physgnn import CONF_DIR, metrics
 from physgnn.data.dataset import write_split
 from physgnn.errors import PhysgnnError
 from physgnn.evaluation import rerun_log
-from physgnn.evaluation.ood import outside
+from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.files import claim_folder, portable, staged_outputs, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
-from physgnn.groundtruth.scenefile import load_scene
+from physgnn.groundtruth.scenefile import load_scene, scene_file
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
@@ -81,7 +81,7 @@ def parse_args(argv: list[str]) -> DictConfig:
             raise SimulateError(f"bad argument '{item}'; use key=value with keys {list(KEYS)}")
         args[key] = value
     if not args["scene"]:
-        raise SimulateError("missing scene=FILE (a YAML scene file, e.g. conf/scenes/throw.yaml)")
+        raise SimulateError("missing scene=FILE (a YAML scene file, or an example: scene=throw)")
     cfg = OmegaConf.create()
     for key, value in args.items():
         OmegaConf.update(cfg, key, value)  # paths.outputs -> cfg.paths.outputs
@@ -179,16 +179,14 @@ def _simulate_into(args, scene, folders: tuple[Path, Path], steps: int, tol: flo
     start = time.perf_counter()
     truth = simulate_with_progress(scene)
     truth.attrs.update(
-        group="truth", scene=scene.name, scene_config=Path(args["scene"]).read_text(),
+        group="truth", scene=scene.name, scene_config=scene_file(args["scene"]).read_text(),
         velocity="the engine's (pybullet)", ms_per_frame=1000 * (time.perf_counter() - start)
         / max(scene.n_frames - 1, 1),
     )  # fmt: skip
     pred, source = (None, {}) if not args["run"] else learned(args["run"], truth, steps)
     warnings = outside(scene, source.get("cfg")) if pred is not None else []
     if warnings:
-        lines = "; ".join(warnings)
-        print(f"warning: {scene.name} lies outside what the run was trained on: {lines}; its "
-              "rollout is extrapolation", file=sys.stderr)  # fmt: skip
+        print(f"warning: {warning_text(scene.name, warnings)}", file=sys.stderr)
     trajs = [truth] if pred is None else [truth, with_provenance(pred, truth, source)]
     h5 = write_split(out / "simulate.h5", trajs, {"split": "simulate", "preset": scene.name})
     result = {

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from physgnn import SCENES_DIR
 from physgnn.files import write_text
 from physgnn.groundtruth.layouts import check_clear_of_planes, check_no_overlap
 from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
@@ -209,11 +210,23 @@ def scene_from_dict(d, where: str = "scene") -> Scene:
         raise SceneError(f"{where}: {e}") from None
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read and check a YAML scene file; one-line :class:`SceneError` on any problem."""
+def scene_file(path: str | Path) -> Path:
+    """``path`` when it is a file, else the example scene of that name (``throw`` or
+    ``throw.yaml``: ``conf/scenes/throw.yaml``, which the installed package carries too)."""
     path = Path(path)
-    if not path.is_file():
-        raise SceneError(f"scene file {path} does not exist")
+    if path.is_file():
+        return path
+    example = Path(SCENES_DIR) / f"{path.stem}.yaml"
+    if path.parent == Path(".") and example.is_file():
+        return example
+    names = ", ".join(sorted(p.stem for p in Path(SCENES_DIR).glob("*.yaml")))
+    raise SceneError(f"scene file {path} does not exist; give a YAML file or an example ({names})")
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and check a YAML scene file (or an example scene's name, :func:`scene_file`);
+    one-line :class:`SceneError` on any problem."""
+    path = scene_file(path)
     try:
         d = yaml.load(path.read_text(), Loader=_Loader)
     except yaml.YAMLError as e:

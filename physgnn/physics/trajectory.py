@@ -10,9 +10,11 @@ import numpy as np
 import torch
 
 from physgnn.physics.kinematics import finite_difference_velocities
-from physgnn.physics.scene import Effects
+from physgnn.physics.scene import GROUND, Effects, Material, SceneError, ground_plane
 
 FRAME_KEYS = ("pos", "quat", "vel", "angvel")
+# Mass of an imported sphere given none: water's density (kg/m³) times its volume.
+DEFAULT_DENSITY = 1000.0
 
 
 @dataclass
@@ -69,3 +71,85 @@ class Trajectory:
             f64(self.pos), f64(self.quat), f64(self.vel[0]), f64(self.angvel[0]), self.dt
         )
         return dataclasses.replace(self, vel=vel.numpy())
+
+    @classmethod
+    def from_arrays(
+        cls,
+        pos,
+        radius,
+        dt: float,
+        *,
+        quat=None,
+        vel=None,
+        angvel=None,
+        mass=None,
+        material=None,
+        materials=None,
+        planes=None,
+        plane_kind=None,
+        effects: Effects | None = None,
+        name: str = "imported",
+        attrs: dict | None = None,
+    ) -> Trajectory:
+        """A trajectory from plain arrays (another engine's spheres, a DEM code's output).
+
+        pos ``[T, N, 3]`` and radius ``[N]`` (or one number) are needed; the rest defaults to:
+        quat ``[T, N, 4]`` (w, x, y, z) the identity; vel, angvel ``[T, N, 3]`` by finite
+        differences of pos and quat (frame 0 takes frame 1's, or zero for one frame); mass
+        ``[N]`` from :data:`DEFAULT_DENSITY`; material ``[N]`` 0 with materials ``[K, 4]`` one
+        default :class:`~physgnn.physics.scene.Material`; planes ``[S, 11]`` and plane_kind
+        ``[S]`` the ground alone. A wrong shape raises a one-line ``SceneError``.
+        """
+        pos = _array("pos", pos, np.float32, (None, None, 3))
+        t, n = pos.shape[:2]
+        radius = np.broadcast_to(np.asarray(radius, np.float32), (n,)).copy()
+        quat = _frames("quat", quat, (t, n, 4), _identity(t, n))
+        vel_fd, angvel_fd = _finite_velocities(pos, quat, dt)
+        volume = 4 / 3 * np.pi * radius.astype(np.float64) ** 3
+        static = {
+            "radius": radius,
+            "mass": _frames("mass", mass, (n,), DEFAULT_DENSITY * volume),
+            "material": _frames("material", material, (n,), np.zeros(n), np.int64),
+            "materials": _frames("materials", materials, (None, 4), Material().as_array()[None]),
+            "planes": _frames("planes", planes, (None, 11), ground_plane()[None]),
+            "plane_kind": _frames("plane_kind", plane_kind, (None,), [GROUND], np.int64),
+        }
+        return cls(
+            name=name, pos=pos, quat=quat, dt=float(dt), effects=effects or Effects(),
+            vel=_frames("vel", vel, (t, n, 3), vel_fd), attrs=dict(attrs or {}),
+            angvel=_frames("angvel", angvel, (t, n, 3), angvel_fd), **static,
+        )  # fmt: skip
+
+
+def _array(key: str, value, dtype, shape: tuple) -> np.ndarray:
+    """``value`` as a ``dtype`` array of ``shape`` (None: any size); else a ``SceneError``."""
+    arr = np.asarray(value, dtype=dtype)
+    fits = arr.ndim == len(shape) and all(
+        s in (None, a) for s, a in zip(shape, arr.shape, strict=True)
+    )
+    if not fits:
+        want = "[" + ", ".join("*" if s is None else str(s) for s in shape) + "]"
+        raise SceneError(f"Trajectory.from_arrays: {key} has shape {list(arr.shape)}, "
+                         f"expected {want}")  # fmt: skip
+    return arr
+
+
+def _frames(key: str, value, shape: tuple, default, dtype=np.float32) -> np.ndarray:
+    """:func:`_array` of ``value``, or of ``default`` when ``value`` is None."""
+    return _array(key, default if value is None else value, dtype, shape)
+
+
+def _identity(t: int, n: int) -> np.ndarray:
+    quat = np.zeros((t, n, 4), np.float32)
+    quat[..., 0] = 1.0
+    return quat
+
+
+def _finite_velocities(pos: np.ndarray, quat: np.ndarray, dt: float):
+    """vel, angvel ``[T, N, 3]`` by finite differences, frame 0 a copy of frame 1."""
+    zeros = torch.zeros(pos.shape[1:], dtype=torch.float64)
+    f64 = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
+    vel, angvel = finite_difference_velocities(f64(pos), f64(quat), zeros, zeros, dt)
+    if pos.shape[0] > 1:
+        vel[0], angvel[0] = vel[1], angvel[1]
+    return vel.float().numpy(), angvel.float().numpy()

@@ -77,9 +77,15 @@ def _commit() -> str | None:
     return out.stdout.strip() or None
 
 
+USAGE = "usage: python -m physgnn.training.export RUN_DIR [OUT_DIR] [CHECKPOINT]"
+
+
 def main(argv: list[str]) -> int:
+    if argv and argv[0] in ("-h", "--help"):
+        print(f"{USAGE}\n\n{__doc__.strip()}")
+        return 0
     if not 1 <= len(argv) <= 3:
-        print("usage: python -m physgnn.training.export RUN_DIR [OUT_DIR] [CHECKPOINT]")
+        print(USAGE)
         return 2
     out = Path(argv[1]) if len(argv) > 1 else PRETRAINED_DIR
     try:

@@ -1,0 +1,156 @@
+"""physgnn in a notebook: a model, a scene, its truth, a rollout, scores, a film, exports.
+
+::
+
+    import physgnn.api as pg
+
+    model = pg.load_model("pretrained")     # the shipped weights, or a run folder
+    scene = pg.load_scene("throw")          # a YAML scene file, or an example scene's name
+    truth = pg.simulate(scene, frames=40)   # pybullet's trajectory
+    pred = pg.roll_out(model, truth)        # the learned rollout from truth's first H+1 frames
+    pg.score(pred, truth)                   # {"mse": ..., "chamfer": ..., "energy_gain": ...}
+    pg.animate(truth, pred, "throw")        # throw.gif, throw.mp4, throw_frame.png
+    pg.export(pred, "throw_vtk", "vtk")     # ParaView; or "gns", "lagrangebench", "hdf5"
+
+A scene from arrays: ``pg.scene_from_arrays(pos [N, 3], radius, vel=[N, 3], frames=T)``; a
+trajectory from another engine: ``pg.trajectory_from_arrays(pos [T, N, 3], radius, dt)``.
+Both take the optional fields of :meth:`~physgnn.physics.trajectory.Trajectory.from_arrays`.
+A scene outside what the model was trained on makes :func:`roll_out` warn with an
+:class:`OutOfDistributionWarning` (``warnings.simplefilter("error", pg.OutOfDistributionWarning)``
+turns it into an error). Every trajectory is a :class:`~physgnn.physics.trajectory.Trajectory`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+from omegaconf import DictConfig
+
+from physgnn.data import interchange, vtk
+from physgnn.data.dataset import read_split, write_split
+from physgnn.evaluation.ood import outside, warning_text
+from physgnn.evaluation.simulate import scene_metrics
+from physgnn.evaluation.video3d import render_side_by_side
+from physgnn.groundtruth import scenefile
+from physgnn.groundtruth.engine import simulate as engine_simulate
+from physgnn.models.constrained import ConstrainedSimulator
+from physgnn.physics.scene import Scene, SceneError
+from physgnn.physics.trajectory import Trajectory
+from physgnn.rollout import rollout
+from physgnn.training.runs import load_run
+
+FORMATS = ("vtk", "gns", "lagrangebench", "hdf5")
+trajectory_from_arrays = Trajectory.from_arrays
+load_trajectories = read_split
+
+
+class OutOfDistributionWarning(UserWarning):
+    """A scene outside the ranges the model was trained on: its rollout is extrapolation."""
+
+
+@dataclass
+class Model:
+    """A trained learned simulator: ``simulator`` (``sim(state) -> (v, ω)``), its run's
+    ``cfg`` and ``info`` (run.json and the ``checkpoint`` loaded)."""
+
+    simulator: object
+    cfg: DictConfig
+    info: dict
+
+    @property
+    def H(self) -> int:
+        """The model's history: a rollout starts from a trajectory's first H+1 frames."""
+        return int(self.simulator.H)
+
+
+def load_model(run: str | Path = "pretrained") -> Model:
+    """The model of a finished run folder, or of the shipped weights (``"pretrained"``)."""
+    return Model(*load_run(run))
+
+
+def load_scene(path: str | Path) -> Scene:
+    """A YAML scene file (docs/scene.schema.json), or an example's name (``"throw"``)."""
+    return scenefile.load_scene(path)
+
+
+def scene_from_arrays(pos, radius, *, frames: int = 100, dt: float = 0.1, name: str = "arrays",
+                      **fields) -> Scene:  # fmt: skip
+    """A scene from its start: pos ``[N, 3]``, radius ``[N]`` (or one number), ``frames`` to
+    simulate at interval ``dt``; ``fields``: vel, angvel ``[N, 3]``, quat ``[N, 4]``, and
+    mass, material, materials, planes, plane_kind, effects as in
+    :meth:`Trajectory.from_arrays` (velocities default to zero)."""
+    start = {k: v if k not in ("vel", "angvel", "quat") else [v] for k, v in fields.items()}
+    first = Trajectory.from_arrays([pos], radius, dt, name=name, **start)
+    return dataclasses.replace(scene_of(first), n_frames=int(frames)).validate()
+
+
+def scene_of(traj: Trajectory) -> Scene:
+    """The scene a trajectory starts from (its frame 0, its length)."""
+    static = ("radius", "mass", "material", "planes", "plane_kind", "materials")
+    return Scene(
+        name=traj.name, n_frames=traj.n_frames, dt=traj.dt, effects=traj.effects,
+        **{k: getattr(traj, k)[0] for k in ("pos", "quat", "vel", "angvel")},
+        **{k: getattr(traj, k) for k in static},
+    )  # fmt: skip
+
+
+def simulate(scene: Scene, frames: int | None = None) -> Trajectory:
+    """pybullet's trajectory of ``scene`` (``frames`` instead of its own length)."""
+    if frames is not None:
+        scene = dataclasses.replace(scene, n_frames=int(frames))
+    return engine_simulate(scene)
+
+
+def roll_out(model: Model, truth: Trajectory, constraints: int = 0) -> Trajectory:
+    """The model's rollout of ``truth`` from its first H+1 frames (its finite prefix if it
+    diverged: ``diverged_at``); with ``constraints`` > 0, each learned step is followed by that
+    many iterations of the constraint stage. Warns (:class:`OutOfDistributionWarning`) when
+    ``truth`` starts outside the model's training ranges."""
+    found = outside(scene_of(truth), model.cfg)
+    if found:
+        warnings.warn(warning_text(truth.name, found), OutOfDistributionWarning, stacklevel=2)
+    simulator = model.simulator
+    if constraints > 0:
+        simulator = ConstrainedSimulator(simulator, constraints)
+    return rollout(simulator, [truth])[0]
+
+
+def score(pred: Trajectory | None, truth: Trajectory, tol: float = 0.0) -> dict:
+    """The metrics of ``pred`` against ``truth`` (``make eval``'s columns; None for a rollout
+    that diverged, then ``diverged_at``), or the truth's own physics when ``pred`` is None.
+    ``tol``: the penetration tolerance, a fraction of the diameter."""
+    return scene_metrics(truth, pred, tol)
+
+
+def animate(truth: Trajectory, pred: Trajectory | None = None, stem: str | Path = "video",
+            max_frames: int = 80) -> dict:  # fmt: skip
+    """The shaded 3-D film of ``truth`` (left) beside ``pred`` (right; the truth again without
+    one): ``stem.gif``, ``stem.mp4`` and ``stem_frame.png``; returns their paths by kind."""
+    panel = (truth, "ground truth") if pred is None else (pred, "prediction")
+    return render_side_by_side(stem, truth, [panel], title=truth.name, max_frames=max_frames)
+
+
+def export(trajs: Trajectory | list[Trajectory], folder: str | Path, format: str = "vtk") -> Path:
+    """Write ``trajs`` into ``folder`` as ``format``: ``vtk`` (one trajectory: ParaView files,
+    returns the series file), ``gns`` or ``lagrangebench`` (a ``test`` split and
+    metadata.json), ``hdf5`` (physgnn's dataset schema, ``trajectories.h5``). What each format
+    cannot hold: docs/DATA.md."""
+    trajs = [trajs] if isinstance(trajs, Trajectory) else list(trajs)
+    if format not in FORMATS:
+        raise SceneError(f"export format '{format}' is unknown; choose one of {list(FORMATS)}")
+    if format == "vtk":
+        if len(trajs) != 1:
+            raise SceneError(
+                f"export to vtk takes one trajectory, got {len(trajs)}: one folder each"
+            )
+        return vtk.write_vtk(trajs[0], folder)
+    if format == "gns":
+        return interchange.write_gns(folder, {"test": trajs})
+    if format == "lagrangebench":
+        return interchange.write_lagrangebench(folder, {"test": trajs})
+    return write_split(
+        Path(folder) / "trajectories.h5", trajs, {"split": "export", "preset": "api"}
+    )
