@@ -15,11 +15,11 @@ export GOMP_SPINCOUNT ?= 1000
 help: ## List the targets
 	@grep -hE '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-12s\033[0m %s\n", $$1, $$2}'
 
-install: ## Make .venv and install physgnn with its dev tools and the Hydra launchers (CPU torch wheel, nothing compiled)
+install: ## Make .venv and install physgnn with its dev tools, the Hydra launchers and the docs tools (CPU torch wheel, nothing compiled)
 	test -x $(PY) || python3 -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q "$(TORCH_PIN)"
-	$(PIP) install -q -e ".[dev,launchers]"
+	$(PIP) install -q -e ".[dev,launchers,docs]"
 	$(PY) -c "import torch, torch_geometric, lightning, pybullet, h5py, submitit, hydra_plugins.hydra_joblib_launcher; print('physgnn environment ready: torch', torch.__version__)"
 
 test: ## Run the fast test suite
@@ -73,8 +73,11 @@ bench: ## Accuracy versus time: outputs/bench/bench.{json,md} (ARGS: e.g. quick=
 sleep-study: ## Sleeping spheres off vs on, OOD (c) and a resting pile (RUN=a run folder)
 	$(PY) -m physgnn.sleep_study run=$(RUN) $(ARGS)
 
+docs: ## Build the documentation site into site/ (mkdocs build --strict: a broken link or a warning fails; needs the docs extra)
+	$(VENV)/bin/mkdocs build --strict
+
 clean: ## Remove caches (keeps outputs/)
-	rm -rf .pytest_cache .ruff_cache .hypothesis
+	rm -rf .pytest_cache .ruff_cache .hypothesis site
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +
 
-.PHONY: help install test test-slow lint format data data-report train sweep study eval bench sleep-study clean ship default-table fingerprint learning-curve
+.PHONY: help install test test-slow lint format data data-report train sweep study eval bench sleep-study clean ship default-table fingerprint learning-curve docs

@@ -22,6 +22,23 @@ STATS = {
     "n_pairs": 100,
 }
 
+# The report's model (conf/model/report.yaml) as LearnedSimulator arguments, beyond H, M and
+# hidden: vi connectivity, pp inputs [p_i − p_j, |p_i − p_j|], absolute mass among the node
+# inputs, summed messages, 6 outputs, no contact or material inputs, no gravity prior, no rest
+# decision. The constructor's defaults are the default model's (conf/model/baseline.yaml);
+# tests/test_simulator.py checks both against the configs.
+REPORT_MODEL = {
+    "connectivity": "vi",
+    "contact_features": False,
+    "material_features": False,
+    "gravity_prior": False,
+    "layer_norm": False,
+    "relative_pairs": False,
+    "mass_ratio": False,
+    "aggregation": "sum",
+    "rest_decision": False,
+}
+
 
 def trajectory(
     n: int = 3, frames: int = 12, seed: int = 0, dt: float = 0.1, effects: Effects | None = None

@@ -9,7 +9,7 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
-from simdata import STATS, batch, trajectory
+from simdata import REPORT_MODEL, STATS, batch, trajectory
 from test_graph import make_state
 from torch.testing import assert_close
 from torch_geometric.data import Batch
@@ -24,9 +24,10 @@ CONF = str(Path(__file__).resolve().parents[1] / "conf")
 
 
 def make(**kwargs) -> LearnedSimulator:
+    """The report's model with boundary features (model=gns builds on model=report)."""
     torch.manual_seed(0)
     args = dict(H=0, M=1, hidden=16, boundary_features=True, boundary_radius=R) | kwargs
-    return LearnedSimulator(STATS, **args)
+    return LearnedSimulator(STATS, **(REPORT_MODEL | args))
 
 
 def box(half: float) -> tuple[list, list]:
@@ -110,13 +111,16 @@ def test_node_in_grows_by_6_only_when_enabled():
     assert_close(x[:, -6:], gns.boundary_features(state))
 
 
-def test_default_features_are_unchanged():
+@pytest.mark.parametrize("model", ["report", "default"])
+def test_default_features_are_unchanged(model):
     state = batch([trajectory(3, seed=1), trajectory(2, seed=2)])
-    default = LearnedSimulator(STATS, H=2, M=1, hidden=16)
-    assert not default.use_boundary
-    x = default.node_features(state)
-    assert x.shape == (5, 6 * 3 + 2)
-    assert torch.equal(make(H=2).node_features(state)[:, :-6], x)
+    switches = REPORT_MODEL if model == "report" else {}
+    plain = LearnedSimulator(STATS, H=2, M=1, hidden=16, **switches)
+    assert not plain.use_boundary
+    x = plain.node_features(state)
+    assert x.shape == (5, 6 * 3 + 2 if model == "report" else 6 * 3 + 1 + 4)
+    with_boundary = LearnedSimulator(STATS, H=2, M=1, hidden=16, boundary_features=True, **switches)
+    assert torch.equal(with_boundary.node_features(state)[:, :-6], x)
 
 
 def test_gns_style_model_runs_forward_and_backward():
@@ -154,7 +158,7 @@ def test_config_keys_are_accepted(model):
 def test_run_with_boundary_features_loads_back(tmp_path):
     sim = make(H=1, boundary_radius=1.5).eval()
     model = dict(_target_="physgnn.models.learned.LearnedSimulator", H=1, M=1, hidden=16)
-    model |= dict(boundary_features=True, boundary_radius=1.5)
+    model |= REPORT_MODEL | dict(boundary_features=True, boundary_radius=1.5)
     (tmp_path / ".hydra").mkdir()
     OmegaConf.save(OmegaConf.create({"model": model}), tmp_path / ".hydra" / "config.yaml")
     (tmp_path / "checkpoints").mkdir()

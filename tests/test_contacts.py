@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from simdata import STATS
+from simdata import REPORT_MODEL, STATS
 from torch.testing import assert_close
 from torch_geometric.data import Batch
 
@@ -59,17 +59,41 @@ def make(**kwargs) -> LearnedSimulator:
     return LearnedSimulator(STATS, **(args | kwargs))
 
 
-def test_pp_contact_features_state_the_gap_and_the_closing_speed():
-    sim = make(length_scale=2.0)
+@pytest.mark.parametrize("relative_pairs", [False, True])
+def test_pp_contact_features_state_the_gap_and_the_closing_speed(relative_pairs):
+    sim = make(length_scale=2.0, relative_pairs=relative_pairs)
     # two spheres 1.7 m apart along x (radii 0.5 and 1: gap 0.2 m), closing at 3 m/s
     state = scene([[0, 0, 5], [1.7, 0, 5]], [[1, 0, 0], [-2, 0, 0]], [0.5, 1.0])
     graph = sim.graph_builder(state)
     pp, _ = sim.edge_features(graph, state)
-    assert pp.shape == (2, 6)
+    assert pp.shape == (2, 4 + 17 if relative_pairs else 6)
     sigma = float(torch.tensor([1.0, 2.0, 4.0]).square().mean().sqrt())
     expected = torch.tensor([0.2 / 2.0, -3.0 / sigma])
-    assert_close(pp[0, 4:], expected)
-    assert_close(pp[1, 4:], expected)  # the same for the reverse edge: the third law holds
+    assert_close(pp[0, 4:6], expected)
+    assert_close(pp[1, 4:6], expected)  # the same for the reverse edge: the third law holds
+
+
+def test_relative_pair_inputs_by_hand():
+    """The default model's pp columns after [p_i − p_j, |p_i − p_j|] (i the target, edge 0 is
+    0 → 1): gap, normal and tangential relative speed, the 3 relative velocities, both radii,
+    the mass ratio, the pair's restitution and friction products."""
+    sim = make(length_scale=2.0)
+    assert sim.relative_pairs and sim.mass_ratio
+    # sphere 1 passes sphere 0 sideways at 4 m/s (y) while closing at 3 m/s (x)
+    state = scene(
+        [[0, 0, 5], [1.7, 0, 5]], [[1, 0, 0], [-2, 4, 0]], [0.5, 1.0], mass=[1.0, 3.0],
+        material=[0, 1],
+    )  # fmt: skip
+    graph = sim.graph_builder(state)
+    pp, _ = sim.edge_features(graph, state)
+    sigma = float(torch.tensor([1.0, 2.0, 4.0]).square().mean().sqrt())
+    restitution, friction = 0.7 * 0.3, 0.5 * 0.9
+    dv = torch.tensor([-3.0, 4.0, 0.0]) / sigma  # v_1 − v_0
+    edge0 = [0.1, -3.0 / sigma, 4.0 / sigma, *dv.tolist() * 3, 0.5, 0.25, 0.75]
+    edge1 = [0.1, -3.0 / sigma, 4.0 / sigma, *(-dv).tolist() * 3, 0.25, 0.5, 0.25]
+    expected = torch.tensor([edge0 + [restitution, friction], edge1 + [restitution, friction]])
+    assert graph.pp_index[:, 0].tolist() == [0, 1]
+    assert_close(pp[:, 4:], expected)
 
 
 def test_ps_contact_features_state_clearance_normal_and_tangential_speed():
@@ -82,17 +106,19 @@ def test_ps_contact_features_state_clearance_normal_and_tangential_speed():
     assert_close(ps[0, 10:], torch.tensor([0.3 / 2.0, -2.0 / sigma, 5.0 / sigma]))
 
 
-def test_material_values_are_node_features():
-    sim = make()
+@pytest.mark.parametrize("mass_ratio", [False, True])
+def test_material_values_are_node_features(mass_ratio):
+    sim = make(mass_ratio=mass_ratio)
     state = scene([[0, 0, 5], [3, 0, 5]], [[0, 0, 0]] * 2, [0.5, 0.5], material=[1, 0])
     x = sim.node_features(state)
-    assert x.shape == (2, 6 * 3 + 2 + 4)
-    assert_close(x[0, 20:], torch.tensor([0.3, 0.9, 2.0, 2.0]))
-    assert_close(x[1, 20:], torch.tensor([0.7, 0.5, 0.5, 0.5]))
+    first = 6 * 3 + 1 + int(not mass_ratio)  # after the velocities, radius (and mass)
+    assert x.shape == (2, first + 4)
+    assert_close(x[0, first:], torch.tensor([0.3, 0.9, 2.0, 2.0]))
+    assert_close(x[1, first:], torch.tensor([0.7, 0.5, 0.5, 0.5]))
 
 
 def test_report_inputs_are_the_old_widths():
-    sim = LearnedSimulator(STATS, H=2, M=1, hidden=8)
+    sim = LearnedSimulator(STATS, H=2, M=1, hidden=8, **REPORT_MODEL)
     assert (sim.network.pp_in, sim.network.ps_in, sim.node_in) == (4, 10, 20)
 
 
@@ -180,9 +206,16 @@ def test_contact_noise_pushes_contacts_in_and_targets_the_truth():
     assert torch.equal(none.pos, state.pos)
 
 
-@pytest.mark.parametrize("flag", ["contact_features", "material_features", "gravity_prior"])
-def test_each_switch_alone_builds_and_predicts(flag):
-    sim = LearnedSimulator(STATS, H=2, M=1, hidden=8, **{flag: True})
+SWITCHES = [("contact_features", True), ("material_features", True), ("gravity_prior", True),
+            ("connectivity", "approach"), ("relative_pairs", True), ("mass_ratio", True),
+            ("aggregation", "mean"), ("rest_decision", True)]  # fmt: skip
+
+
+@pytest.mark.parametrize(("key", "value"), SWITCHES)
+def test_each_switch_alone_builds_and_predicts(key, value):
+    """Each switch of the default model alone on the report's model."""
+    assert REPORT_MODEL.get(key, False) != value
+    sim = LearnedSimulator(STATS, H=2, M=1, hidden=8, **(REPORT_MODEL | {key: value}))
     state = scene([[0, 0, 0.5], [1.0, 0, 0.5]], [[0, 0, 0]] * 2, [0.5, 0.5])
     vel, angvel = sim(state)
     assert torch.isfinite(vel).all() and torch.isfinite(angvel).all()

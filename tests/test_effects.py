@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+from pathlib import Path
 
 import lightning as L
 import numpy as np
@@ -19,6 +20,7 @@ from physgnn.training.lit import LitSimulator
 from physgnn.training.runs import load_run
 
 MODEL = dict(H=1, M=2, hidden=16, epsilon=0.05)
+CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
 def make() -> LearnedSimulator:
@@ -109,7 +111,9 @@ def test_effects_trained_round_trip_through_a_lightning_checkpoint(tmp_path):
     trainer.strategy.connect(lit)
     (tmp_path / "checkpoints").mkdir()
     trainer.save_checkpoint(tmp_path / "checkpoints" / "last.ckpt")
-    model = dict(_target_="physgnn.models.learned.LearnedSimulator", **MODEL)
+    # every key of the model, as a run's config holds it (a run without the keys added since
+    # is an earlier physgnn's, loaded with the earlier model's values)
+    model = OmegaConf.merge(OmegaConf.load(CONF / "model" / "baseline.yaml"), MODEL)
     (tmp_path / ".hydra").mkdir()
     OmegaConf.save(OmegaConf.create({"model": model}), tmp_path / ".hydra" / "config.yaml")
     loaded, _, info = load_run(tmp_path)

@@ -119,7 +119,8 @@ def test_dataset_of_reads_the_datamodule_dir():
 def eval_cfg(*overrides):
     with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
         # the stability section rolls out 2000-frame hard scenes: tests/test_stability.py
-        return compose("eval", ["stability=false", *overrides])
+        # the invariance checks roll 2000-frame grids out: tests/test_invariances.py
+        return compose("eval", ["stability=false", "invariance=null", *overrides])
 
 
 def test_main_on_a_missing_run_folder_prints_one_line_and_exits_2(tmp_path, capsys):

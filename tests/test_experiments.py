@@ -11,6 +11,7 @@ from hydra import compose, initialize_config_dir
 from hydra.types import RunMode
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
+from simdata import REPORT_MODEL
 
 from physgnn.training.train import build
 
@@ -21,7 +22,7 @@ EXPERIMENTS = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml") if p.s
 RUNS = {
     "ablation_H": 15,
     "ablation_M": 15,
-    "ablation_connectivity": 9,
+    "ablation_connectivity": 12,
     "ablation_lambda": 12,
     "ablation_components": 24,
     "ablation_contacts": 27,
@@ -120,6 +121,14 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
             "model.boundary_features": True,
             **REPORT_INPUTS,
         },
+        # each invariance of the default model undone alone
+        "vi_connectivity": {"model.connectivity": "vi"},
+        "absolute_pairs": {"model.relative_pairs": False},
+        "absolute_mass": {"model.mass_ratio": False},
+        "sum_aggregation": {"model.aggregation": "sum"},
+        "no_rest_decision": {"model.rest_decision": False},
+        "uniform_noise": {"lit.noise_rest_scale": 1.0},
+        "no_dense_data": {},  # the data only (below)
     }
     stats = build(baseline)[0].stats()
     for variant, changes in expected.items():
@@ -131,13 +140,14 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
                 want = changes.get(f"{section}.{key}", baseline[section][key])
                 assert value == want, (variant, key)
     assert baseline.model.M == 5 and baseline.model.H == 2 and baseline.lit.lambda_energy == 0
-    assert baseline.model.connectivity == "vi" and baseline.lit.noise_std == 0.03
+    assert baseline.model.connectivity == "approach" and baseline.lit.noise_std == 0.03
+    assert baseline.model.aggregation == "mean" and baseline.lit.noise_rest_scale == 0.05
+    nodense = compose_train([*base, "+variant=no_dense_data"]).data
+    assert nodense.fit_scene.dense_fraction == 0.0 and nodense.dir.endswith("small_nodense")
 
 
-REPORT_INPUTS = {
-    f"model.{key}": False
-    for key in ("contact_features", "material_features", "gravity_prior", "layer_norm")
-}
+# the report's model (model=report, which model=gns builds on) against the default
+REPORT_INPUTS = {f"model.{key}": value for key, value in REPORT_MODEL.items()}
 
 
 def test_gns_model_config_is_the_gns_variant(tiny_dataset, tmp_path):

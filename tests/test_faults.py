@@ -259,7 +259,9 @@ def test_debug_fast_leaves_nothing_eval_takes_for_a_model(tiny_dataset, tmp_path
 
 def compose_eval(outputs, *overrides):
     with initialize_config_dir(config_dir=CONF, version_base="1.3"):
-        return compose("eval", overrides=[f"paths.outputs={outputs}", *overrides])
+        return compose(
+            "eval", overrides=[f"paths.outputs={outputs}", "invariance.rest_frames=4", *overrides]
+        )
 
 
 # --- data-report honours PHYSGNN_OUTPUTS --------------------------------------------------------

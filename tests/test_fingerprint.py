@@ -39,11 +39,16 @@ CONFIG = [
     "model.factor=1.0", "model.third_law=true", "model.use_surfaces=true",
     "model.boundary_features=false", "model.contact_features=true",
     "model.material_features=true", "model.gravity_prior=true", "model.layer_norm=false",
+    "model.clip_margin=1.0",
+    # the invariance keys (default since), at the values the fingerprint was measured with
+    "model.relative_pairs=false", "model.mass_ratio=false", "model.aggregation=sum",
+    "model.rest_decision=false", "model.rest_speed=0.01",
     # the recipe: noise, push-forward (from step 2 of 4), contact terms, Adam, schedule
     "lit.noise_std=0.03", "lit.pushforward_steps=2", "lit.pushforward_after=2",
     "lit.pushforward_growth=0", "lit.lambda_energy=0.0", "lit.lambda_contact=1.0",
     "lit.contact_tol=0.02", "lit.contact_noise_depth=0.2", "lit.contact_noise_prob=0.3",
-    "lit.contact_touch=0.05", "lit.optimizer.lr=1.0e-3", "lit.scheduler.gamma=0.97",
+    "lit.contact_touch=0.05", "lit.noise_rest_scale=1.0", "lit.lambda_rest=0.0",
+    "lit.optimizer.lr=1.0e-3", "lit.scheduler.gamma=0.97",
     # 4 steps of 4 pairs, no callbacks, no logger
     "datamodule.batch_size=4", "datamodule.pairs_per_epoch=16", "datamodule.val_pairs=8",
     "trainer.max_epochs=1", "trainer.max_time=null", "trainer.enable_progress_bar=false",

@@ -8,7 +8,8 @@ import lightning as L
 import pytest
 import torch
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint
-from simdata import STATS, batch, trajectory
+from simdata import REPORT_MODEL, STATS, batch, trajectory
+from test_contacts import scene
 from torch.testing import assert_close
 from torch_geometric.data import Batch
 from torch_geometric.loader import DataLoader
@@ -22,14 +23,18 @@ from physgnn.training.lit import (
     add_noise,
     energy_increase,
     masked_mse,
+    regime_scale,
+    rest_loss,
 )
 
 ADAM = functools.partial(torch.optim.Adam, lr=1e-3)
 
 
-def make_lit(**kwargs) -> LitSimulator:
+def make_lit(model: dict | None = None, **kwargs) -> LitSimulator:
+    """The default model (or ``model``'s switches) with H = 1, M = 1, 8 hidden units."""
     torch.manual_seed(0)
-    return LitSimulator(LearnedSimulator(STATS, H=1, M=1, hidden=8), ADAM, **kwargs)
+    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8, **(model or {}))
+    return LitSimulator(sim, ADAM, **kwargs)
 
 
 def one_sphere(z: float, vel) -> SceneState:
@@ -75,9 +80,13 @@ def test_masked_mse_by_hand():
 
 
 def test_energy_term_enters_the_loss_with_lambda():
+    # the report's model: no gravity prior, so the flying spheres are the network's (mse > 0)
     state = batch([trajectory(3, seed=2)])
-    plain, weighted = make_lit(lambda_energy=0.0), make_lit(lambda_energy=0.5)
+    off = dict(lambda_contact=0.0)
+    plain = make_lit(REPORT_MODEL, lambda_energy=0.0, **off)
+    weighted = make_lit(REPORT_MODEL, lambda_energy=0.5, **off)
     a, b = plain.losses(state), weighted.losses(state)
+    assert float(a["loss_mse"].detach()) > 0
     assert_close(a["loss"], a["loss_mse"])
     assert_close(b["loss"], b["loss_mse"] + 0.5 * b["loss_energy"])
     assert_close(a["loss_energy"], b["loss_energy"])
@@ -86,7 +95,8 @@ def test_energy_term_enters_the_loss_with_lambda():
 
 
 def test_noise_only_in_training_shaped_like_a_rollout_with_correcting_targets():
-    lit = make_lit(noise_std=0.1)
+    # the same noise for every sphere, and no contact noise (which moves positions)
+    lit = make_lit(noise_std=0.1, noise_rest_scale=1.0, contact_noise_depth=0.0)
     still = trajectory(40, seed=4, effects=Effects(rotation=False))
     state = batch([trajectory(40, seed=3), still])
     seen = []
@@ -256,8 +266,76 @@ def test_contact_settings_out_of_range_are_refused():
 
 def test_losses_with_the_contact_terms_are_finite_and_the_penalty_counts():
     state = batch([trajectory(3, seed=0), trajectory(2, seed=1)])
-    lit = make_lit(lambda_contact=2.0)
+    lit = make_lit(REPORT_MODEL, lambda_contact=2.0)
     losses = lit.losses(state)
     expected = losses["loss_mse"] + 2.0 * losses["loss_contact"]
     assert_close(losses["loss"], expected)
-    assert torch.isfinite(losses["loss"])
+    assert torch.isfinite(losses["loss"]) and float(losses["loss_mse"].detach()) > 0
+    assert float(losses["loss_rest"].detach()) == 0.0  # no rest decision
+
+
+def resting_pair_and_a_faller():
+    """A touching pair at rest on the ground (target: rest) and a sphere at the top of its
+    flight 3 m up (target: v + g dt), with materials; dt 0.1 s."""
+    state = scene([[0, 0, 0.5], [1.0, 0, 0.5], [5, 0, 3]], [[0, 0, 0]] * 3, [0.5] * 3)
+    state.vel[2, 1:] = torch.tensor([0.0, 0.0, 0.981])  # ballistic history: out of reach
+    state.target_vel = torch.tensor([[0.0, 0, 0], [0, 0, 0], [0, 0, -0.981]])
+    state.target_angvel = torch.zeros(3, 3)
+    return state
+
+
+def test_default_losses_add_the_rest_term_over_the_spheres_in_reach():
+    state = resting_pair_and_a_faller()
+    lit = make_lit(lambda_contact=2.0, lambda_rest=0.5)
+    sim = lit.simulator
+    losses = lit.losses(state)
+    expected = losses["loss_mse"] + 2.0 * losses["loss_contact"] + 0.5 * losses["loss_rest"]
+    assert_close(losses["loss"], expected)
+    assert float(losses["loss_mse"].detach()) > 0 and float(losses["loss_rest"].detach()) > 0
+    pred, graph = sim.normalized_prediction(state)
+    reach = sim.in_reach(state, graph)
+    assert reach.tolist() == [True, True, False]
+    assert sim.rest_target(state).tolist() == [True, True, False]
+    # binary cross-entropy of the rest logit against "at rest", over the spheres in reach
+    logit = pred[:2, 6]
+    expected_rest = torch.nn.functional.softplus(-logit).mean()
+    assert_close(rest_loss(sim, state, pred, reach), expected_rest)
+    assert_close(losses["loss_rest"], expected_rest)
+
+
+def test_rest_loss_is_zero_without_a_rest_decision():
+    state = resting_pair_and_a_faller()
+    sim = make_lit(dict(rest_decision=False)).simulator
+    pred, graph = sim.normalized_prediction(state)
+    assert pred.shape == (3, 6)
+    assert float(rest_loss(sim, state, pred, sim.in_reach(state, graph)).detach()) == 0.0
+    losses = make_lit(dict(rest_decision=False)).losses(state)
+    assert float(losses["loss_rest"].detach()) == 0.0 and float(losses["loss_mse"].detach()) > 0
+
+
+def test_regime_scale_gives_resting_spheres_the_rest_scale_and_fast_ones_one():
+    sim = make_lit().simulator
+    sigma = float(sim.speed_scale)
+    assert sigma == pytest.approx(7.0**0.5)  # RMS of the velocity std (1, 2, 4)
+    # at rest; fast; 1 m/s; spinning at 2 rad/s with r 0.5 (1 m/s at the surface)
+    state = scene([[0, 0, 0.5], [3, 0, 3], [6, 0, 3], [9, 0, 3]],
+                  [[0, 0, 0], [10, 0, 0], [0, 0.6, -0.8], [0, 0, 0]], [0.5] * 4)  # fmt: skip
+    state.angvel[3, 0] = torch.tensor([0.0, 2.0, 0.0])
+    scale = regime_scale(state, sim, 0.05)
+    assert scale.shape == (4, 1, 1)
+    expected = torch.tensor([0.05, 1.0, 1.0 / sigma, 1.0 / sigma])
+    assert_close(scale.flatten(), expected)
+    assert_close(regime_scale(state, sim, 1.0).flatten(), torch.ones(4))
+
+
+def test_regime_scaled_noise_is_the_uniform_noise_times_the_scale():
+    sim = make_lit().simulator
+    state = scene([[0, 0, 0.5], [3, 0, 3]], [[0, 0, 0], [10, 0, 0]], [0.5] * 2)
+    state.target_vel = state.vel[:, 0].clone()
+    uniform = add_noise(state, sim, 0.1, torch.Generator().manual_seed(4))
+    scaled = add_noise(state, sim, 0.1, torch.Generator().manual_seed(4), rest_scale=0.05)
+    factor = torch.tensor([0.05, 1.0])[:, None, None]
+    assert_close(scaled.vel - state.vel, factor * (uniform.vel - state.vel))
+    assert_close(scaled.angvel - state.angvel, factor * (uniform.angvel - state.angvel))
+    assert_close(scaled.pos - state.pos, factor[:, 0] * (uniform.pos - state.pos))
+    assert float((uniform.vel - state.vel)[0].abs().max()) > 0

@@ -2,20 +2,63 @@
 
 from __future__ import annotations
 
+import inspect
+from pathlib import Path
+
 import pytest
 import torch
-from simdata import STATS, batch, trajectory
+from omegaconf import OmegaConf
+from simdata import REPORT_MODEL, STATS, batch, trajectory
 from torch.testing import assert_close
 
 from physgnn.models.learned import LearnedSimulator, StatsError
 from physgnn.models.profiling import StepTimer
 from physgnn.physics.scene import Effects
 
+MODEL_CONF = Path(__file__).resolve().parents[1] / "conf" / "model"
+
 
 def make(**kwargs) -> LearnedSimulator:
     torch.manual_seed(0)
     args = dict(H=2, M=2, hidden=16) | kwargs
     return LearnedSimulator(STATS, **args)
+
+
+def report(**kwargs) -> LearnedSimulator:
+    """The report's model (tests/simdata.py, REPORT_MODEL)."""
+    return make(**(REPORT_MODEL | kwargs))
+
+
+def constructor_defaults() -> dict:
+    params = inspect.signature(LearnedSimulator).parameters.values()
+    return {p.name: p.default for p in params if p.default is not inspect.Parameter.empty}
+
+
+def test_constructor_defaults_are_the_default_model_and_report_model_is_the_reports():
+    baseline = OmegaConf.to_container(OmegaConf.load(MODEL_CONF / "baseline.yaml"))
+    baseline.pop("_target_")
+    assert constructor_defaults() == baseline
+    own = OmegaConf.load(MODEL_CONF / "report.yaml")
+    own.pop("defaults")
+    composed = OmegaConf.to_container(
+        OmegaConf.merge(OmegaConf.load(MODEL_CONF / "baseline.yaml"), own)
+    )
+    composed.pop("_target_")
+    assert constructor_defaults() | REPORT_MODEL == composed
+
+
+def test_default_and_report_widths():
+    default, old = make(H=2), report(H=2)
+    # node: 6(H+1) velocities, radius, 4 material values (no mass); the report's: radius, mass
+    assert (default.node_in, old.node_in) == (6 * 3 + 1 + 4, 6 * 3 + 2)
+    # pp: [p_i − p_j, |p_i − p_j|], gap, normal and tangential relative speed, 3 relative
+    # velocities, 2 radii, the mass ratio, 2 pair materials; the report's: the first 4
+    assert (default.network.pp_in, old.network.pp_in) == (4 + 5 + 9 + 1 + 2, 4)
+    assert (default.network.ps_in, old.network.ps_in) == (13, 10)
+    outputs = [m.network.decoder.lin2.out_features for m in (default, old)]
+    assert outputs == [7, 6]  # Δv, Δω (and the rest logit)
+    assert [m.network.aggregation for m in (default, old)] == ["mean", "sum"]
+    assert [m.graph_builder.connectivity for m in (default, old)] == ["approach", "vi"]
 
 
 def test_forward_shapes_and_timings():
@@ -32,7 +75,7 @@ def test_forward_shapes_and_timings():
 
 
 def test_node_features_by_hand():
-    sim = make(H=1)
+    sim = report(H=1)
     state = batch([trajectory(2, seed=3)], t=4, H=3)  # a longer history than the model's
     x = sim.node_features(state)
     assert x.shape == (2, 6 * 2 + 2)
@@ -44,8 +87,19 @@ def test_node_features_by_hand():
     assert_close(x[1, 13], (state.mass[1] - 2.0) / 0.5)
 
 
+def test_default_node_features_hold_no_mass():
+    sim = make(H=1)
+    state = batch([trajectory(2, seed=3)], t=4, H=3)
+    x = sim.node_features(state)
+    assert x.shape == (2, 6 * 2 + 1 + 4)
+    assert_close(x[1, 12], (state.radius[1] - 0.5) / 0.1)
+    heavy = state.clone()
+    heavy.mass = state.mass * 37.0
+    assert torch.equal(sim.node_features(heavy), x)
+
+
 def test_edge_features_scaled_by_length_and_velocity_std():
-    sim = make(length_scale=2.0)
+    sim = report(length_scale=2.0)
     state = batch([trajectory(3, seed=0)])
     graph = sim.graph_builder(state)
     pp, ps = sim.edge_features(graph)
@@ -60,15 +114,28 @@ def test_default_length_scale_is_mean_diameter():
 
 
 def test_target_round_trip_gives_ground_truth():
-    sim = make()
+    sim = report()
     state = batch([trajectory(4, seed=2)])
     vel, angvel = sim.to_physical(state, sim.normalized_target(state))
     assert_close(vel, state.target_vel)
     assert_close(angvel, state.target_angvel)
 
 
-def test_zero_output_means_mean_change():
+def test_target_round_trip_of_the_default_model_in_reach_and_not_at_rest():
     sim = make()
+    state = batch([trajectory(4, seed=2)])
+    target = sim.normalized_target(state)
+    assert target.shape == (4, 6)
+    pred = torch.cat([target, torch.full((4, 1), -1.0)], 1)  # rest logit < 0: not at rest
+    vel, angvel = sim.to_physical(state, pred, torch.ones(4, dtype=torch.bool))
+    assert_close(vel, state.target_vel)
+    assert_close(angvel, state.target_angvel)
+    with pytest.raises(ValueError, match="needs the spheres in reach"):
+        sim.to_physical(state, pred)
+
+
+def test_zero_output_means_mean_change():
+    sim = report()
     state = batch([trajectory(3, seed=2)])
     vel, angvel = sim.to_physical(state, torch.zeros(3, 6))
     assert_close(vel, state.vel[:, 0] + torch.tensor([0.0, 0.0, -0.9]))
@@ -76,7 +143,7 @@ def test_zero_output_means_mean_change():
 
 
 def test_rotation_off_keeps_angular_velocity():
-    sim = make()
+    sim = report()  # the default model's gravity prior would keep every ω in free flight
     still = trajectory(3, seed=4, effects=Effects(rotation=False))
     state = batch([trajectory(2, seed=5), still])
     _, angvel = sim(state)
@@ -129,7 +196,8 @@ def test_history_mismatch_raises():
 
 
 def test_material_embedding_changes_the_prediction():
-    sim = make(num_materials=3, material_dim=4)
+    # the report's model: the default one's gravity prior ignores the network in free flight
+    sim = report(num_materials=3, material_dim=4)
     state = batch([trajectory(3, seed=9)])
     before = sim(state)[0]
     state.material = torch.tensor([2, 1, 0])

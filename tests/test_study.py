@@ -44,7 +44,7 @@ def study_cfg(tmp_path, *overrides):
 def test_the_default_study_adds_the_contact_switches_to_the_reports_sweeps(tmp_path):
     sweeps = list(study_cfg(tmp_path).sweeps)
     assert sweeps == [*SWEEPS, "ablation_contacts"]
-    extra = [c.key for c in study_configs(sweeps)][17:]
+    extra = [c.key for c in study_configs(sweeps)][18:]
     assert extra == ["model.contact_features=False", "model.material_features=False",
                      "model.gravity_prior=False", "lit.lambda_contact=0",
                      "lit.contact_noise_depth=0", "model.layer_norm=True",
@@ -52,14 +52,15 @@ def test_the_default_study_adds_the_contact_switches_to_the_reports_sweeps(tmp_p
                      "lit.pushforward_growth=450 lit.pushforward_steps=4"]  # fmt: skip
 
 
-def test_the_five_sweeps_are_17_configurations_the_baseline_shared():
+def test_the_five_sweeps_are_18_configurations_the_baseline_shared():
     configs = study_configs(SWEEPS)
     keys = [c.key for c in configs]
-    assert len(keys) == len(set(keys)) == 17
+    assert len(keys) == len(set(keys)) == 18
     base = configs[0]
     assert base.key == "baseline" and base.overrides == []
+    # the default connects by approach, the connectivity sweep's first point
     assert base.points == {"ablation_components": "baseline", "ablation_H": "2",
-                           "ablation_M": "5", "ablation_connectivity": "vi",
+                           "ablation_M": "5", "ablation_connectivity": "approach",
                            "ablation_lambda": "0"}  # fmt: skip
     by_key = {c.key: c for c in configs}
     # the variant m1 and the sweep's M = 1 are one configuration, trained once
@@ -67,13 +68,16 @@ def test_the_five_sweeps_are_17_configurations_the_baseline_shared():
     assert by_key["lit.lambda_energy=10"].points == {"ablation_components": "energy",
                                                      "ablation_lambda": "10"}  # fmt: skip
     assert by_key["model.H=0"].overrides == ["+variant=h0"]  # datamodule.H follows, not a key
+    assert by_key["model.connectivity=vi"].points == {"ablation_connectivity": "vi"}
     gns = [k for k in keys if "use_surfaces=False" in k]
     assert gns == [
-        "model.boundary_features=True model.contact_features=False model.gravity_prior=False "
-        "model.material_features=False model.third_law=False model.use_surfaces=False"
-    ]  # the GNS-style model has the report's inputs
+        "model.aggregation=sum model.boundary_features=True model.connectivity=vi "
+        "model.contact_features=False model.gravity_prior=False model.mass_ratio=False "
+        "model.material_features=False model.relative_pairs=False model.rest_decision=False "
+        "model.third_law=False model.use_surfaces=False"
+    ]  # the GNS-style model is the report's (tests/simdata.py, REPORT_MODEL)
     jobs = study_jobs(configs, [0, 1, 2])
-    assert len(jobs) == 51
+    assert len(jobs) == 54
     table2 = [c.key for c in configs if next(iter(c.points)) == "ablation_components"]
     assert len(table2) == 8  # the baseline's seeds, then Table 2's rows, seed by seed
     assert [(j.config.key, j.seed) for j in jobs[:24]] == [("baseline", s) for s in (0, 1, 2)] + [
@@ -99,7 +103,7 @@ def test_runs_of_another_default_model_are_not_this_studys(tmp_path, capsys):
         other = compose("train", ["model.M=3"])
     assert defaults_fingerprint(now) == defaults_fingerprint(now.copy())
     assert defaults_fingerprint(now) != defaults_fingerprint(other)
-    cfg = study_cfg(tmp_path, "dry_run=true", "sweeps=[ablation_connectivity]", "seeds=[0]")
+    cfg = study_cfg(tmp_path, "dry_run=true", "sweeps=[ablation_M]", "seeds=[0]")  # has M = 5
     budget = study_budget(cfg)
     assert budget["defaults"] == defaults_fingerprint(now) and budget["steps"] == 2250
     old = budget | {"defaults": defaults_fingerprint(other)}
@@ -205,8 +209,8 @@ def test_dry_run_lists_every_job_and_trains_nothing(tmp_path, capsys):
     cfg = study_cfg(tmp_path, "dry_run=true", "sweeps=[ablation_connectivity]", "seeds=[0,1]")
     run_study(cfg)
     out = capsys.readouterr().out
-    assert "3 configurations × 2 seeds = 6 runs" in out and "6 to run" in out
-    assert out.count("to run (~") == 6 and "model.connectivity=vmax" in out
+    assert "4 configurations × 2 seeds = 8 runs" in out and "8 to run" in out
+    assert out.count("to run (~") == 8 and "model.connectivity=vmax" in out
     assert not (tmp_path / "study").exists() and not (tmp_path / "registry.jsonl").exists()
 
 
@@ -216,7 +220,7 @@ def test_report_only_rebuilds_the_page_and_trains_nothing(tmp_path):
         "budget": study_budget(cfg)})  # fmt: skip
     page = run_study(cfg)
     assert page == tmp_path / "results" / "README.md"
-    assert "**1 done**, 0 failed, 2 left" in page.read_text()
+    assert "**1 done**, 0 failed, 3 left" in page.read_text()
     assert not (tmp_path / "study").exists()
 
 
@@ -304,7 +308,7 @@ def test_the_report_is_rebuilt_from_the_registry_alone(tmp_path):
             records.append(r)
     text = write_study_report(records, configs, cfg).read_text()
     lines = text.splitlines()
-    assert "**51 done**, 0 failed, 0 left" in text and "test cpu" in text
+    assert "**54 done**, 0 failed, 0 left" in text and "test cpu" in text
     assert "the report trained ≈ 390 000" in text and "3 seeds per configuration" in text
     row = next(line for line in lines if line.startswith("| M = 1 |"))
     assert "**∞ (1/3 seeds diverged)**; others 6 ± 1.41" in row

@@ -93,7 +93,9 @@ def eval_config(outputs: Path, *overrides):
     from hydra import compose, initialize_config_dir
 
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        return compose("eval", overrides=[f"paths.outputs={outputs}", *overrides])
+        return compose(
+            "eval", overrides=[f"paths.outputs={outputs}", "invariance.rest_frames=4", *overrides]
+        )
 
 
 # --- simulate: one scene per out, whole ---------------------------------------------------------

@@ -138,9 +138,15 @@ def defaults_fingerprint(train_cfg: DictConfig) -> str:
 
 def study_budget(cfg: DictConfig) -> dict:
     """What makes a study's runs comparable, stored in every record: ``cfg.budget`` plus
-    ``defaults`` (:func:`defaults_fingerprint` of this code's default training)."""
+    ``defaults`` (:func:`defaults_fingerprint` of this code's default training, or
+    ``cfg.fingerprint`` where set: the records of an earlier default, for its page only)."""
     budget = OmegaConf.to_container(cfg.budget, resolve=True)
-    return budget | {"defaults": defaults_fingerprint(compose_config("train"))}
+    return budget | {"defaults": cfg.get("fingerprint") or current_fingerprint()}
+
+
+def current_fingerprint() -> str:
+    """:func:`defaults_fingerprint` of this code's default training."""
+    return defaults_fingerprint(compose_config("train"))
 
 
 def budget_overrides(budget: DictConfig) -> list[str]:

@@ -19,7 +19,7 @@ from physgnn.ablation.aggregate import (
     truth_floor,
 )
 from physgnn.ablation.figures import plot_study_curves, plot_study_fps, plot_study_sweep
-from physgnn.ablation.jobs import Config, study_budget
+from physgnn.ablation.jobs import Config, current_fingerprint, study_budget
 from physgnn.ablation.registry import DONE, budget_id
 from physgnn.ablation.switches import switches_section
 from physgnn.ablation.verdicts import RULES, table2
@@ -61,6 +61,20 @@ def div_cell(records: list[dict], split: str) -> str:
     return f"{gone}/{total}" + (f" (median step {median:.0f})" if gone else "")
 
 
+def _earlier_default(shown: str) -> list[str]:
+    """The page's warning when it shows the records of a default other than this code's."""
+    current = current_fingerprint()
+    if shown == current:
+        return []
+    return [
+        f"> **Runs of an earlier default model** (`{shown}`), not of this code's default "
+        f'(`{current}`): every figure on this page, its "Baseline" and every switch included, '
+        "comes from that earlier default. `make study` trains this code's default's runs (the "
+        "registry keeps both).",
+        "",
+    ]
+
+
 def write_study_report(records: list[dict], configs: list[Config], cfg) -> Path:
     """Write README.md and the figures into ``cfg.results_dir`` from ``records``."""
     out = Path(cfg.results_dir)
@@ -92,6 +106,7 @@ def _header(records, configs, cfg, budget) -> str:
         "[`registry.jsonl`](registry.jsonl) alone; run it again to rebuild this page (runs "
         "already in the registry are not trained again).",
         "",
+        *_earlier_default(budget["defaults"]),
         f"- **Plan:** {len(configs)} unique configurations of the sweeps {list(cfg.sweeps)} × "
         f"seeds {list(cfg.seeds)} = {planned} runs; **{len(done)} done**, {len(failed)} failed, "
         f"{max(0, planned - len(done))} left.",

@@ -109,6 +109,11 @@ def run_study(cfg: DictConfig) -> Path | None:
         return None
     if cfg.get("report_only"):
         return write_study_report(records, configs, cfg)
+    if cfg.get("fingerprint"):
+        raise StudyFailed(
+            "fingerprint= names the earlier default whose page report_only=true rebuilds; "
+            "runs are always of this code's default: drop fingerprint= or add report_only=true"
+        )
     if pending:
         _ensure_dataset(cfg, console)
     failed = _run(console, pending, records, cfg, n_jobs, configs)

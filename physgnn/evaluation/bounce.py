@@ -25,11 +25,19 @@ from physgnn.rollout import rollout
 
 
 def bounce_rows(
-    name: str, simulator, materials, height: float, dt: float, radius: float, **kwargs
+    name: str,
+    simulator,
+    materials,
+    height: float,
+    dt: float,
+    radius: float,
+    mass: float | None = None,
+    **kwargs,
 ) -> list[dict]:
     """One row per material (``materials [K, 4]``: restitution, lateral, rolling, spinning
-    friction) for a sphere of ``radius`` whose bottom starts ``height`` m above the ground;
-    keyword arguments go to :func:`physgnn.rollout.rollout`."""
+    friction) for a sphere of ``radius`` (and ``mass`` kg; None: density 1 000) whose bottom
+    starts ``height`` m above the ground; keyword arguments go to
+    :func:`physgnn.rollout.rollout`. Rows carry the sphere's ``mass``."""
     materials = np.asarray(materials, np.float64).reshape(-1, 4)
     fall = math.sqrt(2.0 * height / G)
     rows = []
@@ -39,12 +47,15 @@ def bounce_rows(
         seed = dataclasses.replace(
             free_fall(height + radius, seconds, dt, radius), materials=material[None]
         )
+        if mass is not None:
+            seed = dataclasses.replace(seed, mass=np.full(1, float(mass)))
         (pred,) = rollout(simulator, [seed], **kwargs)
         apex = _first_apex(pred, radius, dt)
         truth = _truth_ratio(e, height, radius, dt)
         rows.append({
             "run": name,
             "restitution": e,
+            "mass": float(seed.mass[0]),
             "height": height,
             "apex": apex,
             "ratio": apex / (e * e * height),

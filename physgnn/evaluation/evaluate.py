@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
-import shutil
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
@@ -30,6 +28,7 @@ from physgnn.errors import ConfigError
 from physgnn.evaluation import rerun_log
 from physgnn.evaluation.bounce import bounce_rows
 from physgnn.evaluation.freefall import freefall_rows
+from physgnn.evaluation.invariance import invariance_rows
 from physgnn.evaluation.rollouts import (
     Collected,
     hard_rows,
@@ -50,7 +49,7 @@ from physgnn.evaluation.runs import (
 )
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.files import claim_folder, staged_outputs
-from physgnn.report import bounce, figures, freefall, stability, table
+from physgnn.report import bounce, figures, freefall, invariance, stability, table
 from physgnn.report.document import write_report
 
 # What an eval writes into its report_dir (replaced whole by the next eval).
@@ -126,6 +125,11 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
         (report_dir / "stability.csv").unlink(missing_ok=True)  # no stale section
     freefall.write_csv(report_dir / "freefall.csv", _freefall(runs, cfg.freefall, settings))
     bounce.write_csv(report_dir / "bounce.csv", _bounce(runs, cfg.get("bounce"), settings))
+    checks = cfg.get("invariance")
+    if checks is not None:
+        sims = [(run.name, run.simulator) for run in runs]
+        rows = [r for sim in sims for r in invariance_rows(*sim, **checks, **settings)]
+        invariance.write_csv(report_dir / "invariance.csv", rows)
     if out.energies:
         dts = {name: _dt(data, name) for name in out.energies}
         figures.plot_energy(report_dir / "figures" / "energy_ood.png", out.energies, dts)

@@ -3,14 +3,27 @@
 Connectivity, with ``gap_ij = |p_i − p_j| − r_i − r_j`` and a per-sphere
 motion allowance ``a_i``:
 
+- ``approach`` (the default model's): by the pair's *relative* motion. With
+  ``n̂_ij = (p_i − p_j)/|p_i − p_j|`` and the closing speed ``c_ij = max(0, −(v_i − v_j)·n̂_ij)``,
+  pp edge iff ``gap_ij ≤ factor · c_ij · dt + ε`` (ε a thin shell that keeps resting contacts
+  linked). Spheres moving as one (``v_i = v_j``) are never linked unless they touch: a block in
+  free flight has no pp edge. Superset property: with constant relative velocity ``w`` over
+  the frame, ``|d + wτ| ≥ (d + wτ)·n̂ = |d| − τ·(−w·n̂)``, so no pair can touch by ``dt`` that
+  the rule leaves out (factor ≥ 1); gravity cancels in ``w``. A bounded plane is linked when
+  its rectangle's clearance ``|δ| − r_i ≤ factor · max(0, −v̂_i·δ̂) · dt + ε``, with the
+  ballistic next velocity ``v̂_i = v_i + g·dt`` (a plane is static, so gravity does close the
+  gap) and ``δ̂`` the unit offset from the rectangle's closest point (a supporting half-space
+  of the convex rectangle bounds the distance the same way). ``a_i = factor · |v̂_i| · dt``
+  (an upper bound of every approach) only sizes the neighbour search and the feature clip.
 - ``epsilon``: ``a_i = 0``
 - ``vmax``:    ``a_i = factor · V_max · dt``, V_max the largest speed in the sphere's scene
 - ``vi``:      ``a_i = factor · |v_i| · dt``
 
-pp edge iff ``gap_ij ≤ a_i + a_j + ε``; ps edge to a bounded non-ground plane iff
-(distance from the centre to the closest point of the rectangle) ``− r_i ≤ a_i + ε`` and the
-centre is not more than ``r_i`` behind the plane (planes are one-sided: a sphere wholly behind
-one has tunnelled and feels nothing); plus one edge from every sphere's ground plane. The
+For the last three: pp edge iff ``gap_ij ≤ a_i + a_j + ε``; ps edge to a bounded non-ground
+plane iff (distance from the centre to the closest point of the rectangle) ``− r_i ≤ a_i + ε``.
+Every rule: the centre is not more than ``r_i`` behind a bounded plane (planes are one-sided: a
+sphere wholly behind one has tunnelled and feels nothing); plus one edge from every sphere's
+ground plane. The
 rules are evaluated in float64 (boundary included); the features are in the input dtype and
 in raw physical units.
 
@@ -36,10 +49,11 @@ import torch
 from physgnn.data.state import host_sizes, scene_of_sphere
 from physgnn.graph.candidates import compact, scene_pairs, scene_plane_pairs
 from physgnn.graph.neighbors import BACKENDS, radius_pairs
+from physgnn.physics.energy import G
 from physgnn.physics.geometry import rectangle_offset
 from physgnn.physics.scene import EFFECT_NAMES, GROUND
 
-CONNECTIVITIES = ("epsilon", "vmax", "vi")
+CONNECTIVITIES = ("approach", "epsilon", "vmax", "vi")
 _GRAVITY = EFFECT_NAMES.index("gravity")
 _SPHERE_CONTACT = EFFECT_NAMES.index("sphere_contact")
 _SURFACE_CONTACT = EFFECT_NAMES.index("surface_contact")
@@ -137,7 +151,8 @@ class GraphBuilder:
         """Motion allowance ``a_i`` of every sphere, float64 ``[N]``; ``moving [N]`` (bool):
         only these spheres move, the others count with speed 0 (sleeping spheres)."""
         batch = scene_of_sphere(state)
-        speed = _velocity(state).to(torch.float64).norm(dim=-1)
+        vel = ballistic_velocity(state) if self.connectivity == "approach" else _velocity(state)
+        speed = vel.to(torch.float64).norm(dim=-1)
         if self.connectivity == "epsilon":
             return torch.zeros_like(speed)
         if moving is not None:
@@ -148,12 +163,32 @@ class GraphBuilder:
         return self.factor * speed * state.dt.to(torch.float64)[batch]
 
     def pair_within_reach(self, state, i, j, allowance: torch.Tensor) -> torch.Tensor:
-        """``[P]`` bool: the pp rule ``gap_ij ≤ a_i + a_j + ε`` (same scene) for pairs
-        ``(i, j)``, float64."""
+        """``[P]`` bool: the pp rule (module doc; ``gap_ij ≤ a_i + a_j + ε`` but for
+        ``approach``) of same-scene pairs ``(i, j)``, float64."""
         batch = scene_of_sphere(state)
         p, r = state.pos.to(torch.float64), state.radius.to(torch.float64)
-        gap = (p[i] - p[j]).norm(dim=-1) - r[i] - r[j]
-        return (batch[i] == batch[j]) & (gap <= allowance[i] + allowance[j] + self.epsilon)
+        rel = p[i] - p[j]
+        dist = rel.norm(dim=-1)
+        gap = dist - r[i] - r[j]
+        if self.connectivity == "approach":
+            vel = _velocity(state).to(torch.float64)
+            along = ((vel[i] - vel[j]) * rel).sum(-1) / dist.clamp_min(1e-300)
+            limit = self.factor * torch.relu(-along) * state.dt.to(torch.float64)[batch[i]]
+        else:
+            limit = allowance[i] + allowance[j]
+        return (batch[i] == batch[j]) & (gap <= limit + self.epsilon)
+
+    def plane_within_reach(self, state, sphere, normal, clearance, allowance) -> torch.Tensor:
+        """``[Q]`` bool: a plane at ``clearance [Q]`` (float64, from the sphere's surface along
+        the unit direction ``normal [Q, 3]`` pointing from the plane to the sphere) can be
+        reached by ``sphere [Q]`` before the next frame: ``approach``'s
+        ``clearance ≤ factor · max(0, −v̂·n) · dt + ε``, else ``clearance ≤ a_i + ε``."""
+        if self.connectivity != "approach":
+            return clearance <= allowance[sphere] + self.epsilon
+        vel = ballistic_velocity(state).to(torch.float64)[sphere]
+        along = (vel * normal.to(torch.float64)).sum(-1)
+        dt = state.dt.to(torch.float64)[scene_of_sphere(state)[sphere]]
+        return clearance <= self.factor * torch.relu(-along) * dt + self.epsilon
 
     def _pair_candidates(self, state, batch, allowance, spheres) -> tuple[torch.Tensor, ...]:
         """Candidate pairs ``(i, j)``, ``i < j``, sorted: every pair of each scene while there
@@ -188,7 +223,9 @@ class GraphBuilder:
         offset = rectangle_offset(state.pos[sphere], state.planes[plane])
         radius = state.radius.to(torch.float64)[sphere]
         height = (offset * state.planes[plane, 3:6].to(torch.float64)).sum(-1)
-        near = offset.norm(dim=-1) - radius <= allowance[sphere] + self.epsilon
+        dist = offset.norm(dim=-1, keepdim=True)
+        direction = offset / dist.clamp_min(1e-300)
+        near = self.plane_within_reach(state, sphere, direction, dist[:, 0] - radius, allowance)
         bounded = ~ground & effects[:, _SURFACE_CONTACT] & near & (height > -radius)
         keep = (ground & (effects[:, _GRAVITY] | effects[:, _SURFACE_CONTACT])) | bounded
         return keep, offset
@@ -197,6 +234,15 @@ class GraphBuilder:
 def build_graph(state, cfg: Mapping) -> Graph:
     """``GraphBuilder(**cfg)(state)``: cfg holds the builder's arguments (config keys)."""
     return GraphBuilder(**dict(cfg))(state)
+
+
+def ballistic_velocity(state) -> torch.Tensor:
+    """``v_t + g·dt`` ``[N, 3]``: the next velocity in free flight (g only in scenes with
+    gravity)."""
+    gravity = state.effects[scene_of_sphere(state), _GRAVITY].to(state.pos.dtype)
+    vel = _velocity(state).clone()
+    vel[:, 2] = vel[:, 2] - G * state.dt[scene_of_sphere(state)] * gravity
+    return vel
 
 
 def _velocity(state) -> torch.Tensor:

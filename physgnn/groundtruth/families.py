@@ -15,6 +15,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.groundtruth.layouts import (
+    aggregate_positions,
     arena_planes,
     check_clear_of_planes,
     clustered_positions,
@@ -24,6 +25,7 @@ from physgnn.groundtruth.layouts import (
     pile_positions,
     ramp_plane,
     random_quaternions,
+    row_positions,
     spawn_without_overlap,
 )
 from physgnn.physics.scene import (
@@ -95,7 +97,8 @@ def random_box(c: dict, rng: np.random.Generator) -> Scene:
     landing together. With probability ``pile_fraction`` (default 0) the scene is a *pile*
     scene: N ~ U{⌈n_max/2⌉..n_max} spheres scattered (no lattice) over a small arena of side
     U[pile_side_min, pile_side_max], up to ``pile_h_max``, so that they settle into touching
-    groups and piles that then rest."""
+    groups and piles that then rest. With probability ``dense_fraction`` (default 0) it is a
+    *dense* scene instead (:func:`dense_contact`)."""
     if c["n_min"] < 1 or c["n_max"] < c["n_min"]:
         raise SceneError(
             f"random_box: need 1 <= n_min <= n_max (got {c['n_min']}, {c['n_max']}): "
@@ -106,6 +109,9 @@ def random_box(c: dict, rng: np.random.Generator) -> Scene:
             f"random_box: need 0 < radius_min <= radius_max "
             f"(got {c['radius_min']}, {c['radius_max']})"
         )
+    # The extra draw only when dense scenes are asked for: scenes without them stay as they were.
+    if c.get("dense_fraction", 0.0) > 0 and rng.uniform() < c["dense_fraction"]:
+        return dense_contact(c, rng)
     n, side, h_max = _box_size(c, rng)
     radius = rng.uniform(c["radius_min"], c["radius_max"], size=n)
     half = side / 2
@@ -130,6 +136,51 @@ def random_box(c: dict, rng: np.random.Generator) -> Scene:
     )
     planes, kinds = arena_planes(side, c["wall_height"])
     return _finish(c, pos, radius, rng, planes, kinds, vel=vel, angvel=w)
+
+
+DENSE_KINDS = ("flying_aggregate", "settling_aggregate", "sliding_row")
+
+
+def dense_contact(c: dict, rng: np.random.Generator) -> Scene:
+    """A dense-contact scene of the training mix: N ~ U{⌈n_max/2⌉..n_max} spheres, touching or
+    nearly touching (gaps 0 or U(0, ``dense_max_gap``)), in an arena of the usual side; one of
+    :data:`DENSE_KINDS` with equal odds:
+
+    - ``flying_aggregate``: a random aggregate (:func:`aggregate_positions`, no lattice) high
+      in the air, all spheres with one common velocity (horizontal in a disc of ``max_speed0``,
+      vertical U[−2, 4] m/s) and no spin: a group that flies as one, then lands;
+    - ``settling_aggregate``: the same aggregate at rest on the ground, which collapses into a
+      pile and rests (6–12 contacts per sphere);
+    - ``sliding_row``: a row on the ground (:func:`row_positions`) with one common horizontal
+      velocity of speed U[0.5, max_speed0] in a random direction: touching spheres that move
+      together.
+
+    Spheres beyond the arena's walls are left out (at least one stays)."""
+    n = int(rng.integers((c["n_max"] + 1) // 2, c["n_max"] + 1))
+    radius = rng.uniform(c["radius_min"], c["radius_max"], size=n)
+    half = float(rng.uniform(c["side_min"], c["side_max"])) / 2
+    kind = DENSE_KINDS[int(rng.integers(len(DENSE_KINDS)))]
+    gap = float(c.get("dense_max_gap", 0.1))
+    vel = np.zeros((n, 3))
+    if kind == "sliding_row":
+        pos = row_positions(rng, radius, gap)
+        a, speed = rng.uniform(0, 2 * np.pi), rng.uniform(0.5, max(0.5, c["max_speed0"]))
+        vel[:] = [speed * np.cos(a), speed * np.sin(a), 0.0]
+    else:
+        pos = aggregate_positions(rng, radius, gap)
+        pos[:, :2] -= pos[:, :2].mean(0)
+    if kind == "flying_aggregate":
+        top = max(float(pos[:, 2].max()), 1.0)
+        pos[:, 2] += rng.uniform(1.0, max(1.0, c["h_max"] - top))
+        a, speed = rng.uniform(0, 2 * np.pi), c["max_speed0"] * np.sqrt(rng.uniform())
+        vel[:] = [speed * np.cos(a), speed * np.sin(a), rng.uniform(-2.0, 4.0)]
+    room = half - radius[:, None] - 0.05
+    shift = rng.uniform(-1, 1, size=2) * max(0.0, float((room - np.abs(pos[:, :2])).min()))
+    pos[:, :2] += shift
+    inside = np.all(np.abs(pos[:, :2]) <= room, axis=1)
+    inside[np.argmin(np.abs(pos[:, :2]).max(1))] = True
+    planes, kinds = arena_planes(2 * half, c["wall_height"])
+    return _finish(c, pos[inside], radius[inside], rng, planes, kinds, vel=vel[inside])
 
 
 def _cubes(c: dict) -> np.ndarray:

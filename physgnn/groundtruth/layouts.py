@@ -198,3 +198,41 @@ def pile_positions(n: int, layers: int, radius: float) -> np.ndarray:
         z = radius + layer * np.sqrt(2.0) * radius
         pos.append(np.stack([gx.ravel(), gy.ravel(), np.full(k * k, z)], axis=1))
     return np.concatenate(pos)
+
+
+def _contact_gap(rng, max_gap: float) -> float:
+    """A surface gap of a dense layout: exactly touching half the time, else U(0, max_gap)."""
+    return 0.0 if rng.uniform() < 0.5 else float(rng.uniform(0.0, max_gap))
+
+
+def aggregate_positions(rng, radius: np.ndarray, max_gap: float, tries: int = 200) -> np.ndarray:
+    """Centres ``[N, 3]`` of a random aggregate, lowest point at z = 0: each sphere after the
+    first touches (or nearly touches, :func:`_contact_gap`) a random earlier one from a random
+    direction without overlapping any; so every sphere has 1–12 neighbours at random gaps, in
+    no lattice. Raises SceneError when a sphere finds no place in ``tries`` draws."""
+    pos = np.zeros((len(radius), 3))
+    for i in range(1, len(radius)):
+        for _ in range(tries):
+            k = int(rng.integers(i))
+            u = rng.normal(size=3)
+            u /= np.linalg.norm(u)
+            x = pos[k] + (radius[k] + radius[i] + _contact_gap(rng, max_gap)) * u
+            if np.all(np.linalg.norm(pos[:i] - x, axis=1) - radius[:i] - radius[i] > -OVERLAP_TOL):
+                pos[i] = x
+                break
+        else:
+            raise SceneError(f"aggregate: no place for sphere {i + 1} in {tries} tries")
+    pos[:, 2] -= (pos[:, 2] - radius).min()
+    return pos
+
+
+def row_positions(rng, radius: np.ndarray, max_gap: float) -> np.ndarray:
+    """Centres ``[N, 3]`` of a straight row on the ground (z = r) along a random horizontal
+    direction, centred at 0, neighbours' centres ``r_i + r_j + g`` apart horizontally
+    (:func:`_contact_gap`): touching or nearly touching when of one radius, a few centimetres
+    more apart when their radii differ (their centres are at different heights)."""
+    step = [radius[i] + radius[i + 1] + _contact_gap(rng, max_gap) for i in range(len(radius) - 1)]
+    along = np.concatenate([[0.0], np.cumsum(step)])
+    along -= along.mean()
+    a = rng.uniform(0, 2 * np.pi)
+    return np.stack([along * np.cos(a), along * np.sin(a), radius], axis=1)

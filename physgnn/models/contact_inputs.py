@@ -10,6 +10,11 @@ features), the normal speed ``v_i·n_s / σ_v`` and the tangential speed
 std). Both pair features are the same for an edge and its reverse, so the paired layout and
 the third law hold.
 
+**Relative pair inputs** (``relative_pairs=True``, the default model): pp edges carry only
+relative quantities (:func:`pair_inputs`), so a group moving as one exchanges the same
+messages whatever its common velocity, and masses enter as the ratio ``m_i / (m_i + m_j)``
+(with ``mass_ratio``; the node inputs then hold no mass at all).
+
 **Material features** (``material_features=True``): each sphere's restitution, lateral
 friction and 100 × its rolling and spinning friction as node inputs: values, not ids, so a
 material no training scene had still means something.
@@ -18,10 +23,11 @@ material no training scene had still means something.
 next frame moves ballistically, ``v_{t+1} = v_t + g·dt`` and ``ω_{t+1} = ω_t`` exactly,
 whatever its mass or size; the network's output is used only for spheres *in reach* of a
 contact: with a pp edge, an edge to a wall or static plane (the graph's own reach rule), a
-ground clearance ``h − r ≤ a_i + ε + g·dt²`` (the reach rule plus the fall that gravity adds
-within the frame), or a contact during the last frame, seen in the velocity history as
-``|v_t − v_{t−1} − g·dt| > RECENT_TOL`` (needs H ≥ 1). The last one matters: a sphere that
-bounced inside the last frame interval has a finite-difference velocity that is not its
+ground clearance within the graph's plane rule (for ``vi``, ``vmax``, ``epsilon``:
+``h − r ≤ a_i + ε + g·dt²``, the rule plus the fall that gravity adds within the frame;
+``approach`` counts the fall itself), or a contact during the last frame, seen in the velocity
+history as ``|v_t − v_{t−1} − g·dt| > RECENT_TOL`` (needs H ≥ 1). The last one matters: a
+sphere that bounced inside the last frame interval has a finite-difference velocity that is not its
 physical one (the mean over a frame that held the impact), and only the network can tell
 what comes next. The network so learns contacts only, and free flight is exact.
 """
@@ -57,6 +63,40 @@ def pp_contact(graph, state, length_scale, speed_scale) -> torch.Tensor:
     return torch.cat([gap / length_scale, closing / speed_scale], 1)
 
 
+def pair_width(history: int, mass_ratio: bool, materials: bool) -> int:
+    """Columns of :func:`pair_inputs` for ``history`` = H + 1 velocities."""
+    return 5 + 3 * history + int(mass_ratio) + (2 if materials else 0)
+
+
+def pair_inputs(
+    graph, state, length_scale, speed_scale, history: int, mass_ratio: bool, materials: bool
+) -> torch.Tensor:
+    """``[E, pair_width(...)]``: the pair's *relative* inputs, none of which changes when a
+    common velocity is added to both spheres (Galilean invariance) or every mass is scaled
+    (mass-scale invariance); i the target, j the source, ``n̂_ij`` from j to i:
+
+    ``[gap / ℓ, (v_i − v_j)·n̂ / σ_v, |tangential part of v_i − v_j| / σ_v,
+    (v_i − v_j) of the ``history`` latest frames / σ_v (3 each), r_i / ℓ, r_j / ℓ]``, then
+    ``m_i / (m_i + m_j)`` with ``mass_ratio``, then the pair's restitution ``e_i·e_j`` and
+    lateral friction ``μ_i·μ_j`` (Bullet's combination rules) with ``materials``."""
+    src, dst = graph.pp_index
+    rel, dist = graph.pp_attr[:, :3], graph.pp_attr[:, 3:4]
+    normal = rel / dist.clamp_min(1e-12)
+    gap = dist - (state.radius[src] + state.radius[dst])[:, None]
+    dv = state.vel[dst, :history] - state.vel[src, :history]  # [E, history, 3]
+    along = (dv[:, 0] * normal).sum(1, keepdim=True)
+    across = torch.linalg.vector_norm(dv[:, 0] - along * normal, dim=1, keepdim=True)
+    radius = torch.stack([state.radius[dst], state.radius[src]], 1) / length_scale
+    parts = [gap / length_scale, along / speed_scale, across / speed_scale]
+    parts += [dv.flatten(1) / speed_scale, radius]
+    if mass_ratio:
+        parts.append((state.mass[dst] / (state.mass[dst] + state.mass[src]))[:, None])
+    if materials:
+        params = state.material_params
+        parts.append(params[dst, :2] * params[src, :2])
+    return torch.cat(parts, 1)
+
+
 def ps_contact(graph, state, length_scale, speed_scale) -> torch.Tensor:
     """``[F, 3]``: clearance ``(h − r)`` / ℓ, ``v·n`` / σ_v and the tangential speed / σ_v."""
     ps = graph.ps_attr
@@ -83,13 +123,17 @@ def in_reach(state, graph, builder) -> torch.Tensor:
     touched.index_add_(0, graph.pp_index[1], state.pos.new_ones(graph.pp_index.shape[1]))
     plane, sphere = graph.ps_index
     bounded = state.plane_kind[plane] != GROUND
-    dt = state.scene_dt[sphere]
-    limit = graph.allowance[sphere] + builder.epsilon
     # the edge features' heights are clipped: the clearance from the geometry itself
     depth = edge_plane_depth(
         state.pos, state.radius, state.planes, state.plane_kind, graph.ps_index
     )
-    near = bounded | (-depth <= limit + G * dt * dt)
+    if builder.connectivity == "approach":  # the rule itself counts the fall (v + g·dt)
+        normal = state.planes[plane, 3:6]
+        near = builder.plane_within_reach(state, sphere, normal, -depth, graph.allowance)
+    else:
+        dt = state.scene_dt[sphere]
+        near = -depth <= graph.allowance[sphere] + builder.epsilon + G * dt * dt
+    near = bounded | near
     touched.index_add_(0, sphere, near.to(touched.dtype))
     return (touched > 0) | recent_contact(state)
 

@@ -17,10 +17,8 @@ learns to undo the noise.
 ``material_features``, ``gravity_prior``; the default model has all three, ``model=report``
 none): :mod:`physgnn.models.contact_inputs`.
 
-**Boundary features** (``boundary_features=True``, the GNS-style baseline that has no ps edges):
-as in GNS (Sanchez-Gonzalez et al. 2020), every sphere also sees how far the boundaries are,
-``clip(h / R, 0, 1)`` for each of the 6 axis directions, so the network can see the ground and
-the walls without surface edges.
+**Boundary features** (``boundary_features=True``, the GNS-style baseline):
+:mod:`physgnn.models.boundary`.
 """
 
 from __future__ import annotations
@@ -29,37 +27,21 @@ import torch
 from torch import nn
 
 from physgnn.data.state import scene_of_sphere
-from physgnn.errors import PhysgnnError
 from physgnn.graph.builder import GraphBuilder
-from physgnn.models import contact_inputs
+from physgnn.models import boundary, contact_inputs, rest
+from physgnn.models.normalisation import (  # noqa: F401 (StatsError: re-exported)
+    StatsError,
+    register_stats,
+    stats_from_state_dict,
+)
 from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.nn.padding import pad_graph
 from physgnn.physics.scene import EFFECT_NAMES
 
 ROTATION = EFFECT_NAMES.index("rotation")
-
-VECTOR_STATS = ("vel", "angvel", "delta_vel", "delta_angvel")
-SCALAR_STATS = ("radius", "mass")
-# The 6 axis directions of the boundary features, in order +x, −x, +y, −y, +z, −z.
-DIRECTIONS = torch.tensor(
-    [[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]]
-)
-
-
-class StatsError(PhysgnnError, ValueError):
-    """``stats.json`` lacks a field the simulator needs (one-line message)."""
-
-
-def _stat(stats: dict, key: str, part: str, size: int | None) -> torch.Tensor:
-    try:
-        value = torch.as_tensor(stats[key][part], dtype=torch.float32)
-    except (KeyError, TypeError) as err:
-        raise StatsError(
-            f"normalisation stats lack '{key}.{part}' (regenerate stats.json)"
-        ) from err
-    if size is not None and value.shape != (size,):
-        raise StatsError(f"stats '{key}.{part}' has shape {tuple(value.shape)}, expected ({size},)")
-    return value
+# Input widths before the optional columns: pp [p_i − p_j, |p_i − p_j|], ps [v, n, δ, h];
+# outputs: normalised Δv and Δω (then the rest logit with rest_decision).
+PP_BASE, PS_BASE, OUTPUTS = 4, 10, 6
 
 
 class LearnedSimulator(nn.Module):
@@ -84,7 +66,7 @@ class LearnedSimulator(nn.Module):
         H: int = 2,
         M: int = 5,
         hidden: int = 128,
-        connectivity: str = "vi",
+        connectivity: str = "approach",
         epsilon: float = 0.01,
         factor: float = 1.0,
         third_law: bool = True,
@@ -93,61 +75,84 @@ class LearnedSimulator(nn.Module):
         material_dim: int = 0,
         neighbor_backend: str = "auto",
         length_scale: float | None = None,
-        clip_margin: float = 0.0,
+        clip_margin: float = 1.0,
         boundary_features: bool = False,
         boundary_radius: float = 2.0,
-        contact_features: bool = False,
-        material_features: bool = False,
-        gravity_prior: bool = False,
+        contact_features: bool = True,
+        material_features: bool = True,
+        gravity_prior: bool = True,
         layer_norm: bool = False,
         pad_to_buckets: bool = False,
+        relative_pairs: bool = True,
+        mass_ratio: bool = True,
+        aggregation: str = "mean",
+        rest_decision: bool = True,
+        rest_speed: float = 0.01,
     ):
         super().__init__()
-        _check_sizes(H, M, boundary_radius)
+        _check_sizes(H, M, boundary_radius, rest_speed)
         self.H, self.M, self.pad_to_buckets = int(H), int(M), bool(pad_to_buckets)
         self.use_boundary, self.boundary_radius = bool(boundary_features), float(boundary_radius)
         self.contact_features = bool(contact_features)
         self.material_features = bool(material_features)
         self.gravity_prior = bool(gravity_prior)
+        self.relative_pairs, self.mass_ratio = bool(relative_pairs), bool(mass_ratio)
+        self.rest_decision, self.rest_speed = bool(rest_decision), float(rest_speed)
         self._register_stats(stats, length_scale)
         self.use_surfaces = bool(use_surfaces)
         self.num_materials = int(num_materials)
         self.graph_builder = GraphBuilder(
             connectivity, epsilon, factor, neighbor_backend, clip_margin
         )
-        self.network = EncodeProcessDecode(
+        self.network = self._network(
+            hidden, M, third_law, use_surfaces, num_materials, material_dim, layer_norm, aggregation
+        )
+
+    def _network(
+        self,
+        hidden,
+        M,
+        third_law,
+        use_surfaces,
+        num_materials,
+        material_dim,
+        layer_norm,
+        aggregation,
+    ) -> EncodeProcessDecode:
+        """The network, its input and output widths from the simulator's inputs."""
+        ps_extra = contact_inputs.PS_CONTACT if self.contact_features else 0
+        return EncodeProcessDecode(
             node_in=self.node_in,
-            pp_in=4 + (contact_inputs.PP_CONTACT if self.contact_features else 0),
-            ps_in=10 + (contact_inputs.PS_CONTACT if self.contact_features else 0),
+            pp_in=PP_BASE + self.pair_extra,
+            ps_in=PS_BASE + ps_extra,
             hidden=hidden,
             M=M,
-            out_dim=6,
+            out_dim=OUTPUTS + int(self.rest_decision),
             third_law=third_law,
             use_surfaces=use_surfaces,
             num_materials=num_materials,
             material_dim=material_dim,
             layer_norm=layer_norm,
+            aggregation=aggregation,
         )
 
     def _register_stats(self, stats: dict, length_scale: float | None) -> None:
-        """The training set's normalisation, the length scale and the effects trained on as
+        """:func:`~physgnn.models.normalisation.register_stats` and the effects trained on, as
         buffers (saved in checkpoints)."""
-        for key in VECTOR_STATS:
-            self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", 3))
-            self.register_buffer(f"{key}_std", _stat(stats, key, "std", 3))
-        for key in SCALAR_STATS:
-            self.register_buffer(f"{key}_mean", _stat(stats, key, "mean", None).reshape(()))
-            self.register_buffer(f"{key}_std", _stat(stats, key, "std", None).reshape(()))
-        scale = 2.0 * float(self.radius_mean) if length_scale is None else float(length_scale)
-        if not scale > 0:
-            raise ValueError(f"length_scale must be > 0 (got {scale})")
-        self.register_buffer("length_scale", torch.tensor(scale))
+        register_stats(self, stats, length_scale)
         self.register_buffer("effects_trained", torch.zeros(len(EFFECT_NAMES), dtype=torch.bool))
 
     @property
     def node_in(self) -> int:
         extra = (4 if self.material_features else 0) + (6 if self.use_boundary else 0)
-        return 6 * (self.H + 1) + 2 + extra
+        return 6 * (self.H + 1) + 1 + int(not self.mass_ratio) + extra
+
+    @property
+    def pair_extra(self) -> int:
+        """pp input columns after the 4 geometric ones (module doc)."""
+        if self.relative_pairs:
+            return contact_inputs.pair_width(self.H + 1, self.mass_ratio, self.material_features)
+        return contact_inputs.PP_CONTACT if self.contact_features else 0
 
     @property
     def speed_scale(self) -> torch.Tensor:
@@ -159,15 +164,7 @@ class LearnedSimulator(nn.Module):
         """σ_Δv of the contact penalty: the RMS of the three velocity-change stds (m/s)."""
         return self.delta_vel_std.square().mean().sqrt()
 
-    @staticmethod
-    def stats_from_state_dict(state_dict: dict, prefix: str = "") -> dict:
-        """The ``stats`` dict stored in a checkpoint's buffers (to rebuild the simulator)."""
-        stats = {}
-        for key in VECTOR_STATS + SCALAR_STATS:
-            stats[key] = {
-                part: state_dict[f"{prefix}{key}_{part}"].tolist() for part in ("mean", "std")
-            }
-        return stats
+    stats_from_state_dict = staticmethod(stats_from_state_dict)
 
     # ----- features ---------------------------------------------------------------------------
     def node_features(self, state) -> torch.Tensor:
@@ -183,8 +180,9 @@ class LearnedSimulator(nn.Module):
         vel = (vel - self.vel_mean) / self.vel_std
         angvel = (angvel - self.angvel_mean) / self.angvel_std
         radius = (state.radius - self.radius_mean) / self.radius_std
-        mass = (state.mass - self.mass_mean) / self.mass_std
-        parts = [vel.flatten(1), angvel.flatten(1), radius[:, None], mass[:, None]]
+        parts = [vel.flatten(1), angvel.flatten(1), radius[:, None]]
+        if not self.mass_ratio:  # else masses enter as pair ratios only
+            parts.append(((state.mass - self.mass_mean) / self.mass_std)[:, None])
         if self.material_features:
             parts.append(contact_inputs.material_features(state))
         if self.use_boundary:
@@ -192,22 +190,9 @@ class LearnedSimulator(nn.Module):
         return torch.cat(parts, 1)
 
     def boundary_features(self, state) -> torch.Tensor:
-        """``[N, 6]``: for each direction d of ``DIRECTIONS`` (+x, −x, +y, −y, +z, −z), the
-        height ``h = n·(p − p_0) − r`` of the sphere's surface above the nearest plane of its
-        scene whose inward normal n is closest to d (``argmax_d n·d``, the first on a tie: the
-        ground, +z; a wall facing −x, −x; a ramp tilted 30°, +z), as ``clip(h, 0, R) / R`` with
-        R = ``boundary_radius``. Planes are infinite, a sphere behind one gives 0, and 1 means
-        no such plane within R."""
-        planes = state.planes.to(state.pos.dtype)
-        normal = planes[:, 3:6]
-        slot = (normal @ DIRECTIONS.to(normal).T).argmax(1)  # [S]
-        offset = state.pos[:, None, :] - planes[None, :, 0:3]  # [N, S, 3]
-        height = (offset * normal).sum(-1) - state.radius[:, None]  # [N, S]
-        height = height.clamp(0.0, self.boundary_radius) / self.boundary_radius
-        same = scene_of_sphere(state)[:, None] == state.plane_batch.long()[None, :]
-        height = torch.where(same, height, torch.ones_like(height))
-        out = height.new_ones(height.shape[0], len(DIRECTIONS))
-        return out.scatter_reduce(1, slot.expand_as(height), height, "amin")
+        """``[N, 6]``: :func:`~physgnn.models.boundary.boundary_features` at
+        ``boundary_radius``."""
+        return boundary.boundary_features(state, self.boundary_radius)
 
     def edge_features(self, graph, state=None) -> tuple[torch.Tensor, torch.Tensor]:
         """pp ``[E, 4]`` (lengths / length_scale); ps ``[F, 10]`` (velocity / σ_v, normal
@@ -218,9 +203,14 @@ class LearnedSimulator(nn.Module):
         ps_attr = torch.cat(
             [ps[:, :3] / self.vel_std, ps[:, 3:6], ps[:, 6:] / self.length_scale], 1
         )
-        if self.contact_features:
-            scales = self.length_scale, self.speed_scale
+        scales = self.length_scale, self.speed_scale
+        if self.relative_pairs:
+            flags = self.H + 1, self.mass_ratio, self.material_features
+            pair = contact_inputs.pair_inputs(graph, state, *scales, *flags)
+            pp_attr = torch.cat([pp_attr, pair], 1)
+        elif self.contact_features:
             pp_attr = torch.cat([pp_attr, contact_inputs.pp_contact(graph, state, *scales)], 1)
+        if self.contact_features:
             ps_attr = torch.cat([ps_attr, contact_inputs.ps_contact(graph, state, *scales)], 1)
         return pp_attr, ps_attr
 
@@ -257,6 +247,10 @@ class LearnedSimulator(nn.Module):
         dang = (dang - self.delta_angvel_mean) / self.delta_angvel_std
         return torch.cat([dvel, dang], 1)
 
+    def rest_target(self, state) -> torch.Tensor:
+        """``[N]`` bool: the rest decision's label (:func:`~physgnn.models.rest.rest_target`)."""
+        return rest.rest_target(state, self.rest_speed)
+
     def to_physical(
         self, state, pred: torch.Tensor, reach: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -265,7 +259,7 @@ class LearnedSimulator(nn.Module):
         ``reach [N]`` (:meth:`in_reach` of the prediction's graph) fly ballistically."""
         vel_next = state.vel[:, 0] + pred[:, :3] * self.delta_vel_std + self.delta_vel_mean
         angvel_next = (
-            state.angvel[:, 0] + pred[:, 3:] * self.delta_angvel_std + self.delta_angvel_mean
+            state.angvel[:, 0] + pred[:, 3:6] * self.delta_angvel_std + self.delta_angvel_mean
         )
         if self.gravity_prior:
             if reach is None:
@@ -273,6 +267,8 @@ class LearnedSimulator(nn.Module):
             vel_free, angvel_free = contact_inputs.free_flight(state)
             vel_next = torch.where(reach[:, None], vel_next, vel_free)
             angvel_next = torch.where(reach[:, None], angvel_next, angvel_free)
+        if self.rest_decision:  # output 7 is the logit of "at rest next frame"
+            vel_next, angvel_next = rest.apply_rest(pred[:, OUTPUTS], vel_next, angvel_next, reach)
         angvel_next = torch.where(self.rotating(state)[:, None], angvel_next, state.angvel[:, 0])
         return vel_next, angvel_next
 
@@ -289,8 +285,10 @@ class LearnedSimulator(nn.Module):
         return (*self.to_physical(state, pred, reach), graph)
 
 
-def _check_sizes(H: int, M: int, boundary_radius: float) -> None:
+def _check_sizes(H: int, M: int, boundary_radius: float, rest_speed: float) -> None:
     if H < 0 or M < 1:
         raise ValueError(f"need H >= 0 and M >= 1 (got H={H}, M={M})")
     if not boundary_radius > 0:
         raise ValueError(f"boundary_radius must be > 0 (got {boundary_radius})")
+    if not rest_speed > 0:
+        raise ValueError(f"rest_speed must be > 0 (got {rest_speed})")

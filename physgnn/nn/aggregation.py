@@ -28,3 +28,17 @@ class IndexSum(Aggregation):
         if index is None or dim not in (0, -2) or x.dim() != 2:
             raise ValueError("IndexSum sums rows of a [E, h] tensor by an index [E]")
         return x.new_zeros(dim_size, x.shape[1]).index_add_(0, index, x)
+
+
+def inverse_degree(index: Tensor, num_nodes: int, like: Tensor) -> Tensor:
+    r"""``[N, 1]``: :math:`1 / \max(1, d_k)`, :math:`d_k = |\{e : \mathrm{index}[e] = k\}|` the
+    in-degree of node k, in ``like``'s dtype and device (counted by ``index_add_``: nothing is
+    read back). Multiplied into an :class:`IndexSum` it gives the *mean* of the incoming
+    messages, which stays within the messages' own range however many contacts a sphere has
+    (a sum of 12 similar messages is 12 times one).
+
+    Shapes: ``index [E]`` → ``[num_nodes, 1]``.
+    """
+    ones = like.new_ones(index.shape[0])
+    degree = like.new_zeros(num_nodes).index_add_(0, index, ones)
+    return degree.clamp_min(1.0).reciprocal()[:, None]

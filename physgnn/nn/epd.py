@@ -7,9 +7,12 @@ import os
 import torch
 from torch import Tensor, nn
 
+from physgnn.nn.aggregation import inverse_degree
 from physgnn.nn.interaction import InteractionBlock
 from physgnn.nn.mlp import MLP
 from physgnn.nn.surface import SurfaceBlock
+
+AGGREGATIONS = ("sum", "mean")
 
 
 class ProcessorBlock(nn.Module):
@@ -19,6 +22,9 @@ class ProcessorBlock(nn.Module):
                v_i \mathrel{+}= \mathrm{MLP}_v([v_i, \mathrm{Agg}_i]), \quad
                e_{ij} \mathrel{+}= m_{ij}
 
+    With ``aggregation="mean"`` each sum is divided by the sphere's number of edges of its
+    kind (``inv_pp``, ``inv_ps`` ``[N, 1]`` from :func:`~physgnn.nn.aggregation.inverse_degree`):
+    the aggregate stays bounded as contacts grow from 1 to 12. ``None``: plain sums.
     An interaction with no edge (``E == 0``, ``e_ps is None``) runs no MLP at all.
     ``layer_norm``: the node update ``MLP_v`` ends in a LayerNorm (messages never do: a
     norm's bias would break the exact antisymmetry ``m_ji = −m_ij``).
@@ -45,15 +51,23 @@ class ProcessorBlock(nn.Module):
                 module.reset_parameters()
 
     def forward(
-        self, v: Tensor, pp_index: Tensor, e_pp: Tensor, ps_index: Tensor, e_ps: Tensor | None
+        self,
+        v: Tensor,
+        pp_index: Tensor,
+        e_pp: Tensor,
+        ps_index: Tensor,
+        e_ps: Tensor | None,
+        inv_pp: Tensor | None = None,
+        inv_ps: Tensor | None = None,
     ) -> tuple[Tensor, Tensor]:
         aggs = []
         if pp_index.shape[1] > 0:
             agg_pp, m = self.pp(v, pp_index, e_pp)
-            aggs.append(agg_pp)
+            aggs.append(agg_pp if inv_pp is None else agg_pp * inv_pp)
             e_pp = e_pp + m
         if e_ps is not None:
-            aggs.append(self.ps(v, ps_index, e_ps))
+            agg_ps = self.ps(v, ps_index, e_ps)
+            aggs.append(agg_ps if inv_ps is None else agg_ps * inv_ps)
         # MLP_v([v, Agg]) with its first layer split, W_v v + W_a Agg: no [N, 2h] copy, and no
         # product at all on an Agg that is zero (no edges).
         w_v, w_a = self.node.first_layer_blocks([v.shape[1], v.shape[1]])
@@ -90,6 +104,8 @@ class EncodeProcessDecode(nn.Module):
     - ``layer_norm``: the three encoders and every node update end in a LayerNorm (GNS does
       this on every MLP but the decoder; here the message MLPs have none, see
       :class:`ProcessorBlock`).
+    - ``aggregation``: ``"sum"`` (the report's) or ``"mean"`` (bounded in the number of
+      contacts, :class:`ProcessorBlock`).
     """
 
     def __init__(
@@ -106,10 +122,14 @@ class EncodeProcessDecode(nn.Module):
         material_dim: int = 0,
         concat_trick: str = "auto",
         layer_norm: bool = False,
+        aggregation: str = "sum",
     ):
         super().__init__()
         if min(node_in, pp_in, ps_in, hidden, out_dim) < 1 or M < 0:
             raise ValueError("dimensions must be positive and M >= 0")
+        if aggregation not in AGGREGATIONS:
+            raise ValueError(f"aggregation must be one of {AGGREGATIONS}, got {aggregation!r}")
+        self.aggregation = aggregation
         if (num_materials > 0) != (material_dim > 0):
             raise ValueError("num_materials and material_dim must be both positive or both 0")
         self.node_in, self.pp_in, self.ps_in = node_in, pp_in, ps_in
@@ -146,8 +166,12 @@ class EncodeProcessDecode(nn.Module):
         e_pp = self.pp_encoder(pp_attr) if has_pp else pp_attr.new_zeros(0, v.shape[1])
         has_ps = self.ps_encoder is not None and ps_index.shape[1] > 0
         e_ps = self.ps_encoder(ps_attr) if has_ps else None
+        inv_pp = inv_ps = None
+        if self.aggregation == "mean":
+            inv_pp = inverse_degree(pp_index[1], v.shape[0], v) if has_pp else None
+            inv_ps = inverse_degree(ps_index[1], v.shape[0], v) if has_ps else None
         for block in self.blocks:
-            v, e_pp = block(v, pp_index, e_pp, ps_index, e_ps)
+            v, e_pp = block(v, pp_index, e_pp, ps_index, e_ps, inv_pp, inv_ps)
         return self.decoder(v)
 
     def flops_per_step(self, num_nodes: int, num_pp_edges: int, num_ps_edges: int) -> int:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from physgnn.files import write_text
-from physgnn.report import bounce, freefall, pareto, stability
+from physgnn.report import bounce, freefall, invariance, pareto, stability
 from physgnn.report.sections import (
     baselines_table,
     components_section,
@@ -39,6 +39,12 @@ def freefall_section(root: Path) -> str:
     """The free-fall table from ``root/freefall.csv`` (written by the eval)."""
     path = root / "freefall.csv"
     return freefall.section(freefall.read_csv(path) if path.exists() else [])
+
+
+def invariance_section(root: Path) -> str:
+    """The invariance checks from ``root/invariance.csv`` (written by the eval)."""
+    path = root / "invariance.csv"
+    return invariance.section(invariance.read_csv(path) if path.exists() else [])
 
 
 def bounce_section(root: Path) -> str:
@@ -83,6 +89,8 @@ def write_report(
         freefall_section(root),
         "## Bounces against restitution",
         bounce_section(root),
+        "## Invariances of rigid contact",
+        invariance_section(root),
     ]
     parts += _figures(rows, bench_dir, root)
     if skipped:

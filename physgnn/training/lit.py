@@ -3,7 +3,12 @@
 Loss of a batch of state pairs:
 
 ``L = MSE(normalised prediction, normalised target)
-+ λ · mean_scenes max(E_{t+1} − E_t, 0) / Σ m g + λ_c · contact penalty``
++ λ · mean_scenes max(E_{t+1} − E_t, 0) / Σ m g + λ_c · contact penalty + λ_r · rest BCE``
+
+- The rest term (with the simulator's ``rest_decision``, :mod:`physgnn.models.rest`): binary
+  cross-entropy of the seventh output against "at rest next frame", over the spheres in reach.
+- Velocity noise is scaled to each sphere's regime (:func:`physgnn.training.noise.regime_scale`,
+  ``noise_rest_scale``): a resting sphere gets a small share of it, so rest stays resolvable.
 
 - MSE over the 6 normalised outputs of every sphere (:mod:`physgnn.models.learned` explains the
   target); the 3 angular outputs of spheres whose scene has rotation off are left out, and
@@ -37,43 +42,16 @@ import random
 
 import lightning as L
 import torch
+import torch.nn.functional as F
 
 from physgnn.data.state import scene_of_sphere
-from physgnn.models.learned import LearnedSimulator
-from physgnn.physics import quaternion as Q
+from physgnn.models.learned import OUTPUTS, LearnedSimulator
 from physgnn.physics.energy import scene_energy, scene_weight
 from physgnn.physics.integrator import euler_step, step
 from physgnn.training.contacts import contact_penalty, perturb_contacts
 from physgnn.training.epoch_means import EpochMeans
 from physgnn.training.finite import FiniteWatch, NonFiniteLossError  # noqa: F401 (its home)
-
-
-def add_noise(state, simulator: LearnedSimulator, std: float, generator=None):
-    """A copy of ``state`` with rollout-shaped noise and the matching velocity target (see the
-    module doc). ``state.vel`` / ``angvel`` are ``[N, H+1, 3]``, latest first."""
-
-    def randn_like(x: torch.Tensor) -> torch.Tensor:
-        return torch.randn(x.shape, generator=generator, dtype=x.dtype, device=x.device)
-
-    def random_walk(x: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
-        """``[N, H+1, 3]`` cumulative noise from the oldest entry to the latest (std scale)."""
-        steps = randn_like(x) * (scale / x.shape[1] ** 0.5)
-        return torch.cumsum(steps.flip(1), dim=1).flip(1)
-
-    noisy = state.clone()
-    rot = simulator.rotating(state)[:, None]
-    dt = state.scene_dt[:, None]
-    dv = random_walk(state.vel, std * simulator.vel_std)
-    noisy.vel = state.vel + dv
-    dp = dt * dv.sum(1)  # p̃_t − p_t: the velocity noise integrated along the history
-    noisy.pos = state.pos + dp
-    if getattr(state, "target_vel", None) is not None:
-        noisy.target_vel = state.target_vel - dp / dt
-    quat = Q.normalize(state.quat + std * randn_like(state.quat))
-    noisy.quat = torch.where(rot, quat, state.quat)
-    angvel = state.angvel + random_walk(state.angvel, std * simulator.angvel_std)
-    noisy.angvel = torch.where(rot[:, :, None], angvel, state.angvel)
-    return noisy
+from physgnn.training.noise import add_noise, regime_scale  # noqa: F401 (re-exported)
 
 
 @torch.no_grad()
@@ -125,6 +103,35 @@ def masked_mse(
     return ((pred - target) ** 2 * weight).sum() / weight.sum().clamp_min(1.0)
 
 
+def rest_loss(simulator: LearnedSimulator, state, pred: torch.Tensor, reach) -> torch.Tensor:
+    """Binary cross-entropy of the rest logit ``pred[:, 6]`` against
+    :meth:`~physgnn.models.learned.LearnedSimulator.rest_target`, over the spheres in ``reach``
+    (all when None); 0 without a rest decision."""
+    if not simulator.rest_decision:
+        return pred.new_zeros(())
+    label = simulator.rest_target(state).to(pred.dtype)
+    each = F.binary_cross_entropy_with_logits(pred[:, OUTPUTS], label, reduction="none")
+    if reach is None:
+        return each.mean()
+    weight = reach.to(pred.dtype)
+    return (each * weight).sum() / weight.sum().clamp_min(1.0)
+
+
+def _check_ranges(values: dict, contact_noise_prob: float, noise_rest_scale: float) -> None:
+    """Lengths, weights and step counts ``values`` >= 0, ``contact_noise_prob`` in [0, 1],
+    ``noise_rest_scale`` in (0, 1]; else a one-line ValueError naming the key."""
+    bad = [name for name, value in values.items() if value < 0]
+    if not 0 <= contact_noise_prob <= 1:
+        bad.append("contact_noise_prob")
+    if not 0 < noise_rest_scale <= 1:
+        bad.append("noise_rest_scale")
+    if bad:
+        raise ValueError(
+            f"lit.{bad[0]} out of range: lengths, weights and step counts must be >= 0, "
+            "contact_noise_prob in [0, 1], noise_rest_scale in (0, 1]"
+        )
+
+
 class LitSimulator(L.LightningModule):
     """Trains a :class:`LearnedSimulator` on one-step pairs.
 
@@ -151,32 +158,29 @@ class LitSimulator(L.LightningModule):
         optimizer,
         scheduler=None,
         lambda_energy: float = 0.0,
-        noise_std: float = 0.01,
+        noise_std: float = 0.03,
         seed: int = 0,
-        pushforward_steps: int = 0,
-        pushforward_after: int = 0,
+        pushforward_steps: int = 2,
+        pushforward_after: int = 400,
         pushforward_growth: int = 0,
-        lambda_contact: float = 0.0,
+        lambda_contact: float = 1.0,
         contact_tol: float = 0.02,
-        contact_noise_depth: float = 0.0,
-        contact_noise_prob: float = 0.5,
+        contact_noise_depth: float = 0.2,
+        contact_noise_prob: float = 0.3,
         contact_touch: float = 0.05,
+        noise_rest_scale: float = 0.05,
+        lambda_rest: float = 1.0,
         compile: bool = False,
     ):
         super().__init__()
         values = dict(
             lambda_energy=lambda_energy, noise_std=noise_std, pushforward_steps=pushforward_steps,
             pushforward_after=pushforward_after, pushforward_growth=pushforward_growth,
-            lambda_contact=lambda_contact,
+            lambda_contact=lambda_contact, lambda_rest=lambda_rest,
             contact_tol=contact_tol, contact_noise_depth=contact_noise_depth,
             contact_touch=contact_touch,
         )  # fmt: skip
-        negative = [name for name, value in values.items() if value < 0]
-        if negative or not 0 <= contact_noise_prob <= 1:
-            raise ValueError(
-                f"lit.{(negative or ['contact_noise_prob'])[0]} out of range: lengths, weights "
-                "and step counts must be >= 0, contact_noise_prob in [0, 1]"
-            )
+        _check_ranges(values, contact_noise_prob, noise_rest_scale)
         self.save_hyperparameters(ignore=["simulator", "optimizer", "scheduler"])
         self.simulator = simulator
         self.optimizer_factory = optimizer
@@ -188,6 +192,7 @@ class LitSimulator(L.LightningModule):
         self.pushforward_after = int(pushforward_after)
         self.pushforward_growth = int(pushforward_growth)
         self.lambda_contact = float(lambda_contact)
+        self.noise_rest_scale, self.lambda_rest = float(noise_rest_scale), float(lambda_rest)
         self.contact_tol = float(contact_tol)
         self.contact_noise = (float(contact_noise_depth), float(contact_touch))
         self.contact_noise_prob = float(contact_noise_prob)
@@ -204,16 +209,17 @@ class LitSimulator(L.LightningModule):
         pred, graph = sim.normalized_prediction(state)
         target = sim.normalized_target(state)
         reach = sim.in_reach(state, graph) if sim.gravity_prior else None
-        mse = masked_mse(pred, target, sim.rotating(state), reach)
+        mse = masked_mse(pred[:, :OUTPUTS], target, sim.rotating(state), reach)
         vel_next, _ = sim.to_physical(state, pred, reach)
         energy = energy_increase(state, vel_next).mean()
         weighted = self.lambda_energy * energy
         tol = self.contact_tol * sim.length_scale
         contact = contact_penalty(state, vel_next, graph, tol, sim.delta_speed_scale)
-        loss = mse + weighted + self.lambda_contact * contact
+        rest = rest_loss(sim, state, pred, reach)
+        loss = mse + weighted + self.lambda_contact * contact + self.lambda_rest * rest
         share = (weighted / loss.clamp_min(1e-30)).detach()
         return {"loss": loss, "loss_mse": mse, "loss_energy": energy, "energy_share": share,
-                "loss_contact": contact}  # fmt: skip
+                "loss_contact": contact, "loss_rest": rest}  # fmt: skip
 
     def _log_all(self, prefix: str, losses: dict, batch_size: int) -> None:
         """Epoch means under the exact names ``{prefix}/loss`` etc. (weighted by scene count;
@@ -249,7 +255,8 @@ class LitSimulator(L.LightningModule):
     def training_step(self, batch, batch_idx: int) -> torch.Tensor:
         generator = self._noise_generator()
         if self.noise_std > 0:
-            batch = add_noise(batch, self.simulator, self.noise_std, generator)
+            scale = self.noise_rest_scale
+            batch = add_noise(batch, self.simulator, self.noise_std, generator, scale)
         if self.contact_noise[0] > 0 and self.contact_noise_prob > 0:
             scale = self.simulator.length_scale  # a tensor: no read-back to the host
             depth, touch = (scale * x for x in self.contact_noise)

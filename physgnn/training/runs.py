@@ -96,6 +96,12 @@ def _own_score(path: Path) -> float:
     return float("inf")
 
 
+# Model keys that runs of an earlier physgnn lack, with the values their model had (the
+# invariance changes: physgnn/models/learned.py); the defaults of these keys changed since.
+EARLIER_MODEL = {"relative_pairs": False, "mass_ratio": False, "aggregation": "sum",
+                 "rest_decision": False}  # fmt: skip
+
+
 def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
     """``(simulator, cfg, info)`` of a finished run (or ``pretrained``): the simulator from
     ``.hydra/config.yaml`` and the best (else last) checkpoint, in eval mode on the CPU;
@@ -112,6 +118,9 @@ def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
     target = OmegaConf.select(cfg, "model._target_")
     if target in MOVED_TARGETS:
         cfg.model._target_ = MOVED_TARGETS[target]
+    for key, value in EARLIER_MODEL.items():  # a run of an earlier physgnn: its own model
+        if key not in cfg.model:
+            cfg.model[key] = value
     path = checkpoint_of(run_dir)
     state = torch.load(path, map_location="cpu", weights_only=True)["state_dict"]
     state = {

@@ -1,0 +1,214 @@
+"""The invariances of rigid contact, checked on analytic scenes (no engine needed).
+
+Each check rolls the learned simulator out from exact seed frames and compares it with what
+physics requires whatever the training data held; every row states its limit and whether it
+passed. Checks (``kind`` of a row):
+
+- ``flying_block``: a block of ``4×3×2`` spheres (radius 0.5 m, 0.1 m gaps) far above the
+  ground, all with one velocity (2, −1, 3) m/s: nothing touches, so every pair distance must
+  stay the same and every velocity must change by exactly ``−g·dt`` per frame. ``value`` is the
+  largest change of a neighbour pair's distance as a share of its gap (limit 10 %);
+  ``value2`` the largest error of a frame's ``Δv_z`` as a share of ``g·dt`` (limit 2 %).
+- ``resting_grid``: a 5 × 5 grid of touching spheres (radius 0.75 m) at rest on the ground,
+  at the training density and at 1 kg each: nothing may move. ``value``: the largest
+  displacement after ``frames`` frames, in radii (limit 1).
+- ``collision``: a frictionless head-on collision in the air of spheres of radius 0.5 and
+  1.0 m (mass ratio 1 : 8), closing at 5 m/s: the momentum along the impact line (x) must be
+  kept. ``value``: ``|P_x(end) − P_x(0)| / Σ m |v_x(0)|`` (limit 1 %).
+- ``bounce``: rows of :func:`physgnn.evaluation.bounce.bounce_rows` for restitutions 0.3–0.9
+  and masses 1 kg, the training density's and 10 t: ``value`` the apex over ``e²·H`` (limit:
+  within 10 % of 1).
+
+A diverged rollout fails its check (``value`` NaN).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from physgnn.evaluation.bounce import bounce_rows
+from physgnn.physics.energy import G
+from physgnn.physics.scene import Effects, ground_plane
+from physgnn.physics.trajectory import Trajectory
+from physgnn.rollout import rollout
+
+BLOCK_LIMITS = (0.10, 0.02)  # pair distance change / gap; Δv_z error / (g·dt)
+REST_LIMIT = 1.0  # radii
+MOMENTUM_LIMIT = 0.01
+BOUNCE_LIMIT = 0.10
+BOUNCE_MASSES = (1.0, None, 10_000.0)  # kg; None: density 1 000 (the training density)
+BOUNCE_MATERIALS = (
+    (0.3, 0.9, 0.02, 0.02),
+    (0.5, 0.7, 0.01, 0.01),
+    (0.7, 0.5, 0.005, 0.005),
+    (0.9, 0.5, 0.005, 0.005),
+)
+DENSITY = 1000.0
+
+
+def ballistic(name, pos0, vel0, radius, mass, material, frames: int, dt: float) -> Trajectory:
+    """Spheres flying freely from ``pos0 [N, 3]`` with ``vel0 [N, 3]``: exact positions and
+    velocities of frames ``0..frames−1`` over the ground alone, one ``material`` row [4]."""
+    t = np.arange(frames)[:, None, None] * dt
+    drop = np.array([0.0, 0.0, -0.5 * G])
+    pos = pos0[None] + vel0[None] * t + drop * t**2
+    vel = vel0[None] + 2 * drop * t
+    n = len(pos0)
+    quat = np.zeros((frames, n, 4))
+    quat[..., 0] = 1.0
+    return Trajectory(
+        name=name,
+        pos=pos,
+        quat=quat,
+        vel=vel,
+        angvel=np.zeros((frames, n, 3)),
+        radius=np.asarray(radius, np.float64),
+        mass=np.asarray(mass, np.float64),
+        material=np.zeros(n, np.int64),
+        planes=ground_plane()[None].astype(np.float64),
+        plane_kind=np.zeros(1, np.int64),
+        materials=np.asarray(material, np.float64)[None],
+        dt=dt,
+        effects=Effects(),
+    )
+
+
+def sphere_mass(radius, density: float = DENSITY) -> np.ndarray:
+    return density * 4.0 / 3.0 * np.pi * np.asarray(radius, np.float64) ** 3
+
+
+def flying_block(frames: int = 30, dt: float = 0.1) -> Trajectory:
+    """The ``flying_block`` scene of the module doc."""
+    r, gap = 0.5, 0.1
+    cells = np.array(list(itertools.product(range(4), range(3), range(2))), np.float64)
+    pos0 = cells * (2 * r + gap) + [0.0, 0.0, 200.0]
+    n = len(pos0)
+    vel0 = np.tile([2.0, -1.0, 3.0], (n, 1))
+    radius = np.full(n, r)
+    return ballistic(
+        "flying_block", pos0, vel0, radius, sphere_mass(radius), (0.5, 0.7, 0.01, 0.01), frames, dt
+    )
+
+
+def resting_grid(mass: float | None, frames: int, dt: float = 0.1) -> Trajectory:
+    """The ``resting_grid`` scene: 25 touching spheres at rest (``mass`` kg each; None: the
+    training density)."""
+    r = 0.75
+    xy = np.array(list(itertools.product(range(5), range(5))), np.float64) * 2 * r
+    pos0 = np.concatenate([xy, np.full((25, 1), r)], axis=1)
+    radius = np.full(25, r)
+    masses = sphere_mass(radius) if mass is None else np.full(25, float(mass))
+    traj = ballistic(
+        "resting_grid", pos0, np.zeros((25, 3)), radius, masses, (0.5, 0.7, 0.01, 0.01), frames, dt
+    )
+    traj.pos[:] = pos0  # resting, not falling: the ground holds them
+    traj.vel[:] = 0.0
+    return traj
+
+
+def collision(frames: int = 12, dt: float = 0.1) -> Trajectory:
+    """The ``collision`` scene: radius 0.5 at x = 0 moving +4 m/s, radius 1.0 at 1.5 m of
+    gap moving −1 m/s, 50 m up, frictionless (restitution 0.5)."""
+    radius = np.array([0.5, 1.0])
+    pos0 = np.array([[0.0, 0.0, 50.0], [0.5 + 1.0 + 1.5, 0.0, 50.0]])
+    vel0 = np.array([[4.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    return ballistic(
+        "collision", pos0, vel0, radius, sphere_mass(radius), (0.5, 0.0, 0.0, 0.0), frames, dt
+    )
+
+
+def _velocities(pos: np.ndarray, dt: float) -> np.ndarray:
+    """``[T−1, N, 3]`` finite-difference velocities of ``pos [T, N, 3]``."""
+    return np.diff(np.asarray(pos, np.float64), axis=0) / dt
+
+
+def block_errors(pred, truth: Trajectory) -> tuple[float, float]:
+    """``(pair change / gap, Δv_z error / (g·dt))`` of a flying block's rollout (module doc)."""
+    pos0 = truth.pos[0]
+    dist0 = np.linalg.norm(pos0[:, None] - pos0[None], axis=-1)
+    gap0 = dist0 - truth.radius[:, None] - truth.radius[None]
+    i, j = np.nonzero(np.triu(gap0 < 1.5 * gap0[np.triu_indices(len(pos0), 1)].min(), 1))
+    pos = np.asarray(pred.pos, np.float64)
+    dist = np.linalg.norm(pos[:, i] - pos[:, j], axis=-1)
+    change = np.abs(dist - dist0[i, j]).max() / gap0[i, j].min()
+    dvz = np.diff(_velocities(pos, truth.dt)[..., 2], axis=0)[int(pred.start) - 1 :]
+    dvz_error = np.abs(dvz + G * truth.dt).max() / (G * truth.dt)
+    return float(change), float(dvz_error)
+
+
+def invariance_rows(name: str, simulator, rest_frames: int = 2000, **kwargs) -> list[dict]:
+    """Every check of the module doc for one learned run (keyword arguments go to
+    :func:`physgnn.rollout.rollout`); ``rest_frames``: the resting grids' length."""
+    block, hit = flying_block(), collision()
+    grids = [resting_grid(None, rest_frames), resting_grid(1.0, rest_frames)]
+    preds = rollout(simulator, [block, hit, *grids], **kwargs)
+    rows = [_block_row(name, preds[0], block), _collision_row(name, preds[1], hit)]
+    rows += [_rest_row(name, p, g) for p, g in zip(preds[2:], grids, strict=True)]
+    for mass in BOUNCE_MASSES:
+        bounces = bounce_rows(name, simulator, BOUNCE_MATERIALS, 10.0, 0.1, 0.75, mass, **kwargs)
+        rows += [_bounce_row(b) for b in bounces]
+    return rows
+
+
+def _row(name, kind, setting, value, limit, passed, pred, value2=float("nan")) -> dict:
+    diverged = getattr(pred, "diverged_at", None)
+    return {
+        "run": name,
+        "kind": kind,
+        "setting": setting,
+        "value": value,
+        "value2": value2,
+        "limit": limit,
+        "passed": bool(passed and diverged is None),
+        "diverged_at": diverged,
+    }
+
+
+def _block_row(name, pred, truth) -> dict:
+    change, dvz = block_errors(pred, truth) if pred.diverged_at is None else (np.nan, np.nan)
+    ok = change <= BLOCK_LIMITS[0] and dvz <= BLOCK_LIMITS[1]
+    return _row(
+        name,
+        "flying_block",
+        "24 spheres, 0.1 m gaps, v = (2, -1, 3) m/s",
+        change,
+        BLOCK_LIMITS[0],
+        ok,
+        pred,
+        dvz,
+    )
+
+
+def _collision_row(name, pred, truth) -> dict:
+    vel = _velocities(pred.pos, truth.dt)[..., 0]
+    momentum = vel @ truth.mass
+    scale = float(np.abs(truth.vel[0, :, 0]) @ truth.mass)
+    error = abs(momentum[-1] - momentum[0]) / scale if pred.diverged_at is None else np.nan
+    return _row(
+        name,
+        "collision",
+        "radii 0.5 / 1.0 (mass 1 : 8), frictionless",
+        float(error),
+        MOMENTUM_LIMIT,
+        error <= MOMENTUM_LIMIT,
+        pred,
+    )
+
+
+def _rest_row(name, pred, truth) -> dict:
+    moved = np.linalg.norm(np.asarray(pred.pos[-1], np.float64) - truth.pos[0], axis=-1)
+    drift = float(moved.max() / truth.radius.max()) if pred.diverged_at is None else np.nan
+    setting = f"25 spheres, {truth.mass[0]:.4g} kg each, {truth.n_frames} frames"
+    return _row(name, "resting_grid", setting, drift, REST_LIMIT, drift <= REST_LIMIT, pred)
+
+
+def _bounce_row(b: dict) -> dict:
+    ratio = b["ratio"]
+    ok = abs(ratio - 1.0) <= BOUNCE_LIMIT
+    setting = f"e = {b['restitution']:g}, {b['mass']:.4g} kg"
+    row = _row(b["run"], "bounce", setting, ratio, BOUNCE_LIMIT, ok, None)
+    row["diverged_at"] = b["diverged_at"]
+    row["passed"] = bool(ok and b["diverged_at"] is None)
+    return row

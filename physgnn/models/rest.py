@@ -1,0 +1,30 @@
+"""The learned rest decision (``rest_decision=True``, the default model).
+
+Resting spheres are 72 % of the training set's sphere-frames, and 1 radius of creep over
+2 000 frames is 0.0025 m/s: below what a regression of Δv, scaled by bounces (σ ≈ 0.16–1.07
+m/s), resolves. So the network has a seventh output, the logit of "at rest next frame", trained
+by binary cross-entropy against :func:`rest_target`; a sphere in reach of a contact that it
+calls at rest gets ``v = ω = 0`` exactly (:func:`apply_rest`). The hand-written sleeping of
+:mod:`physgnn.models.sleeping` stays a separate, opt-in effect.
+"""
+
+from __future__ import annotations
+
+import torch
+
+
+def rest_target(state, rest_speed: float) -> torch.Tensor:
+    """``[N]`` bool: spheres whose target next motion is rest, ``|v_{t+1}| < rest_speed`` and
+    ``|ω_{t+1}|·r < rest_speed`` (m/s)."""
+    still = torch.linalg.vector_norm(state.target_vel, dim=1) < rest_speed
+    spin = torch.linalg.vector_norm(state.target_angvel, dim=1) * state.radius
+    return still & (spin < rest_speed)
+
+
+def apply_rest(logit: torch.Tensor, vel: torch.Tensor, angvel: torch.Tensor, reach=None):
+    """``(vel, angvel)`` ``[N, 3]`` each with ``v = ω = 0`` where ``logit [N] > 0`` and the
+    sphere is in ``reach [N]`` of a contact (None: every sphere)."""
+    rest = logit > 0
+    rest = rest if reach is None else rest & reach
+    zero = torch.zeros_like(vel)
+    return torch.where(rest[:, None], zero, vel), torch.where(rest[:, None], zero, angvel)

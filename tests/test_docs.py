@@ -1,0 +1,116 @@
+"""The documentation: every relative link of README.md and docs/**/*.md reaches a file (and, for
+a ``#anchor`` into a Markdown page, a heading of it); the README stays short; and, when mkdocs
+is installed (the ``docs`` extra), the site builds with ``mkdocs build --strict`` (slow)."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+import unicodedata
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+# [text](target) and ![alt](target), not inside code; <a href> is not used in these pages
+LINK = re.compile(r"!?\[(?:[^\[\]]|\[[^\[\]]*\])*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
+FENCE = re.compile(r"^(```|~~~).*?^\1", re.S | re.M)
+CODE = re.compile(r"`[^`\n]*`")
+
+
+def strip_code(text: str) -> str:
+    """``text`` without fenced blocks and inline code (links there are examples, not links)."""
+    return CODE.sub("", FENCE.sub("", text))
+
+
+def slug(heading: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces to hyphens."""
+    text = CODE.sub(lambda m: m.group(0)[1:-1], heading.strip()).lower()
+    text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", text)
+    kept = "".join(c for c in text if c in " -_" or unicodedata.category(c)[0] in "LN")
+    return kept.replace(" ", "-")
+
+
+def anchors(page: Path) -> set[str]:
+    """The anchors of ``page``'s headings (repeated headings get -1, -2, ... as on GitHub)."""
+    seen: dict[str, int] = {}
+    found = set()
+    for line in FENCE.sub("", page.read_text(encoding="utf-8")).splitlines():
+        match = re.match(r"^#{1,6}\s+(.*?)\s*#*\s*$", line)
+        if not match:
+            continue
+        base = slug(match.group(1))
+        n = seen.get(base, 0)
+        seen[base] = n + 1
+        found.add(base if n == 0 else f"{base}-{n}")
+    return found
+
+
+def broken_links(page: Path, root: Path = ROOT) -> list[str]:
+    """``page``'s relative links whose file (or heading) does not exist, or that leave ``root``,
+    one line each."""
+    problems = []
+    for target in LINK.findall(strip_code(page.read_text(encoding="utf-8"))):
+        if re.match(r"^[a-z][a-z0-9+.-]*:", target, re.I):  # https:, mailto:, ...
+            continue
+        path, _, anchor = target.partition("#")
+        if path.startswith("/"):
+            problems.append(f"{page.relative_to(root)}: absolute link {target}")
+            continue
+        file = (page.parent / path).resolve() if path else page
+        if not file.exists():
+            problems.append(f"{page.relative_to(root)}: {target} (no such file)")
+        elif root not in file.parents:
+            problems.append(f"{page.relative_to(root)}: {target} (outside the repository)")
+        elif anchor and file.suffix == ".md" and anchor not in anchors(file):
+            problems.append(f"{page.relative_to(root)}: {target} (no such heading)")
+    return problems
+
+
+def test_the_checker_finds_broken_links(tmp_path):
+    (tmp_path / "other.md").write_text("# A page\n\n## Two words\n", encoding="utf-8")
+    page = tmp_path / "page.md"
+    page.write_text(
+        "[ok](other.md) [ok](other.md#two-words) [web](https://example.org) [self](#here)\n"
+        "# Here\n`[code](missing.md)`\n```\n[fenced](missing.md)\n```\n"
+        "[gone](missing.md) [bad anchor](other.md#nope) ![img](pic.png)\n",
+        encoding="utf-8",
+    )
+    assert broken_links(page, tmp_path) == [
+        "page.md: missing.md (no such file)",
+        "page.md: other.md#nope (no such heading)",
+        "page.md: pic.png (no such file)",
+    ]
+
+
+def test_no_broken_relative_link():
+    problems = [line for page in PAGES for line in broken_links(page)]
+    assert not problems, "broken links:\n" + "\n".join(problems)
+
+
+def test_readme_is_short_and_names_no_machine_path():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= 250
+    for page in PAGES:
+        body = page.read_text(encoding="utf-8")
+        assert "/work/" not in body and "/home/" not in body, page
+
+
+@pytest.mark.slow
+def test_mkdocs_build_strict(tmp_path):
+    mkdocs = shutil.which("mkdocs", path=str(Path(sys.executable).parent)) or shutil.which("mkdocs")
+    if mkdocs is None:
+        pytest.skip("mkdocs is not installed (pip install -e '.[docs]')")
+    pytest.importorskip("mkdocstrings_handlers.python", reason="mkdocstrings[python] is missing")
+    done = subprocess.run(
+        [mkdocs, "build", "--strict", "--site-dir", str(tmp_path / "site")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    assert (tmp_path / "site" / "index.html").exists()

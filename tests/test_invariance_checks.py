@@ -1,0 +1,60 @@
+"""The invariance checks of make eval (physgnn/evaluation/invariance.py), their report section
+and the targets table (physgnn/report/targets.py), on analytic scenes and an untrained model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from simdata import STATS
+
+from physgnn.evaluation import invariance as inv
+from physgnn.models.learned import LearnedSimulator
+from physgnn.physics.energy import G
+from physgnn.report import invariance as section
+
+
+def test_the_flying_block_is_exact_ballistic_flight():
+    block = inv.flying_block(frames=5)
+    assert block.pos.shape == (5, 24, 3)
+    dz = np.diff(block.vel[..., 2], axis=0)
+    np.testing.assert_allclose(dz, -G * block.dt, rtol=1e-12)
+    np.testing.assert_allclose(block.vel[0], np.tile([2.0, -1.0, 3.0], (24, 1)))
+    change, dvz = inv.block_errors(block, block)  # the truth as its own rollout: no error
+    assert change == pytest.approx(0.0, abs=1e-9) and dvz == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_collision_is_one_to_eight_and_starts_apart():
+    hit = inv.collision()
+    assert hit.mass[1] / hit.mass[0] == pytest.approx(8.0)
+    gap = np.linalg.norm(hit.pos[2, 1] - hit.pos[2, 0]) - hit.radius.sum()
+    assert gap > 0  # the seed frames (H = 2) are before the impact
+    assert hit.materials[0, 1:].tolist() == [0.0, 0.0, 0.0]  # frictionless
+
+
+def test_resting_grids_touch_and_weigh_what_they_say():
+    heavy, light = inv.resting_grid(None, 6), inv.resting_grid(1.0, 6)
+    assert np.all(light.mass == 1.0) and heavy.mass[0] == pytest.approx(inv.sphere_mass(0.75))
+    assert np.all(heavy.pos == heavy.pos[0]) and np.all(heavy.vel == 0)
+    dist = np.linalg.norm(heavy.pos[0, 0] - heavy.pos[0, 1])
+    assert dist == pytest.approx(2 * 0.75)  # touching neighbours
+
+
+def test_an_untrained_default_keeps_the_block_and_every_row_is_there():
+    torch.manual_seed(0)
+    sim = LearnedSimulator(STATS, H=2, M=1, hidden=8).eval()
+    rows = inv.invariance_rows("untrained", sim, rest_frames=4)
+    kinds = [r["kind"] for r in rows]
+    assert kinds.count("flying_block") == 1 and kinds.count("collision") == 1
+    assert kinds.count("resting_grid") == 2
+    assert kinds.count("bounce") == len(inv.BOUNCE_MATERIALS) * len(inv.BOUNCE_MASSES)
+    block = rows[0]
+    # no pp edge between spheres moving as one, no plane in reach: the gravity prior, exact
+    assert block["passed"] and block["value"] < 1e-3 and block["value2"] < 1e-4
+    text = section.section(rows)
+    passed = sum(r["passed"] for r in rows)
+    assert f"`untrained` {passed}/{len(rows)}" in text and "flying_block" in text
+
+
+def test_the_section_says_when_there_are_no_checks():
+    assert "No invariance checks" in section.section([])
