@@ -46,7 +46,7 @@ def test_an_untrained_default_keeps_the_block_and_every_row_is_there():
     rows = inv.invariance_rows("untrained", sim, rest_frames=4)
     kinds = [r["kind"] for r in rows]
     assert kinds.count("flying_block") == 1 and kinds.count("collision") == 1
-    assert kinds.count("resting_grid") == 2
+    assert kinds.count("resting_grid") == 2 and kinds.count("sliding_row") == 1
     assert kinds.count("bounce") == len(inv.BOUNCE_MATERIALS) * len(inv.BOUNCE_MASSES)
     block = rows[0]
     # no pp edge between spheres moving as one, no plane in reach: the gravity prior, exact

@@ -12,6 +12,11 @@ passed. Checks (``kind`` of a row):
 - ``resting_grid``: a 5 × 5 grid of touching spheres (radius 0.75 m) at rest on the ground,
   at the training density and at 1 kg each: nothing may move. ``value``: the largest
   displacement after ``frames`` frames, in radii (limit 1).
+- ``sliding_row``: 5 touching spheres (radius 0.75 m) in a row on a frictionless ground, all
+  sliding at 2 m/s along the row for 50 frames: nothing acts between them, so the row must
+  keep its shape, though the network sees each sphere's velocity relative to the ground in
+  its node latents. ``value``: the largest change of a neighbour distance, in radii (limit
+  0.1, ours).
 - ``collision``: a frictionless head-on collision in the air of spheres of radius 0.5 and
   1.0 m (mass ratio 1 : 8), closing at 5 m/s: the momentum along the impact line (x) must be
   kept. ``value``: ``|P_x(end) − P_x(0)| / Σ m |v_x(0)|`` (limit 1 %).
@@ -37,6 +42,7 @@ from physgnn.rollout import rollout
 BLOCK_LIMITS = (0.10, 0.02)  # pair distance change / gap; Δv_z error / (g·dt)
 REST_LIMIT = 1.0  # radii
 MOMENTUM_LIMIT = 0.01
+ROW_LIMIT = 0.1  # radii
 BOUNCE_LIMIT = 0.10
 BOUNCE_MASSES = (1.0, None, 10_000.0)  # kg; None: density 1 000 (the training density)
 BOUNCE_MATERIALS = (
@@ -119,6 +125,20 @@ def collision(frames: int = 12, dt: float = 0.1) -> Trajectory:
     )
 
 
+def sliding_row(frames: int = 50, dt: float = 0.1) -> Trajectory:
+    """The ``sliding_row`` scene of the module doc (exact frames: uniform sliding)."""
+    r = 0.75
+    pos0 = np.array([[2 * r * k, 0.0, r] for k in range(5)])
+    vel0 = np.tile([2.0, 0.0, 0.0], (5, 1))
+    radius = np.full(5, r)
+    traj = ballistic(
+        "sliding_row", pos0, vel0, radius, sphere_mass(radius), (0.5, 0.0, 0.0, 0.0), frames, dt
+    )
+    traj.pos[..., 2] = r  # on the ground, not falling
+    traj.vel[..., 2] = 0.0
+    return traj
+
+
 def _velocities(pos: np.ndarray, dt: float) -> np.ndarray:
     """``[T−1, N, 3]`` finite-difference velocities of ``pos [T, N, 3]``."""
     return np.diff(np.asarray(pos, np.float64), axis=0) / dt
@@ -141,11 +161,12 @@ def block_errors(pred, truth: Trajectory) -> tuple[float, float]:
 def invariance_rows(name: str, simulator, rest_frames: int = 2000, **kwargs) -> list[dict]:
     """Every check of the module doc for one learned run (keyword arguments go to
     :func:`physgnn.rollout.rollout`); ``rest_frames``: the resting grids' length."""
-    block, hit = flying_block(), collision()
+    block, hit, row = flying_block(), collision(), sliding_row()
     grids = [resting_grid(None, rest_frames), resting_grid(1.0, rest_frames)]
-    preds = rollout(simulator, [block, hit, *grids], **kwargs)
+    preds = rollout(simulator, [block, hit, row, *grids], **kwargs)
     rows = [_block_row(name, preds[0], block), _collision_row(name, preds[1], hit)]
-    rows += [_rest_row(name, p, g) for p, g in zip(preds[2:], grids, strict=True)]
+    rows += [_row_row(name, preds[2], row)]
+    rows += [_rest_row(name, p, g) for p, g in zip(preds[3:], grids, strict=True)]
     for mass in BOUNCE_MASSES:
         bounces = bounce_rows(name, simulator, BOUNCE_MATERIALS, 10.0, 0.1, 0.75, mass, **kwargs)
         rows += [_bounce_row(b) for b in bounces]
@@ -193,6 +214,21 @@ def _collision_row(name, pred, truth) -> dict:
         float(error),
         MOMENTUM_LIMIT,
         error <= MOMENTUM_LIMIT,
+        pred,
+    )
+
+
+def _row_row(name, pred, truth) -> dict:
+    pos = np.asarray(pred.pos, np.float64)
+    dist = np.linalg.norm(np.diff(pos, axis=1), axis=-1)  # [T, 4] neighbour distances
+    change = np.abs(dist - dist[0]).max() / truth.radius[0] if pred.diverged_at is None else np.nan
+    return _row(
+        name,
+        "sliding_row",
+        "5 touching spheres at 2 m/s, frictionless",
+        float(change),
+        ROW_LIMIT,
+        change <= ROW_LIMIT,
         pred,
     )
 

@@ -150,7 +150,7 @@ def dense_contact(c: dict, rng: np.random.Generator) -> Scene:
       in the air, all spheres with one common velocity (horizontal in a disc of ``max_speed0``,
       vertical U[−2, 4] m/s) and no spin: a group that flies as one, then lands;
     - ``settling_aggregate``: the same aggregate at rest on the ground, which collapses into a
-      pile and rests (6–12 contacts per sphere);
+      pile and rests;
     - ``sliding_row``: a row on the ground (:func:`row_positions`) with one common horizontal
       velocity of speed U[0.5, max_speed0] in a random direction: touching spheres that move
       together.

@@ -11,6 +11,7 @@ COLUMNS = ["run", "kind", "setting", "value", "value2", "limit", "passed", "dive
 _WHAT = {
     "flying_block": "pair distance change / gap (Δv_z error / g·dt)",
     "resting_grid": "largest drift (radii)",
+    "sliding_row": "largest neighbour distance change (radii)",
     "collision": "momentum change along the impact / Σ m|v|",
     "bounce": "apex / e²H (|1 − x| within the limit)",
 }

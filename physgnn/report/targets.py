@@ -66,7 +66,7 @@ def _row(run, metrics, stab, checks) -> list[str]:
         f"{fmt(pack.get('max_pen_sphere'))} / {fmt(pack.get('rest_drift'))}",
         *(
             _checks([c for c in checks if c["run"] == run and c["kind"] == kind])
-            for kind in ("flying_block", "collision", "bounce", "resting_grid")
+            for kind in ("flying_block", "sliding_row", "collision", "bounce", "resting_grid")
         ),
     ]
 
