@@ -58,3 +58,58 @@ def test_an_untrained_default_keeps_the_block_and_every_row_is_there():
 
 def test_the_section_says_when_there_are_no_checks():
     assert "No invariance checks" in section.section([])
+
+
+def test_the_targets_table_reads_an_eval_folder(tmp_path):
+    from physgnn.files import write_rows
+    from physgnn.report import stability, targets
+
+    metrics = [
+        {"run": "r", "split": "test", "mse": m, "chamfer": 2 * m, "diverged_at": None}
+        for m in (1.0, 3.0)
+    ]
+    write_rows(tmp_path / "metrics.csv", metrics, ["run", "split", "mse", "chamfer", "diverged_at"])
+    stab = [
+        {
+            "run": "r",
+            "source": "ood",
+            "scene": "ood_cubes",
+            "max_pen_sphere": 0.5,
+            "tunnelled": 2,
+            "rest_drift": None,
+        },
+        {
+            "run": "r",
+            "source": "hard",
+            "scene": "resting_pile",
+            "max_pen_sphere": 0.01,
+            "tunnelled": 0,
+            "rest_drift": 0.25,
+        },
+        {
+            "run": "ground_truth",
+            "source": "ood",
+            "scene": "ood_cubes",
+            "max_pen_sphere": 0.0,
+            "tunnelled": 0,
+            "rest_drift": None,
+        },
+    ]
+    stability.write_csv(tmp_path / "stability.csv", stab)
+    checks = [
+        {
+            "run": "r",
+            "kind": "flying_block",
+            "setting": "",
+            "value": 1e-4,
+            "value2": 0.0,
+            "limit": 0.1,
+            "passed": True,
+            "diverged_at": None,
+        }
+    ]
+    section.write_csv(tmp_path / "invariance.csv", checks)
+    (row,) = targets.target_rows(tmp_path)  # the ground truth is no run
+    assert row[:8] == ["`r`", "2", "4", "0/4", "0.5", "2", "0.25", "– / –"]
+    assert row[8] == "1/1 (1.00e-04)" and row[9] == "–"
+    assert len(row) == len(targets.HEADER)

@@ -32,6 +32,7 @@ HEADER = [
     "resting_pile drift (r)",
     "tight_pack depth (d) / drift (r)",
     "flying block",
+    "sliding row (r)",
     "collision",
     "bounce ≤ 10 %",
     "resting grids",

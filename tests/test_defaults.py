@@ -1,0 +1,43 @@
+"""One source of truth: every literal value of conf/train.yaml's ``lit`` and ``datamodule``
+nodes equals the default of the constructor argument of that name (interpolations such as
+``${seed}`` and nested nodes such as the optimiser are the config's alone)."""
+
+from __future__ import annotations
+
+import inspect
+from pathlib import Path
+
+import pytest
+from omegaconf import OmegaConf
+
+from physgnn.training.datamodule import StatePairDataModule
+from physgnn.training.lit import LitSimulator
+
+TRAIN = Path(__file__).resolve().parents[1] / "conf" / "train.yaml"
+
+
+def literal_values(node) -> dict:
+    """The keys of a config node whose value is a plain value, not an interpolation or node."""
+    out = {}
+    for key in node:
+        if key == "_target_" or OmegaConf.is_interpolation(node, key):
+            continue
+        value = node[key]
+        if not OmegaConf.is_config(value):
+            out[key] = value
+    return out
+
+
+@pytest.mark.parametrize(
+    ("node", "cls"), [("lit", LitSimulator), ("datamodule", StatePairDataModule)]
+)
+def test_constructor_defaults_equal_train_yaml(node, cls):
+    cfg = OmegaConf.load(TRAIN)[node]
+    params = inspect.signature(cls).parameters
+    literals = literal_values(cfg)
+    assert literals, f"{node} has no literal value to compare"
+    for key, value in literals.items():
+        assert key in params, f"{node}.{key} is no argument of {cls.__name__}"
+        assert params[key].default == value, (
+            f"{node}.{key}: code {params[key].default}, YAML {value}"
+        )
