@@ -234,10 +234,10 @@ def test_a_tiny_study_runs_resumes_from_the_registry_and_survives_failures(
     tiny = ["sweeps=[ablation_connectivity]", "seeds=[0]", "preset=tiny", "budget.steps=2",
             "budget.steps_per_epoch=1", "budget.batch_size=4", "horizon=12"]  # fmt: skip
     broken = study_cfg(tmp_path, *tiny, "budget.extra=['model.M=0']")
-    with pytest.raises(Exception, match="3 of 3 runs failed"):
+    with pytest.raises(Exception, match="4 of 4 runs failed"):
         run_study(broken)
     failed = read_registry(tmp_path / "registry.jsonl")
-    assert [r["status"] for r in failed] == ["failed"] * 3 and all(r["reason"] for r in failed)
+    assert [r["status"] for r in failed] == ["failed"] * 4 and all(r["reason"] for r in failed)
 
     cfg = study_cfg(tmp_path, *tiny)
     budget = study_budget(cfg)
@@ -245,7 +245,8 @@ def test_a_tiny_study_runs_resumes_from_the_registry_and_survives_failures(
     report = run_study(cfg)  # of this budget: tried again, like the two never run
     records = [r for r in read_registry(tmp_path / "registry.jsonl") if r["budget"] == budget]
     assert sorted(r["key"] for r in records) == [
-        "baseline", "model.connectivity=epsilon", "model.connectivity=vmax"]  # fmt: skip
+        "baseline", "model.connectivity=epsilon", "model.connectivity=vi",
+        "model.connectivity=vmax"]  # fmt: skip
     assert {r["status"] for r in records} == {"finished"}
     assert all(len(r["splits"]["ood"]) == 4 and r["steps"] == 2 for r in records)
     assert all(r["curve"] and r["curve"][0]["step"] >= 1 for r in records)  # learning curve
@@ -255,7 +256,7 @@ def test_a_tiny_study_runs_resumes_from_the_registry_and_survives_failures(
     assert len(base["splits_constraints"]["ood"]) == 4
     assert all("splits_constraints" not in r for r in records if r["key"] != "baseline")
     text = report.read_text()
-    assert "3 done" in text and "(report Fig. 17)" in text
+    assert "4 done" in text and "(report Fig. 17)" in text
     assert (report.parent / "sweep_connectivity.png").stat().st_size > 0
 
     lines = (tmp_path / "registry.jsonl").read_text().splitlines()
@@ -279,7 +280,7 @@ def test_the_slurm_launcher_runs_the_same_jobs(tiny_dataset, tmp_path):
                     "launcher.poll_s=0.1")  # fmt: skip
     run_study(cfg)
     records = read_registry(tmp_path / "registry.jsonl")
-    assert len(records) == 3 and {r["status"] for r in records} == {"finished"}
+    assert len(records) == 4 and {r["status"] for r in records} == {"finished"}
     assert {r["seed"] for r in records} == {1}
 
 
