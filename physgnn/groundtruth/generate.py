@@ -209,7 +209,10 @@ def export_scenes(jobs: list[Job], folder: Path) -> Path:
 def generate(cfg: DictConfig) -> Path:
     """Generate the dataset of ``cfg.data`` into ``cfg.data.dir``; returns that folder. With
     ``export_scene=FOLDER``: write the preset's scenes as scene files there instead."""
+    from physgnn.training.checks import check_seed  # lazily: it imports Lightning
+
     data = cfg.data
+    check_seed(data.get("seed"), "data.seed", f"conf/data/{data.name}.yaml: seed")
     if cfg.get("export_scene"):
         engine = OmegaConf.to_container(cfg.get("engine") or {}, resolve=True)
         return export_scenes(plan(data, engine), Path(cfg.export_scene))
