@@ -57,3 +57,17 @@ def test_a_bad_data_seed_is_one_line_before_any_scene(tmp_path, monkeypatch, cap
         "(conf/data/tiny.yaml: seed; e.g. data.seed=0)"
     )
     assert not (tmp_path / "data").exists()
+
+
+# --- a sweep without its dataset ------------------------------------------------------------------
+
+
+def test_a_sweep_without_its_dataset_is_one_line_before_any_job(tmp_path, monkeypatch, capsys):
+    stats = tmp_path / "data" / "small" / "stats.json"
+    line = one_line_exit(monkeypatch, capsys, train_command, "+experiment=ablation_M",
+                         f"paths.outputs={tmp_path}")  # fmt: skip
+    assert line == (
+        f"error: dataset 'small' not found ({stats} is missing): run `make data PRESET=small` or "
+        "`python -m physgnn.generate data=small`; no job of the sweep was launched"
+    )
+    assert not (tmp_path / "multirun").exists() and not (tmp_path / "runs").exists()
