@@ -3,12 +3,18 @@ the file and the fix, before anything is built or launched."""
 
 from __future__ import annotations
 
+import re
+import shutil
 import sys
+from pathlib import Path
 
 import pytest
 
 from physgnn import generate as generate_command
 from physgnn import train as train_command
+from physgnn.cli import job_dirname
+from physgnn.training.checks import check_checkpoint
+from physgnn.training.runs import RunError, load_run
 
 
 def one_line_exit(monkeypatch, capsys, module, *args) -> str:
@@ -71,3 +77,69 @@ def test_a_sweep_without_its_dataset_is_one_line_before_any_job(tmp_path, monkey
         "`python -m physgnn.generate data=small`; no job of the sweep was launched"
     )
     assert not (tmp_path / "multirun").exists() and not (tmp_path / "runs").exists()
+
+
+# --- a run's files cut short, mixed or broken -----------------------------------------------------
+
+
+@pytest.fixture
+def run_copy(tiny_run, tmp_path) -> Path:
+    """A copy of the session's tiny run (M = 1) to damage."""
+    return Path(shutil.copytree(tiny_run, tmp_path / "run"))
+
+
+def cut_in_half(path: Path) -> None:
+    with open(path, "r+b") as f:
+        f.truncate(path.stat().st_size // 2)
+
+
+def test_a_truncated_checkpoint_is_one_line_naming_it_and_the_one_that_loads(tiny_run, run_copy):
+    best = next((run_copy / "checkpoints").glob("best-*.ckpt"))
+    last = run_copy / "checkpoints" / "last.ckpt"
+    cut_in_half(best)
+    with pytest.raises(RunError, match=f"^{re.escape(str(best))} is truncated or corrupt "
+                       rf"\(.*\): move {best.name} away to load {re.escape(str(last))} instead, "
+                       "or train the run again$"):  # fmt: skip
+        load_run(run_copy)
+    shutil.copy(best, last)  # a resume from a truncated last.ckpt suggests the best that loads
+    shutil.copy(tiny_run / "checkpoints" / best.name, best)
+    fix = f"train on from {best} in a new run_dir (ckpt_path={best} run_dir=<a new folder>)"
+    with pytest.raises(RunError, match=f"^{re.escape(str(last))} is truncated or corrupt "
+                       rf"\(.*\): {re.escape(fix)}$"):  # fmt: skip
+        check_checkpoint(str(last), None)
+
+
+def test_weights_of_another_m_name_the_key(run_copy):
+    config = run_copy / ".hydra" / "config.yaml"
+    config.write_text(config.read_text().replace("\n  M: 1\n", "\n  M: 2\n"))
+    with pytest.raises(RunError, match=r"does not fit the model .* describes \(model\.M is 1 in "
+                       r"the weights, 2 in the config\): the weights and the config are of "
+                       "different runs"):  # fmt: skip
+        load_run(run_copy)
+
+
+def test_a_broken_run_config_is_one_line_naming_it(run_copy):
+    config = run_copy / ".hydra" / "config.yaml"
+    config.write_text(config.read_text() + "model: [unclosed\n")
+    with pytest.raises(RunError, match=f"^{re.escape(str(config))} is not a readable config "
+                       r"\(.*\): restore it") as err:  # fmt: skip
+        load_run(run_copy)
+    assert "\n" not in str(err.value)
+
+
+# --- a path in a sweep's overrides --------------------------------------------------------------
+
+
+def test_a_path_in_a_sweep_override_names_one_flat_job_folder(tiny_dataset, tmp_path,
+                                                              monkeypatch):  # fmt: skip
+    sweep = tmp_path / "sweep"
+    args = ["-m", "data=tiny", f"data.dir={tiny_dataset}", "lit.noise_std=-1,-2"]
+    monkeypatch.setattr(sys, "argv", ["physgnn.train", *args, f"paths.outputs={tmp_path}",
+                                      f"hydra.sweep.dir={sweep}"])  # fmt: skip
+    with pytest.raises(SystemExit) as exit_info:  # both jobs fail on their noise_std, at once
+        train_command.main()
+    assert exit_info.value.code == 1
+    flat = str(tiny_dataset).replace("/", "_")
+    jobs = sorted(p.name for p in sweep.iterdir() if p.is_dir())
+    assert jobs == [f"{n}_data.dir={flat},data=tiny,lit.noise_std=-{n + 1}" for n in (0, 1)]
+    assert job_dirname("x=/a/" + "b" * 300) == "x=_a_" + "b" * 195

@@ -42,7 +42,7 @@ from hydra.core.global_hydra import GlobalHydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import HydraException
 from hydra.types import RunMode
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
@@ -55,6 +55,20 @@ from physgnn.errors import (
     one_line,
     sigterm_interrupts,
 )
+
+# A sweep job's folder name (conf/train.yaml: hydra.sweep.subdir) is its overrides: at most
+# this many characters (a file name holds 255 bytes), and a path in one (``data.dir=/a/b``)
+# with its slashes as ``_``, which would otherwise nest the job folder under ``0_data.dir=``.
+DIRNAME_CHARS = 200
+
+
+def job_dirname(overrides: str) -> str:
+    """Hydra's ``override_dirname`` as one folder name (:data:`DIRNAME_CHARS`)."""
+    return overrides.replace(os.sep, "_").replace("/", "_")[:DIRNAME_CHARS]
+
+
+# Registered when any command is imported (a launcher's worker too: it imports the command)
+OmegaConf.register_new_resolver("physgnn_dirname", job_dirname, replace=True)
 
 USER_ERRORS = (
     PhysgnnError,

@@ -17,7 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
 from physgnn.files import process_alive
-from physgnn.training.runs import RUN_JSON, read_run_json, run_status
+from physgnn.training.runs import RUN_JSON, load_checkpoint, read_run_json, run_status
 
 HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
 # A run folder in one of these states is resumed from its last.ckpt when trained again (a
@@ -292,16 +292,16 @@ def resume_from(cfg: DictConfig, run_dir: Path) -> str | None:
 
 def check_checkpoint(path: str | None, lit: torch.nn.Module, model_cfg=None) -> int:
     """The global step of the checkpoint at ``path`` (0 without one), after checking that
+    it reads whole (else one line naming it and the run's best checkpoint that does) and that
     its weights fit ``lit`` (same names and shapes), naming the keys of ``model_cfg`` that
     differ from its run's config."""
     if path is None:
         return 0
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
-        state = ckpt["state_dict"]
-    except Exception as err:  # not a zip, not a Lightning checkpoint, ...
-        first = (str(err).splitlines() or [type(err).__name__])[0]
-        raise ConfigError(f"ckpt_path={path} is not a training checkpoint ({first})") from None
+    way_out = "train on from {other} in a new run_dir (ckpt_path={other} run_dir=<a new folder>)"
+    ckpt = load_checkpoint(Path(path), way_out, weights_only=True, mmap=True)
+    if not isinstance(ckpt, dict) or "state_dict" not in ckpt:
+        raise ConfigError(f"ckpt_path={path} is not a training checkpoint (no state_dict)")
+    state = ckpt["state_dict"]
     model = lit.state_dict()
     wrong = sorted(set(model) ^ set(state))
     wrong += [k for k in model if k in state and model[k].shape != state[k].shape]
