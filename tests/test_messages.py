@@ -3,16 +3,20 @@ the file and the fix, before anything is built or launched."""
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
+from physgnn import cli
 from physgnn import generate as generate_command
 from physgnn import train as train_command
-from physgnn.cli import job_dirname
+from physgnn.cli import check_outputs_env, job_dirname
+from physgnn.errors import ConfigError
 from physgnn.training.checks import check_checkpoint
 from physgnn.training.runs import RunError, load_run
 
@@ -143,3 +147,46 @@ def test_a_path_in_a_sweep_override_names_one_flat_job_folder(tiny_dataset, tmp_
     jobs = sorted(p.name for p in sweep.iterdir() if p.is_dir())
     assert jobs == [f"{n}_data.dir={flat},data=tiny,lit.noise_std=-{n + 1}" for n in (0, 1)]
     assert job_dirname("x=/a/" + "b" * 300) == "x=_a_" + "b" * 195
+
+
+# --- a read-only outputs folder -------------------------------------------------------------------
+
+
+@pytest.fixture
+def read_only_tmpfs(tmp_path):
+    """A real read-only filesystem (root only: it mounts a tmpfs)."""
+    if os.geteuid() != 0 or not shutil.which("mount"):
+        pytest.skip("mounting a read-only tmpfs needs root")
+    mount = tmp_path / "ro"
+    mount.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(mount)],
+                          capture_output=True)  # fmt: skip
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.decode().strip()})")
+    try:
+        yield mount
+    finally:
+        subprocess.run(["umount", str(mount)], check=False)
+
+
+@pytest.mark.parametrize("module", [train_command, generate_command])
+def test_a_read_only_outputs_folder_is_one_line(read_only_tmpfs, monkeypatch, capsys, module):
+    outputs = read_only_tmpfs / "outputs"
+    line = one_line_exit(monkeypatch, capsys, module, "data=tiny", f"paths.outputs={outputs}")
+    assert line == (
+        f"error: paths.outputs={outputs} cannot be written (read-only file system: "
+        f"{read_only_tmpfs}): choose a writable paths.outputs (or PHYSGNN_OUTPUTS)"
+    )
+    assert len(capsys.readouterr().err.splitlines()) == 0  # nothing before it either
+
+
+def test_a_command_writing_elsewhere_is_not_held_to_paths_outputs(monkeypatch):
+    monkeypatch.setattr(cli, "unwritable", lambda f: "read-only" if f.startswith("/ro") else None)
+    check_outputs_env(["paths.outputs=/ro/x", "report_dir=/rw/r"], "report_dir")  # eval
+    check_outputs_env(["paths.outputs=/ro/x"], None)  # data_report reads only
+    with pytest.raises(ConfigError, match=r"^report_dir=/ro/r cannot be written \(read-only\): "
+                       "choose a writable report_dir$"):  # fmt: skip
+        check_outputs_env(["paths.outputs=/rw", "report_dir=/ro/r"], "report_dir")
+    with pytest.raises(ConfigError, match=r"^paths.outputs=/ro cannot be written"):
+        check_outputs_env(["paths.outputs=/ro"], "report_dir")  # its report_dir lies under it
+    check_outputs_env(["paths.outputs=/ro", "run_dir=/rw/run"])  # train reads data from /ro
