@@ -12,10 +12,11 @@ from pathlib import Path
 
 import pytest
 
-from physgnn import cli
 from physgnn import generate as generate_command
 from physgnn import train as train_command
-from physgnn.cli import check_outputs_env, job_dirname
+from physgnn.cli import job_dirname
+from physgnn.cli import outputs as cli_outputs
+from physgnn.cli.outputs import check_outputs_env
 from physgnn.errors import ConfigError
 from physgnn.training.checks import check_checkpoint
 from physgnn.training.runs import RunError, load_run
@@ -181,7 +182,9 @@ def test_a_read_only_outputs_folder_is_one_line(read_only_tmpfs, monkeypatch, ca
 
 
 def test_a_command_writing_elsewhere_is_not_held_to_paths_outputs(monkeypatch):
-    monkeypatch.setattr(cli, "unwritable", lambda f: "read-only" if f.startswith("/ro") else None)
+    monkeypatch.setattr(
+        cli_outputs, "unwritable", lambda f: "read-only" if f.startswith("/ro") else None
+    )
     check_outputs_env(["paths.outputs=/ro/x", "report_dir=/rw/r"], "report_dir")  # eval
     check_outputs_env(["paths.outputs=/ro/x"], None)  # data_report reads only
     with pytest.raises(ConfigError, match=r"^report_dir=/ro/r cannot be written \(read-only\): "

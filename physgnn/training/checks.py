@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
 from physgnn.files import process_alive
+from physgnn.training.ranges import check_range
 from physgnn.training.runs import RUN_JSON, load_checkpoint, read_run_json, run_status
 
 HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
@@ -26,39 +27,10 @@ HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
 RESUMABLE = ("interrupted", "running", "failed")
 # Every status physgnn writes into a run.json (physgnn/training/train.py, export.py).
 STATUSES = ("running", "finished", "truncated", "interrupted", "diverged", "failed", "debug")
-MAX_SEED = 2**32 - 1
 # What the rollout callback logs (physgnn/training/callbacks.py)
 ROLLOUT_METRICS = ("val/rollout_score", "val/rollout_mse", "val/chamfer", "val/energy_gain",
                    "val/max_depth", "val/tunnelled", "val/rest_drift")  # fmt: skip
 WORDS = {int: "a whole number", float: "a number", bool: "true or false", str: "a string"}
-# The values a constructor argument takes, where it refuses others itself (in a message that
-# names no key, wrapped by Hydra's "Error in call to target"): key -> (least, whether the least
-# itself is allowed, most or None, what it is).
-RANGES = {
-    "model.H": (0, True, None, "velocities of history"),
-    "model.M": (1, True, None, "message-passing steps"),
-    "model.hidden": (1, True, None, "units per layer"),
-    "model.num_materials": (0, True, None, "materials; 0: none"),
-    "model.material_dim": (0, True, None, "material embedding size; 0: none"),
-    "model.boundary_radius": (0, False, None, "m"),
-    "model.rest_speed": (0, False, None, "m/s"),
-    "datamodule.batch_size": (1, True, None, "pairs per step"),
-    "datamodule.pairs_per_epoch": (1, True, None, "training pairs per epoch"),
-    "datamodule.val_pairs": (1, True, None, "validation pairs"),
-    "datamodule.num_workers": (0, True, None, "loader processes; 0: none"),
-    "lit.noise_std": (0, True, None, "input noise, normalised units; 0: none"),
-    "lit.lambda_energy": (0, True, None, "a loss weight; 0: off"),
-    "lit.lambda_contact": (0, True, None, "a loss weight; 0: off"),
-    "lit.lambda_rest": (0, True, None, "a loss weight; 0: off"),
-    "lit.pushforward_steps": (0, True, None, "steps; 0: off"),
-    "lit.pushforward_after": (0, True, None, "steps"),
-    "lit.pushforward_growth": (0, True, None, "steps; 0: off"),
-    "lit.contact_tol": (0, True, None, "sphere diameters"),
-    "lit.contact_noise_depth": (0, True, None, "sphere diameters"),
-    "lit.contact_touch": (0, True, None, "sphere diameters"),
-    "lit.contact_noise_prob": (0, True, 1, "a probability; 0: off"),
-    "lit.noise_rest_scale": (0, False, 1, "a factor; 1: full noise at rest"),
-}  # fmt: skip
 
 
 def _fits(value, hint) -> bool:
@@ -108,29 +80,6 @@ def check_arguments(cfg: DictConfig, sections=("model", "datamodule", "lit")) ->
             if not isinstance(value, DictConfig) and not _fits(value, hints.get(key)):
                 raise ConfigError(f"{section}.{key} must be {_words(hints[key])}, got {value!r}")
             check_range(f"{section}.{key}", value, hints.get(key))
-
-
-def check_range(key: str, value, hint=None) -> None:
-    """``value`` of ``key`` lies in its :data:`RANGES` (``model.M=0``: ``model.M must be a
-    whole number >= 1 (message-passing steps), got 0``); NaN never does."""
-    if key not in RANGES or not isinstance(value, int | float) or isinstance(value, bool):
-        return
-    least, closed, most, what = RANGES[key]
-    above = value >= least if closed else value > least
-    if not (above and (most is None or value <= most)):
-        kind = "a whole number" if hint is int else "a number"
-        bound = f"{'>=' if closed else '>'} {least}" + (f" and <= {most}" if most else "")
-        raise ConfigError(f"{key} must be {kind} {bound} ({what}), got {value!r}")
-
-
-def check_seed(seed, key: str = "seed", where: str = "conf/train.yaml: seed") -> None:
-    """``seed`` (the config's ``key``, set in ``where``) is a whole number that numpy, torch
-    and Python all take: 0 to 2³² − 1."""
-    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= MAX_SEED:
-        raise ConfigError(
-            f"{key} must be a whole number from 0 to {MAX_SEED}, got {seed!r} ({where}; e.g. "
-            f"{key}=0)"
-        )
 
 
 def check_optimizer(lit_cfg: DictConfig | None) -> None:

@@ -25,7 +25,7 @@ from lightning.pytorch.callbacks import Timer
 from lightning.pytorch.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.errors import ConfigError, Interrupted, one_line, signal_name
+from physgnn.errors import ConfigError, Interrupted, check_seed, one_line, signal_name
 from physgnn.files import write_text
 from physgnn.training.checkpoint_io import AtomicCheckpointIO
 from physgnn.training.checks import (
@@ -36,7 +36,6 @@ from physgnn.training.checks import (
     check_optimizer,
     check_run_dir,
     check_scheduler,
-    check_seed,
     resume_from,
 )
 from physgnn.training.lit import NonFiniteLossError
