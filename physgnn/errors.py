@@ -32,6 +32,19 @@ class ConfigError(PhysgnnError, ValueError):
     """A config value that cannot be used (missing, of the wrong kind or out of range)."""
 
 
+MAX_SEED = 2**32 - 1
+
+
+def check_seed(seed, key: str = "seed", where: str = "conf/train.yaml: seed") -> None:
+    """``seed`` (the config's ``key``, set in ``where``) is a whole number that numpy, torch
+    and Python all take: 0 to 2³² − 1."""
+    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= MAX_SEED:
+        raise ConfigError(
+            f"{key} must be a whole number from 0 to {MAX_SEED}, got {seed!r} ({where}; e.g. "
+            f"{key}=0)"
+        )
+
+
 class Interrupted(PhysgnnError):
     """A command stopped by a signal (Ctrl-C: SIGINT, ``kill``: SIGTERM); exit 128 + signal."""
 

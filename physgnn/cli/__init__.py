@@ -42,10 +42,11 @@ from hydra.core.global_hydra import GlobalHydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import HydraException
 from hydra.types import RunMode
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
+from physgnn.cli.outputs import OWN_FOLDER, check_outputs_env
 from physgnn.cli.overrides import check_added_keys
 from physgnn.errors import (
     ConfigError,
@@ -55,6 +56,20 @@ from physgnn.errors import (
     one_line,
     sigterm_interrupts,
 )
+
+# A sweep job's folder name (conf/train.yaml: hydra.sweep.subdir) is its overrides: at most
+# this many characters (a file name holds 255 bytes), and a path in one (``data.dir=/a/b``)
+# with its slashes as ``_``, which would otherwise nest the job folder under ``0_data.dir=``.
+DIRNAME_CHARS = 200
+
+
+def job_dirname(overrides: str) -> str:
+    """Hydra's ``override_dirname`` as one folder name (:data:`DIRNAME_CHARS`)."""
+    return overrides.replace(os.sep, "_").replace("/", "_")[:DIRNAME_CHARS]
+
+
+# Registered when any command is imported (a launcher's worker too: it imports the command)
+OmegaConf.register_new_resolver("physgnn_dirname", job_dirname, replace=True)
 
 USER_ERRORS = (
     PhysgnnError,
@@ -196,27 +211,8 @@ def command(
     if parse is not None:
         return _parsed(main, parse, usage)
     return _outputs_checked(
-        hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main), before
+        hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main), before, name
     )
-
-
-def check_outputs_env(argv: list[str] | None = None) -> None:
-    """``PHYSGNN_OUTPUTS``, where set, and ``paths.outputs=`` on the command line are not
-    files: Hydra makes its output folder under them before any command runs, and would fail
-    with a traceback."""
-    outputs = os.environ.get("PHYSGNN_OUTPUTS")
-    if outputs and os.path.exists(outputs) and not os.path.isdir(outputs):
-        raise ConfigError(
-            f"PHYSGNN_OUTPUTS={outputs} is a file: set it to a folder (physgnn writes its data, "
-            "runs and reports there), or unset it to write into ./outputs"
-        )
-    for arg in sys.argv[1:] if argv is None else argv:
-        key, _, value = arg.lstrip("+").partition("=")
-        if key == "paths.outputs" and os.path.exists(value) and not os.path.isdir(value):
-            raise ConfigError(
-                f"paths.outputs={value} is a file: give a folder (physgnn writes its data, "
-                "runs and reports there), or leave it out to write into ./outputs"
-            )
 
 
 def run_dir_is_hydras(argv: list[str]) -> list[str]:
@@ -229,14 +225,15 @@ def run_dir_is_hydras(argv: list[str]) -> list[str]:
     return argv
 
 
-def _outputs_checked(hydra_main: Callable, before: Callable | None = None) -> Callable:
-    """``hydra_main`` after :func:`check_outputs_env` and ``before(argv)`` (their errors
-    printed as one line)."""
+def _outputs_checked(hydra_main: Callable, before: Callable | None = None,
+                     name: str = "") -> Callable:  # fmt: skip
+    """``hydra_main`` after :func:`check_outputs_env` (command ``name``) and ``before(argv)``
+    (their errors printed as one line)."""
 
     @functools.wraps(hydra_main)
     def main(*args, **kwargs):
         try:
-            check_outputs_env()
+            check_outputs_env(own=OWN_FOLDER.get(name, "paths.outputs"))
             if before is not None:
                 before(sys.argv[1:])
         except USER_ERRORS as err:

@@ -31,7 +31,7 @@ from physgnn.data.dataset import (
     write_split,
     write_stats,
 )
-from physgnn.errors import ConfigError, Interrupted, interrupt_signal, signal_name
+from physgnn.errors import ConfigError, Interrupted, check_seed, interrupt_signal, signal_name
 from physgnn.files import exclusive
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
@@ -210,6 +210,7 @@ def generate(cfg: DictConfig) -> Path:
     """Generate the dataset of ``cfg.data`` into ``cfg.data.dir``; returns that folder. With
     ``export_scene=FOLDER``: write the preset's scenes as scene files there instead."""
     data = cfg.data
+    check_seed(data.get("seed"), "data.seed", f"conf/data/{data.name}.yaml: seed")
     if cfg.get("export_scene"):
         engine = OmegaConf.to_container(cfg.get("engine") or {}, resolve=True)
         return export_scenes(plan(data, engine), Path(cfg.export_scene))

@@ -17,7 +17,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
 from physgnn.files import process_alive
-from physgnn.training.runs import RUN_JSON, read_run_json, run_status
+from physgnn.training.ranges import check_range
+from physgnn.training.runs import RUN_JSON, load_checkpoint, read_run_json, run_status
 
 HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
 # A run folder in one of these states is resumed from its last.ckpt when trained again (a
@@ -26,7 +27,6 @@ HYDRA_KEYS = {"_target_", "_partial_", "_recursive_", "_convert_", "_args_"}
 RESUMABLE = ("interrupted", "running", "failed")
 # Every status physgnn writes into a run.json (physgnn/training/train.py, export.py).
 STATUSES = ("running", "finished", "truncated", "interrupted", "diverged", "failed", "debug")
-MAX_SEED = 2**32 - 1
 # What the rollout callback logs (physgnn/training/callbacks.py)
 ROLLOUT_METRICS = ("val/rollout_score", "val/rollout_mse", "val/chamfer", "val/energy_gain",
                    "val/max_depth", "val/tunnelled", "val/rest_drift")  # fmt: skip
@@ -79,15 +79,7 @@ def check_arguments(cfg: DictConfig, sections=("model", "datamodule", "lit")) ->
             value = OmegaConf.select(node, key)
             if not isinstance(value, DictConfig) and not _fits(value, hints.get(key)):
                 raise ConfigError(f"{section}.{key} must be {_words(hints[key])}, got {value!r}")
-
-
-def check_seed(seed) -> None:
-    """``seed`` is a whole number that numpy, torch and Python all take: 0 to 2³² − 1."""
-    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= MAX_SEED:
-        raise ConfigError(
-            f"seed must be a whole number from 0 to {MAX_SEED}, got {seed!r} (conf/train.yaml: "
-            "seed; e.g. seed=0)"
-        )
+            check_range(f"{section}.{key}", value, hints.get(key))
 
 
 def check_optimizer(lit_cfg: DictConfig | None) -> None:
@@ -117,10 +109,14 @@ def check_scheduler(lit_cfg: DictConfig | None) -> None:
 
 
 def check_budget(trainer_cfg: DictConfig) -> None:
-    """``trainer.max_epochs`` and ``trainer.max_steps`` train something: >= 1, or -1 (no
-    limit) or null."""
+    """``trainer.max_epochs`` and ``trainer.max_steps`` are whole numbers (Lightning asserts
+    so deep inside ``fit``) that train something: >= 1, or -1 (no limit) or null."""
     for key in ("max_epochs", "max_steps"):
         value = trainer_cfg.get(key)
+        if value is not None and (not isinstance(value, int) or isinstance(value, bool)):
+            raise ConfigError(
+                f"trainer.{key} must be a whole number (>= 1; -1: no limit), got {value!r}"
+            )
         if value is not None and value != -1 and value < 1:
             raise ConfigError(
                 f"trainer.{key}={value} trains nothing: give at least 1 (-1: no limit)"
@@ -245,16 +241,16 @@ def resume_from(cfg: DictConfig, run_dir: Path) -> str | None:
 
 def check_checkpoint(path: str | None, lit: torch.nn.Module, model_cfg=None) -> int:
     """The global step of the checkpoint at ``path`` (0 without one), after checking that
+    it reads whole (else one line naming it and the run's best checkpoint that does) and that
     its weights fit ``lit`` (same names and shapes), naming the keys of ``model_cfg`` that
     differ from its run's config."""
     if path is None:
         return 0
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
-        state = ckpt["state_dict"]
-    except Exception as err:  # not a zip, not a Lightning checkpoint, ...
-        first = (str(err).splitlines() or [type(err).__name__])[0]
-        raise ConfigError(f"ckpt_path={path} is not a training checkpoint ({first})") from None
+    way_out = "train on from {other} in a new run_dir (ckpt_path={other} run_dir=<a new folder>)"
+    ckpt = load_checkpoint(Path(path), way_out, weights_only=True, mmap=True)
+    if not isinstance(ckpt, dict) or "state_dict" not in ckpt:
+        raise ConfigError(f"ckpt_path={path} is not a training checkpoint (no state_dict)")
+    state = ckpt["state_dict"]
     model = lit.state_dict()
     wrong = sorted(set(model) ^ set(state))
     wrong += [k for k in model if k in state and model[k].shape != state[k].shape]

@@ -28,6 +28,38 @@ from physgnn.data.dataset import (
 )
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 
+# The files of a dataset that training reads
+TRAINING_FILES = ("stats.json", "train.h5", "val.h5")
+
+
+def dataset_file(data_dir: str | Path, preset: str, name: str) -> Path:
+    """``<data_dir>/<name>``, refused in one line with the command that makes it if missing."""
+    path = Path(data_dir) / name
+    if not path.exists():
+        raise DatasetError(
+            f"dataset '{preset}' not found ({path} is missing): " + generate_hint(data_dir, preset)
+        )
+    return path
+
+
+def check_preset(data_dir: str | Path, preset: str) -> None:
+    """The dataset in ``data_dir`` is of the configured preset (its marker says which)."""
+    found = dataset_preset(Path(data_dir))
+    if found is not None and found != preset:
+        raise DatasetError(
+            f"data.dir {data_dir} holds the '{found}' dataset (its {DATASET_MARKER}), not "
+            f"'{preset}' (data={preset}): train with data={found}, or set data.dir to a "
+            f"'{preset}' dataset"
+        )
+
+
+def check_training_data(data_dir: str | Path, preset: str) -> None:
+    """The files training reads are there, of ``preset`` (a sweep checks once before its
+    jobs: :mod:`physgnn.training.sweep`)."""
+    for name in TRAINING_FILES:
+        dataset_file(data_dir, preset, name)
+    check_preset(data_dir, preset)
+
 
 class StatePairDataModule(L.LightningDataModule):
     """Reads ``<data_dir>/{train,val}.h5`` and ``stats.json`` (written by ``physgnn.generate``).
@@ -69,23 +101,10 @@ class StatePairDataModule(L.LightningDataModule):
         self.val_set: PairDataset | None = None
 
     def _path(self, name: str) -> Path:
-        path = self.data_dir / name
-        if not path.exists():
-            raise DatasetError(
-                f"dataset '{self.preset}' not found ({path} is missing): "
-                + generate_hint(self.data_dir, self.preset)
-            )
-        return path
+        return dataset_file(self.data_dir, self.preset, name)
 
     def _check_preset(self) -> None:
-        """The dataset in ``data_dir`` is of the configured preset (its marker says which)."""
-        found = dataset_preset(self.data_dir)
-        if found is not None and found != self.preset:
-            raise DatasetError(
-                f"data.dir {self.data_dir} holds the '{found}' dataset (its "
-                f"{DATASET_MARKER}), not '{self.preset}' (data={self.preset}): train with "
-                f"data={found}, or set data.dir to a '{self.preset}' dataset"
-            )
+        check_preset(self.data_dir, self.preset)
 
     def stats(self) -> dict:
         """The training split's normalisation statistics (``stats.json``)."""

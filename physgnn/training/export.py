@@ -31,6 +31,7 @@ from physgnn.training.runs import (
     PRETRAINED_DIR,
     WEIGHTS_FORMAT,
     checkpoint_of,
+    load_checkpoint,
     read_run_json,
     write_run_json,
 )
@@ -48,7 +49,8 @@ def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path |
             "export (make ship RUN=<a finished run folder>)"
         )
     source = Path(checkpoint) if checkpoint else checkpoint_of(run_dir)
-    full = torch.load(source, map_location="cpu", weights_only=True)
+    full = load_checkpoint(source, "export {other} (CHECKPOINT=...), or train the run again",
+                           weights_only=True)  # fmt: skip
     weights = {k: v for k, v in full["state_dict"].items() if k.startswith("simulator.")}
     step = int(full.get("global_step", 0))
     claim_folder(out_dir, "OUT_DIR")

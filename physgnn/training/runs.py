@@ -7,13 +7,14 @@ No Lightning here: evaluation loads runs without importing the trainer.
 from __future__ import annotations
 
 import json
+import zipfile
 from pathlib import Path
 
 import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.errors import PhysgnnError
+from physgnn.errors import PhysgnnError, one_line
 from physgnn.files import write_json
 from physgnn.models.learned import LearnedSimulator
 
@@ -113,7 +114,7 @@ def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
         raise FileNotFoundError(f"{run_dir} is not a training run (no .hydra/config.yaml)")
     info = read_run_json(run_dir)
     _check_format(run_dir, info.get("weights_format", WEIGHTS_FORMAT))
-    cfg = OmegaConf.load(config)
+    cfg = read_run_config(config)
     cfg.run_dir = str(run_dir)
     target = OmegaConf.select(cfg, "model._target_")
     if target in MOVED_TARGETS:
@@ -122,22 +123,110 @@ def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
         if key not in cfg.model:
             cfg.model[key] = value
     path = checkpoint_of(run_dir)
-    state = torch.load(path, map_location="cpu", weights_only=True)["state_dict"]
+    way_out = f"move {path.name} away to load {{other}} instead, or train the run again"
+    state = load_checkpoint(path, way_out)["state_dict"]
     state = {
         k.removeprefix("simulator."): v for k, v in state.items() if k.startswith("simulator.")
     }
     simulator = instantiate(cfg.model, stats=LearnedSimulator.stats_from_state_dict(state))
     try:
         simulator.load_state_dict(state)
-    except RuntimeError as err:
-        reason = str(err).split("\n\t")[1].strip() if "\n\t" in str(err) else str(err)
+    except RuntimeError:
         raise RunError(
-            f"{path} does not fit the model this physgnn builds from {config} ({reason[:160]}): "
-            "it was trained by another version; train it again or use weights of this version"
-        ) from err
+            f"{path} does not fit the model {config} describes ({weights_difference(state, cfg)})"
+            ": the weights and the config are of different runs; put the run's own "
+            ".hydra/config.yaml back, or use the weights of this config"
+        ) from None
     simulator.eval()
     info["checkpoint"] = str(path)
     return simulator, cfg, info
+
+
+def read_run_config(path: Path) -> DictConfig:
+    """A run's ``.hydra/config.yaml``; one that is not a readable config is one line naming
+    it."""
+    try:
+        cfg = OmegaConf.load(path)
+    except Exception as err:  # YAML syntax, an unreadable file, ...
+        raise RunError(
+            f"{path} is not a readable config ({one_line(err)[:200]}): restore it (a copy of the "
+            "run's, or the train command with the overrides run.json lists writes it), or train "
+            "the run again"
+        ) from None
+    if not isinstance(cfg, DictConfig) or not isinstance(cfg.get("model"), DictConfig):
+        raise RunError(
+            f"{path} is not a training run's config (no model section): restore the run's own "
+            ".hydra/config.yaml, or train the run again"
+        )
+    return cfg
+
+
+def load_checkpoint(path: Path, way_out: str, **kwargs) -> dict:
+    """``torch.load`` of the checkpoint ``path`` on the CPU (``kwargs``: its options); one
+    that is truncated or corrupt is one line naming it and ``way_out``, in which ``{other}``
+    stands for the checkpoints beside it that read whole (the best first)."""
+    path = Path(path)
+    try:
+        return torch.load(path, map_location="cpu", **kwargs)
+    except (FileNotFoundError, PermissionError):
+        raise
+    except Exception as err:  # a zip cut short, not a zip, a pickle torch refuses
+        reason = (str(err).splitlines() or [type(err).__name__])[0][:120]
+        others = whole_checkpoints(path.parent, but=path)
+        fix = way_out.format(other=others[0]) if others else (
+            f"no other checkpoint in {path.parent} reads whole: train the run again")  # fmt: skip
+        raise RunError(f"{path} is truncated or corrupt ({reason}): {fix}") from None
+
+
+def whole_checkpoints(folder: Path, but: Path | None = None) -> list[Path]:
+    """The checkpoints of ``folder`` (but ``but``) whose zip reads whole, the best first."""
+    found = sorted(Path(folder).glob("best-*.ckpt"), reverse=True) + [folder / "last.ckpt"]
+    whole = []
+    for path in found:
+        if path.is_file() and path != but:
+            try:
+                with zipfile.ZipFile(path) as z:
+                    if z.testzip() is None:
+                        whole.append(path)
+            except (OSError, zipfile.BadZipFile):
+                continue
+    return whole
+
+
+# The model keys that set the shapes of the weights, tried one at a time by
+# :func:`weights_difference` (each with the values listed, besides the one the config has).
+SHAPE_KEYS = {"M": range(1, 17), "hidden": (), "H": range(0, 9), "num_materials": range(0, 9),
+              "material_dim": range(0, 33), "boundary_features": (False, True),
+              "contact_features": (False, True), "material_features": (False, True),
+              "relative_pairs": (False, True), "mass_ratio": (False, True),
+              "rest_decision": (False, True), "use_surfaces": (False, True)}  # fmt: skip
+
+
+def weights_difference(state: dict, cfg: DictConfig) -> str:
+    """``"model.M is 1 in the weights, 2 in the config"``: the one model key (of
+    :data:`SHAPE_KEYS`) whose other value builds a model the weights ``state`` fit; else the
+    first weight that differs."""
+    shapes = {k: tuple(v.shape) for k, v in state.items()}
+    stats = LearnedSimulator.stats_from_state_dict(state)
+    encoder = shapes.get("network.node_encoder.lin1.weight")
+    for key, values in SHAPE_KEYS.items():
+        now = cfg.model.get(key)
+        tried = [encoder[0]] if key == "hidden" and encoder else list(values)
+        for value in tried:
+            if value == now or key not in cfg.model:
+                continue
+            try:
+                model = instantiate(cfg.model, stats=stats, **{key: value})
+            except Exception:  # a value this model cannot take
+                continue
+            if {k: tuple(v.shape) for k, v in model.state_dict().items()} == shapes:
+                return f"model.{key} is {value!r} in the weights, {now!r} in the config"
+    model = instantiate(cfg.model, stats=stats).state_dict()
+    for key in sorted(set(model) | set(shapes)):
+        there, here = shapes.get(key), tuple(model[key].shape) if key in model else None
+        if there != here:
+            return f"{key}: {there or 'absent'} in the weights, {here or 'absent'} in the model"
+    return "the weights differ"
 
 
 def _check_format(run_dir: Path, found) -> None:

@@ -2,10 +2,13 @@
 callback (``hydra.callbacks.sweep_summary`` in ``conf/train.yaml``) that runs once every job is
 done, whichever launcher ran them (Hydra's own, joblib, submitit).
 
-A failing job does not stop the others (:mod:`physgnn.cli`) and records its failure in its
-``run.json``. The summary reads the ``run.json`` of every job folder of the sweep, writes
-``<sweep dir>/sweep.json`` (one entry per job: folder, status, overrides, error) and prints
-one line per job that did not finish; then the sweep exits with code 1 if any did not.
+Before any job is launched, the dataset every job would read is checked once
+(:func:`check_sweep_data`): a missing one is one line, not a launch of every job to fail each
+on the same file. A failing job does not stop the others (:mod:`physgnn.cli`) and records its
+failure in its ``run.json``. The summary reads the ``run.json`` of every job folder of the
+sweep, writes ``<sweep dir>/sweep.json`` (one entry per job: folder, status, overrides,
+error) and prints one line per job that did not finish; then the sweep exits with code 1 if
+any did not.
 """
 
 from __future__ import annotations
@@ -15,9 +18,11 @@ from collections import Counter
 from pathlib import Path
 
 from hydra.experimental.callback import Callback
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
+from physgnn.errors import PhysgnnError, one_line
 from physgnn.files import write_json
+from physgnn.training.datamodule import check_training_data
 from physgnn.training.runs import RUN_JSON, read_run_json
 
 # A job in one of these states did its work (debug: a fast_dev_run smoke test).
@@ -67,8 +72,44 @@ def summarize(sweep_dir: Path) -> list[dict]:
     return failed
 
 
+# Keys whose sweep gives jobs other datasets: the sweep's own config then names none of them
+DATA_KEYS = ("data", "+data", "paths", "datamodule.data_dir", "datamodule.preset", "variant",
+             "+variant")  # fmt: skip
+
+
+def swept_keys(config: DictConfig) -> list[str]:
+    """The keys a sweep varies: ``hydra.sweeper.params`` and command-line overrides with
+    several values (``model.M=1,2``, ``range(...)``, ``choice(...)``)."""
+    keys = [str(k) for k in (OmegaConf.select(config, "hydra.sweeper.params") or {})]
+    for override in OmegaConf.select(config, "hydra.overrides.task") or []:
+        key, _, value = str(override).partition("=")
+        if "," in value or "(" in value:
+            keys.append(key)
+    return keys
+
+
+def check_sweep_data(config: DictConfig) -> None:
+    """The dataset of a sweep whose jobs all read the same one is there (one line and exit 2
+    before any job is launched); a sweep over datasets is left to its jobs."""
+    if any(k.split(".")[0] in DATA_KEYS or k in DATA_KEYS for k in swept_keys(config)):
+        return
+    data_dir = OmegaConf.select(config, "datamodule.data_dir")
+    preset = OmegaConf.select(config, "datamodule.preset", default="")
+    if data_dir is None:
+        return
+    try:
+        check_training_data(data_dir, str(preset))
+    except PhysgnnError as err:
+        print(f"error: {one_line(err)}; no job of the sweep was launched", file=sys.stderr)
+        sys.exit(err.exit_code)
+
+
 class SweepSummary(Callback):
-    """Hydra callback: :func:`summarize` the sweep at its end; exit 1 if a job failed."""
+    """Hydra callback: :func:`check_sweep_data` before the jobs; :func:`summarize` the sweep
+    at its end, exit 1 if a job failed."""
+
+    def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
+        check_sweep_data(config)
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
         sweep_dir = Path(str(config.hydra.sweep.dir))

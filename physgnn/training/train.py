@@ -25,7 +25,7 @@ from lightning.pytorch.callbacks import Timer
 from lightning.pytorch.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.errors import ConfigError, Interrupted, one_line, signal_name
+from physgnn.errors import ConfigError, Interrupted, check_seed, one_line, signal_name
 from physgnn.files import write_text
 from physgnn.training.checkpoint_io import AtomicCheckpointIO
 from physgnn.training.checks import (
@@ -36,7 +36,6 @@ from physgnn.training.checks import (
     check_optimizer,
     check_run_dir,
     check_scheduler,
-    check_seed,
     resume_from,
 )
 from physgnn.training.lit import NonFiniteLossError
@@ -63,12 +62,17 @@ def check_trainer_config(trainer_cfg: DictConfig) -> None:
         )
 
 
-def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
-    """The Lightning trainer of ``cfg.trainer`` with ``cfg.callbacks`` (then
-    ``extra_callbacks``) and ``cfg.logger``."""
+def check_trainer(cfg: DictConfig) -> None:
+    """The trainer's values and the callbacks' monitors (before Lightning fails on them)."""
     check_trainer_config(cfg.trainer)
     check_budget(cfg.trainer)
     check_monitors(cfg.get("callbacks"))
+
+
+def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
+    """The Lightning trainer of ``cfg.trainer`` with ``cfg.callbacks`` (then
+    ``extra_callbacks``) and ``cfg.logger``."""
+    check_trainer(cfg)
     callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
     callbacks += list(extra_callbacks)
     logger = instantiate(cfg.logger) if cfg.get("logger") else False
@@ -80,10 +84,12 @@ def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
 
 
 def build(cfg: DictConfig, extra_callbacks=()):
-    """``(datamodule, LitSimulator, trainer)`` of a composed training config."""
+    """``(datamodule, LitSimulator, trainer)`` of a composed training config, every value
+    checked before anything is built."""
     check_arguments(cfg)
     check_optimizer(cfg.get("lit"))
     check_scheduler(cfg.get("lit"))
+    check_trainer(cfg)
     datamodule = instantiate(cfg.datamodule)
     simulator = instantiate(cfg.model, stats=datamodule.stats())
     simulator.effects_trained.copy_(datamodule.effects_trained())
