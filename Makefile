@@ -1,5 +1,11 @@
 # physgnn — `make help` lists the targets.
 .DEFAULT_GOAL := help
+# Every path below is relative to the checkout: `make -f <checkout>/Makefile` from elsewhere is
+# refused in one line (make -C <checkout> works).
+ROOT := $(patsubst %/,%,$(dir $(abspath $(lastword $(MAKEFILE_LIST)))))
+ifneq ($(ROOT),$(CURDIR))
+$(error run make in the checkout: make -C $(ROOT) <target>, or cd $(ROOT))
+endif
 SHELL := /bin/bash
 VENV ?= .venv
 PY := $(VENV)/bin/python

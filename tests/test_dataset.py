@@ -99,8 +99,10 @@ def one_line_error(path, match):
     assert "\n" not in str(e.value)
 
 
-def test_missing_file_names_the_command(tmp_path):
-    one_line_error(tmp_path / "small" / "train.h5", r"not found: run `make data PRESET=small`")
+def test_missing_file_names_the_command(tmp_path, monkeypatch):
+    monkeypatch.setenv("PHYSGNN_OUTPUTS", str(tmp_path))  # where make data writes
+    path = tmp_path / "data" / "small" / "train.h5"
+    one_line_error(path, r"not found: run `make data PRESET=small`")
 
 
 def test_truncated_file(tmp_path):

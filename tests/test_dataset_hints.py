@@ -18,15 +18,27 @@ from physgnn.training.datamodule import StatePairDataModule
 from physgnn.training.train import check_trainer_config
 
 
-def test_a_preset_folder_is_named_by_its_preset_with_overwrite_when_it_exists(tmp_path):
-    assert generate_hint(tmp_path / "small") == (
+def test_a_preset_folder_is_named_by_its_preset_with_overwrite_when_it_exists(
+    tmp_path, monkeypatch
+):
+    monkeypatch.setenv("PHYSGNN_OUTPUTS", str(tmp_path))  # make data writes <it>/data/small
+    folder = tmp_path / "data" / "small"
+    assert generate_hint(folder) == (
         "run `make data PRESET=small` or `python -m physgnn.generate data=small`"
     )
-    (tmp_path / "small").mkdir()
-    (tmp_path / "small" / "train.h5").write_text("x")
-    assert generate_hint(tmp_path / "small") == (
+    folder.mkdir(parents=True)
+    (folder / "train.h5").write_text("x")
+    assert generate_hint(folder) == (
         "run `make data PRESET=small ARGS=overwrite=true` or "
         "`python -m physgnn.generate data=small overwrite=true`"
+    )
+
+
+def test_a_preset_named_folder_elsewhere_is_named_by_data_dir(tmp_path, monkeypatch):
+    monkeypatch.setenv("PHYSGNN_OUTPUTS", str(tmp_path / "outputs"))
+    elsewhere = tmp_path / "scratch" / "tiny"  # make data PRESET=tiny would not write here
+    assert generate_hint(elsewhere) == (
+        f"run `python -m physgnn.generate data=tiny data.dir={elsewhere}`"
     )
 
 

@@ -411,7 +411,8 @@ def test_zero_std_in_stats_names_the_file_and_key(tiny_dataset, tmp_path, monkey
     code, line = run_main(monkeypatch, capsys, *args, *SHORT)
     assert code == 2
     assert line.startswith(f"error: {data / 'stats.json'}: vel.std must be positive and finite")
-    assert line.endswith("`python -m physgnn.generate data=tiny overwrite=true`)")
+    # outputs elsewhere than make data's: the fix names the folder itself
+    assert line.endswith(f"`python -m physgnn.generate data=tiny data.dir={data} overwrite=true`)")
 
 
 def test_an_exploding_model_names_no_checkpoint_folder_that_is_not_there(tiny_dataset, tmp_path):

@@ -38,31 +38,55 @@ def one_line_exit(monkeypatch, capsys, module, *args) -> str:
 @pytest.mark.parametrize(
     "override,message",
     [
-        ("datamodule.batch_size=0", "datamodule.batch_size must be a whole number >= 1 (pairs per "
-         "step), got 0"),
+        (
+            "datamodule.batch_size=0",
+            "datamodule.batch_size must be a whole number >= 1 (pairs per step), got 0",
+        ),
         ("model.M=0", "model.M must be a whole number >= 1 (message-passing steps), got 0"),
         ("model.hidden=0", "model.hidden must be a whole number >= 1 (units per layer), got 0"),
-        ("lit.noise_std=-1", "lit.noise_std must be a number >= 0 (input noise, normalised units; "
-         "0: none), got -1"),
-        ("lit.noise_rest_scale=nan", "lit.noise_rest_scale must be a number > 0 and <= 1 (a "
-         "factor; 1: full noise at rest), got nan"),
-        ("trainer.max_epochs=1.5", "trainer.max_epochs must be a whole number (>= 1; -1: no "
-         "limit), got 1.5"),
+        (
+            "lit.noise_std=-1",
+            "lit.noise_std must be a number >= 0 (input noise, normalised units; 0: none), got -1",
+        ),
+        (
+            "lit.noise_rest_scale=nan",
+            "lit.noise_rest_scale must be a number > 0 and <= 1 (a "
+            "factor; 1: full noise at rest), got nan",
+        ),
+        (
+            "trainer.max_epochs=1.5",
+            "trainer.max_epochs must be a whole number (>= 1; -1: no limit), got 1.5",
+        ),
     ],
-)  # fmt: skip
-def test_a_value_out_of_range_is_one_line_naming_the_key(tmp_path, monkeypatch, capsys, override,
-                                                         message):  # fmt: skip
+)
+def test_a_value_out_of_range_is_one_line_naming_the_key(
+    tmp_path, monkeypatch, capsys, override, message
+):
     run_dir = tmp_path / "run"
-    line = one_line_exit(monkeypatch, capsys, train_command, "data=tiny",
-                         f"paths.outputs={tmp_path}", f"run_dir={run_dir}", override)  # fmt: skip
+    line = one_line_exit(
+        monkeypatch,
+        capsys,
+        train_command,
+        "data=tiny",
+        f"paths.outputs={tmp_path}",
+        f"run_dir={run_dir}",
+        override,
+    )
     assert line == f"error: {message}"
     assert not (run_dir / "checkpoints").exists()
 
 
 @pytest.mark.parametrize("seed", ["-1", "1.5"])
 def test_a_bad_data_seed_is_one_line_before_any_scene(tmp_path, monkeypatch, capsys, seed):
-    line = one_line_exit(monkeypatch, capsys, generate_command, "data=tiny", "workers=1",
-                         f"paths.outputs={tmp_path}", f"data.seed={seed}")  # fmt: skip
+    line = one_line_exit(
+        monkeypatch,
+        capsys,
+        generate_command,
+        "data=tiny",
+        "workers=1",
+        f"paths.outputs={tmp_path}",
+        f"data.seed={seed}",
+    )
     assert line == (
         f"error: data.seed must be a whole number from 0 to 4294967295, got {seed} "
         "(conf/data/tiny.yaml: seed; e.g. data.seed=0)"
@@ -75,8 +99,8 @@ def test_a_bad_data_seed_is_one_line_before_any_scene(tmp_path, monkeypatch, cap
 
 def test_a_sweep_without_its_dataset_is_one_line_before_any_job(tmp_path, monkeypatch, capsys):
     stats = tmp_path / "data" / "small" / "stats.json"
-    line = one_line_exit(monkeypatch, capsys, train_command, "+experiment=ablation_M",
-                         f"paths.outputs={tmp_path}")  # fmt: skip
+    monkeypatch.setenv("PHYSGNN_OUTPUTS", str(tmp_path))  # make data writes there too
+    line = one_line_exit(monkeypatch, capsys, train_command, "+experiment=ablation_M")
     assert line == (
         f"error: dataset 'small' not found ({stats} is missing): run `make data PRESET=small` or "
         "`python -m physgnn.generate data=small`; no job of the sweep was launched"
@@ -102,32 +126,44 @@ def test_a_truncated_checkpoint_is_one_line_naming_it_and_the_one_that_loads(tin
     best = next((run_copy / "checkpoints").glob("best-*.ckpt"))
     last = run_copy / "checkpoints" / "last.ckpt"
     cut_in_half(best)
-    with pytest.raises(RunError, match=f"^{re.escape(str(best))} is truncated or corrupt "
-                       rf"\(.*\): move {best.name} away to load {re.escape(str(last))} instead, "
-                       "or train the run again$"):  # fmt: skip
+    with pytest.raises(
+        RunError,
+        match=f"^{re.escape(str(best))} is truncated or corrupt "
+        rf"\(.*\): move {best.name} away to load {re.escape(str(last))} instead, "
+        "or train the run again$",
+    ):
         load_run(run_copy)
     shutil.copy(best, last)  # a resume from a truncated last.ckpt suggests the best that loads
     shutil.copy(tiny_run / "checkpoints" / best.name, best)
     fix = f"train on from {best} in a new run_dir (ckpt_path={best} run_dir=<a new folder>)"
-    with pytest.raises(RunError, match=f"^{re.escape(str(last))} is truncated or corrupt "
-                       rf"\(.*\): {re.escape(fix)}$"):  # fmt: skip
+    with pytest.raises(
+        RunError,
+        match=f"^{re.escape(str(last))} is truncated or corrupt "
+        rf"\(.*\): {re.escape(fix)}$",
+    ):
         check_checkpoint(str(last), None)
 
 
 def test_weights_of_another_m_name_the_key(run_copy):
     config = run_copy / ".hydra" / "config.yaml"
     config.write_text(config.read_text().replace("\n  M: 1\n", "\n  M: 2\n"))
-    with pytest.raises(RunError, match=r"does not fit the model .* describes \(model\.M is 1 in "
-                       r"the weights, 2 in the config\): the weights and the config are of "
-                       "different runs"):  # fmt: skip
+    with pytest.raises(
+        RunError,
+        match=r"does not fit the model .* describes \(model\.M is 1 in "
+        r"the weights, 2 in the config\): the weights and the config are of "
+        "different runs",
+    ):
         load_run(run_copy)
 
 
 def test_a_broken_run_config_is_one_line_naming_it(run_copy):
     config = run_copy / ".hydra" / "config.yaml"
     config.write_text(config.read_text() + "model: [unclosed\n")
-    with pytest.raises(RunError, match=f"^{re.escape(str(config))} is not a readable config "
-                       r"\(.*\): restore it") as err:  # fmt: skip
+    with pytest.raises(
+        RunError,
+        match=f"^{re.escape(str(config))} is not a readable config "
+        r"\(.*\): restore it",
+    ) as err:
         load_run(run_copy)
     assert "\n" not in str(err.value)
 
@@ -135,12 +171,14 @@ def test_a_broken_run_config_is_one_line_naming_it(run_copy):
 # --- a path in a sweep's overrides --------------------------------------------------------------
 
 
-def test_a_path_in_a_sweep_override_names_one_flat_job_folder(tiny_dataset, tmp_path,
-                                                              monkeypatch):  # fmt: skip
+def test_a_path_in_a_sweep_override_names_one_flat_job_folder(tiny_dataset, tmp_path, monkeypatch):
     sweep = tmp_path / "sweep"
     args = ["-m", "data=tiny", f"data.dir={tiny_dataset}", "lit.noise_std=-1,-2"]
-    monkeypatch.setattr(sys, "argv", ["physgnn.train", *args, f"paths.outputs={tmp_path}",
-                                      f"hydra.sweep.dir={sweep}"])  # fmt: skip
+    monkeypatch.setattr(
+        sys,
+        "argv",
+        ["physgnn.train", *args, f"paths.outputs={tmp_path}", f"hydra.sweep.dir={sweep}"],
+    )
     with pytest.raises(SystemExit) as exit_info:  # both jobs fail on their noise_std, at once
         train_command.main()
     assert exit_info.value.code == 1
@@ -160,8 +198,9 @@ def read_only_tmpfs(tmp_path):
         pytest.skip("mounting a read-only tmpfs needs root")
     mount = tmp_path / "ro"
     mount.mkdir()
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(mount)],
-                          capture_output=True)  # fmt: skip
+    done = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(mount)], capture_output=True
+    )
     if done.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs here ({done.stderr.decode().strip()})")
     try:
@@ -187,9 +226,29 @@ def test_a_command_writing_elsewhere_is_not_held_to_paths_outputs(monkeypatch):
     )
     check_outputs_env(["paths.outputs=/ro/x", "report_dir=/rw/r"], "report_dir")  # eval
     check_outputs_env(["paths.outputs=/ro/x"], None)  # data_report reads only
-    with pytest.raises(ConfigError, match=r"^report_dir=/ro/r cannot be written \(read-only\): "
-                       "choose a writable report_dir$"):  # fmt: skip
+    with pytest.raises(
+        ConfigError,
+        match=r"^report_dir=/ro/r cannot be written \(read-only\): "
+        "choose a writable report_dir$",
+    ):
         check_outputs_env(["paths.outputs=/rw", "report_dir=/ro/r"], "report_dir")
     with pytest.raises(ConfigError, match=r"^paths.outputs=/ro cannot be written"):
         check_outputs_env(["paths.outputs=/ro"], "report_dir")  # its report_dir lies under it
     check_outputs_env(["paths.outputs=/ro", "run_dir=/rw/run"])  # train reads data from /ro
+
+
+# --- make from another folder -----------------------------------------------------------------
+
+
+def test_make_from_another_folder_is_one_line_naming_the_checkout(tmp_path):
+    root = Path(__file__).resolve().parents[1]
+    if shutil.which("make") is None:
+        pytest.skip("no make on this machine")
+    done = subprocess.run(
+        ["make", "-f", str(root / "Makefile"), "help"], cwd=tmp_path, capture_output=True, text=True
+    )
+    assert done.returncode == 2 and done.stdout == ""
+    (line,) = done.stderr.strip().splitlines()
+    assert f"run make in the checkout: make -C {root} <target>, or cd {root}" in line
+    ok = subprocess.run(["make", "-C", str(root), "help"], capture_output=True, text=True)
+    assert ok.returncode == 0 and "test" in ok.stdout

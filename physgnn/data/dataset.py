@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import io
 import json
+import os
 from pathlib import Path
 
 import h5py
@@ -46,16 +47,24 @@ def _generate_hint(path: Path) -> str:
 
 def generate_hint(folder: str | Path, preset: str | None = None) -> str:
     """How to (re)make the dataset folder ``folder``: ``run `make data PRESET=x` or `...``
-    when its name is a preset of conf/data/, else the generate command with ``data.dir=``
-    (``preset``, else the one its marker names, else small); with ``overwrite=true`` when it
-    exists."""
+    when it is where that writes (:func:`default_data_dir` of a preset of conf/data/), else the
+    generate command with ``data.dir=`` (``preset``, else the one its marker names, else its
+    name when a preset's, else small); with ``overwrite=true`` when it exists."""
     folder = Path(folder)
     again = " overwrite=true" if folder.is_dir() and any(folder.iterdir()) else ""
-    if (Path(CONF_DIR) / "data" / f"{folder.name}.yaml").is_file():
+    preset_file = Path(CONF_DIR) / "data" / f"{folder.name}.yaml"
+    if preset_file.is_file() and folder.resolve() == default_data_dir(folder.name).resolve():
         make = f"make data PRESET={folder.name}" + (f" ARGS={again.strip()}" if again else "")
         return f"run `{make}` or `python -m physgnn.generate data={folder.name}{again}`"
-    preset = preset or dataset_preset(folder) or "small"
+    named = folder.name if preset_file.is_file() else "small"
+    preset = preset or dataset_preset(folder) or named
     return f"run `python -m physgnn.generate data={preset} data.dir={folder}{again}`"
+
+
+def default_data_dir(preset: str) -> Path:
+    """Where ``make data PRESET=preset`` writes: ``$PHYSGNN_OUTPUTS/data/<preset>`` (default
+    ``outputs/data/<preset>``, relative to the working folder)."""
+    return Path(os.environ.get("PHYSGNN_OUTPUTS") or "outputs") / "data" / preset
 
 
 def dataset_preset(folder: str | Path) -> str | None:
