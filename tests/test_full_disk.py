@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -16,10 +17,14 @@ from physgnn import simulate as simulate_command
 from physgnn.cli import command
 
 ROOT = Path(__file__).resolve().parents[1]
-TORCH_FULL = ("[enforce fail at inline_container.cc:664] . PytorchStreamWriter failed writing "
-              "file data/0: file write failed")  # fmt: skip
-H5PY_FULL = ("Can't decrement id ref count (file write failed: time = now, filename = 'x.h5', "
-             "errno = 28, error message = 'No space left on device')")  # fmt: skip
+TORCH_FULL = (
+    "[enforce fail at inline_container.cc:664] . PytorchStreamWriter failed writing "
+    "file data/0: file write failed"
+)
+H5PY_FULL = (
+    "Can't decrement id ref count (file write failed: time = now, filename = 'x.h5', "
+    "errno = 28, error message = 'No space left on device')"
+)
 
 
 @pytest.mark.parametrize("message", [TORCH_FULL, H5PY_FULL], ids=["torch", "h5py"])
@@ -43,8 +48,9 @@ def full_tmpfs(tmp_path):
         pytest.skip("mounting a small tmpfs needs root")
     mount = tmp_path / "small"
     mount.mkdir()
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(mount)],
-                          capture_output=True)  # fmt: skip
+    done = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(mount)], capture_output=True
+    )
     if done.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs here ({done.stderr.decode().strip()})")
     try:
@@ -69,3 +75,26 @@ def test_simulate_onto_a_real_full_disk_is_one_line_and_leaves_nothing(full_tmpf
     assert err.startswith("error: No space left on device: ")
     assert sorted(p.name for p in full_tmpfs.iterdir()) == ["fill", "sim"]  # no lock, no staging
     assert [p.name for p in out.iterdir()] == ["physgnn-output.json"]
+
+
+@pytest.mark.parametrize(
+    ("module", "args", "key"),
+    [
+        ("physgnn.train", ["data=tiny", "run_dir={disk}/run"], "run_dir={disk}/run"),
+        (
+            "physgnn.generate",
+            ["data=tiny", "paths.outputs={disk}/out", "workers=1"],
+            "paths.outputs={disk}/out",
+        ),
+    ],
+    ids=["train", "generate"],
+)
+def test_train_and_generate_onto_a_real_full_disk_are_one_line(full_tmpfs, module, args, key):
+    argv = [a.format(disk=full_tmpfs) for a in args]
+    done = subprocess.run(
+        [sys.executable, "-m", module, *argv], cwd=ROOT, capture_output=True, text=True
+    )
+    assert done.returncode == 2
+    (line,) = [x for x in done.stderr.splitlines() if x.startswith("error")]
+    assert line.startswith(f"error: {key.format(disk=full_tmpfs)} cannot be written (no space ")
+    assert sorted(p.name for p in full_tmpfs.iterdir()) == ["fill"]  # nothing made there

@@ -244,11 +244,17 @@ def test_make_from_another_folder_is_one_line_naming_the_checkout(tmp_path):
     root = Path(__file__).resolve().parents[1]
     if shutil.which("make") is None:
         pytest.skip("no make on this machine")
+    env = {k: v for k, v in os.environ.items() if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL")}
     done = subprocess.run(
-        ["make", "-f", str(root / "Makefile"), "help"], cwd=tmp_path, capture_output=True, text=True
+        ["make", "-f", str(root / "Makefile"), "help"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
     )
+
     assert done.returncode == 2 and done.stdout == ""
     (line,) = done.stderr.strip().splitlines()
     assert f"run make in the checkout: make -C {root} <target>, or cd {root}" in line
-    ok = subprocess.run(["make", "-C", str(root), "help"], capture_output=True, text=True)
+    ok = subprocess.run(["make", "-C", str(root), "help"], env=env, capture_output=True, text=True)
     assert ok.returncode == 0 and "test" in ok.stdout

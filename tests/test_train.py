@@ -143,9 +143,13 @@ def run_main(monkeypatch, capsys, *args) -> tuple[int, str]:
 
 
 def test_missing_dataset_is_one_line(monkeypatch, capsys, tmp_path):
-    code, line = run_main(monkeypatch, capsys, "data=tiny", f"paths.outputs={tmp_path}")
+    monkeypatch.setenv("PHYSGNN_OUTPUTS", str(tmp_path))  # where make data writes too
+    code, line = run_main(monkeypatch, capsys, "data=tiny")
     assert code == 2
     assert line.startswith("error: dataset 'tiny' not found") and "make data PRESET=tiny" in line
+    # paths.outputs on the command line: make data would write elsewhere, the fix names the folder
+    code, line = run_main(monkeypatch, capsys, "data=tiny", f"paths.outputs={tmp_path / 'x'}")
+    assert code == 2 and f"data=tiny data.dir={tmp_path / 'x' / 'data' / 'tiny'}`" in line
 
 
 def test_bad_config_value_is_one_line(monkeypatch, capsys, tiny_dataset, tmp_path):

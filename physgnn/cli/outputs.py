@@ -5,6 +5,7 @@ is one line naming it and the fix)."""
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 
 from physgnn.errors import ConfigError
@@ -16,6 +17,9 @@ OUTPUT_KEYS = ("hydra.run.dir", "hydra.sweep.dir", "run_dir")
 # where it is not paths.outputs itself; None: a command that writes nothing (data_report).
 OWN_FOLDER = {"eval": "report_dir", "bench": "out_dir", "sleep_study": "out", "study":
               "runs_dir", "data_report": None}  # fmt: skip
+
+
+MIN_FREE = 1 << 20  # bytes: less than this free and Hydra's own first writes may fail
 
 
 def check_outputs_env(argv: list[str] | None = None, own: str | None = "paths.outputs") -> None:
@@ -55,13 +59,22 @@ def check_outputs_env(argv: list[str] | None = None, own: str | None = "paths.ou
 
 def unwritable(folder: str) -> str | None:
     """Why ``folder`` (or, where it is not yet there, the folder it would be made in) cannot
-    be written: ``"read-only file system: /x"``, ``"no permission to write in /x"``; None
-    where it can."""
+    be written: ``"read-only file system: /x"``, ``"no permission to write in /x"``,
+    ``"no space left on device: N KiB free in /x"`` (below :data:`MIN_FREE`); None where it
+    can."""
     place = os.path.abspath(folder)
     while not os.path.exists(place):
         place = os.path.dirname(place)
-    if not os.path.isdir(place) or os.access(place, os.W_OK | os.X_OK):
+    if not os.path.isdir(place):
         return None  # a file in the way: the commands name it themselves
+    if os.access(place, os.W_OK | os.X_OK):
+        free = shutil.disk_usage(place).free
+        # Hydra writes its config files (tens of kB) before any command can catch an error
+        return (
+            f"no space left on device: {free >> 10} KiB free in {place}"
+            if free < MIN_FREE
+            else None
+        )
     if hasattr(os, "statvfs") and os.statvfs(place).f_flag & os.ST_RDONLY:
         return f"read-only file system: {place}"
     return f"no permission to write in {place}"

@@ -4,8 +4,7 @@
 file under the real name. ``read_split`` checks everything it reads and raises
 :class:`DatasetError` with one line naming the problem. ``stats.json`` holds the training
 split's normalisation statistics (``compute_stats`` / ``write_stats`` / ``read_stats``).
-A folder physgnn generated carries the marker file :data:`DATASET_MARKER`: only such a folder
-is ever replaced or removed (``python -m physgnn.generate overwrite=true``).
+Only a folder with the marker file :data:`DATASET_MARKER` is ever replaced or removed.
 """
 
 from __future__ import annotations
@@ -56,14 +55,12 @@ def generate_hint(folder: str | Path, preset: str | None = None) -> str:
     if preset_file.is_file() and folder.resolve() == default_data_dir(folder.name).resolve():
         make = f"make data PRESET={folder.name}" + (f" ARGS={again.strip()}" if again else "")
         return f"run `{make}` or `python -m physgnn.generate data={folder.name}{again}`"
-    named = folder.name if preset_file.is_file() else "small"
-    preset = preset or dataset_preset(folder) or named
+    preset = preset or dataset_preset(folder) or (folder.name if preset_file.is_file() else "small")
     return f"run `python -m physgnn.generate data={preset} data.dir={folder}{again}`"
 
 
 def default_data_dir(preset: str) -> Path:
-    """Where ``make data PRESET=preset`` writes: ``$PHYSGNN_OUTPUTS/data/<preset>`` (default
-    ``outputs/data/<preset>``, relative to the working folder)."""
+    """Where ``make data PRESET=preset`` writes: ``$PHYSGNN_OUTPUTS`` or outputs, /data/preset."""
     return Path(os.environ.get("PHYSGNN_OUTPUTS") or "outputs") / "data" / preset
 
 
@@ -214,13 +211,11 @@ def read_split(path) -> list[Trajectory]:
         ) from None
 
 
-# The split files of a dataset folder; each says which it is in its file attribute ``split``.
-SPLIT_FILES = ("train", "val", "test", "ood")
+SPLIT_FILES = ("train", "val", "test", "ood")  # each names itself in its attribute ``split``
 
 
 def _check_split(path: Path, split) -> None:
-    """A split file (``val.h5``, ...) whose attribute says it is another split is refused:
-    training would validate on its own training data, or evaluate on it."""
+    """A split file whose attribute ``split`` names another split is refused (one line)."""
     split = _attr(split)
     if path.stem in SPLIT_FILES and split is not None and split != path.stem:
         raise DatasetError(
