@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
+import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
+import torch
 from hydra.core.hydra_config import HydraConfig
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
@@ -70,3 +75,31 @@ def hydra_leaves_nothing_behind():
     logging.root.handlers[:] = handlers
     logging.root.setLevel(level)
     HydraConfig.instance().cfg = None
+
+
+@pytest.fixture
+def one_thread():
+    """One torch thread, restored afterwards: on the shared 2-core machine two threads made
+    small networks ~10x slower (oversubscription), and results are pinned with one."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@contextlib.contextmanager
+def mounted_tmpfs(mount: Path, options: str):
+    """A real tmpfs mounted on ``mount`` with ``options`` (e.g. ``size=2m``), unmounted after;
+    the test is skipped with the reason where it cannot be mounted (root only)."""
+    if os.geteuid() != 0 or not shutil.which("mount"):
+        pytest.skip("mounting a tmpfs needs root")
+    mount.mkdir()
+    done = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(mount)], capture_output=True
+    )
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.decode().strip()})")
+    try:
+        yield mount
+    finally:
+        subprocess.run(["umount", str(mount)], check=False)

@@ -23,7 +23,6 @@ from pathlib import Path
 
 import lightning as L
 import numpy as np
-import pytest
 import torch
 from test_train import config
 
@@ -94,14 +93,6 @@ def repin(found: dict) -> None:
     pinned = {"about": about, "pinned_at": rev or None, "torch": torch.__version__,
               "config": CONFIG, **found}  # fmt: skip
     PINNED.write_text(json.dumps(pinned, indent=1) + "\n")
-
-
-@pytest.fixture
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 def test_training_numerics_match_the_pinned_fingerprint(tiny_dataset, tmp_path, one_thread):

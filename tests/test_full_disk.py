@@ -5,12 +5,12 @@ small filesystem (tmpfs, mounted when the suite runs as root) checks simulate en
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from conftest import mounted_tmpfs
 from omegaconf import OmegaConf
 
 from physgnn import simulate as simulate_command
@@ -44,16 +44,7 @@ def test_a_disk_error_wrapped_in_a_runtime_error_is_one_line(capsys, message):
 @pytest.fixture
 def full_tmpfs(tmp_path):
     """A real 2 MiB filesystem with 16 KiB left (root only: it mounts a tmpfs)."""
-    if os.geteuid() != 0 or not shutil.which("mount"):
-        pytest.skip("mounting a small tmpfs needs root")
-    mount = tmp_path / "small"
-    mount.mkdir()
-    done = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(mount)], capture_output=True
-    )
-    if done.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.decode().strip()})")
-    try:
+    with mounted_tmpfs(tmp_path / "small", "size=2m") as mount:
         with open(mount / "fill", "wb") as f:
             try:
                 f.write(b"\0" * (3 << 20))
@@ -61,8 +52,6 @@ def full_tmpfs(tmp_path):
                 pass
         os.truncate(mount / "fill", os.path.getsize(mount / "fill") - 16384)
         yield mount
-    finally:
-        subprocess.run(["umount", str(mount)], check=False)
 
 
 def test_simulate_onto_a_real_full_disk_is_one_line_and_leaves_nothing(full_tmpfs, capsys):

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import mounted_tmpfs
 
 from physgnn import generate as generate_command
 from physgnn import train as train_command
@@ -194,19 +195,8 @@ def test_a_path_in_a_sweep_override_names_one_flat_job_folder(tiny_dataset, tmp_
 @pytest.fixture
 def read_only_tmpfs(tmp_path):
     """A real read-only filesystem (root only: it mounts a tmpfs)."""
-    if os.geteuid() != 0 or not shutil.which("mount"):
-        pytest.skip("mounting a read-only tmpfs needs root")
-    mount = tmp_path / "ro"
-    mount.mkdir()
-    done = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(mount)], capture_output=True
-    )
-    if done.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.decode().strip()})")
-    try:
+    with mounted_tmpfs(tmp_path / "ro", "ro,size=1m") as mount:
         yield mount
-    finally:
-        subprocess.run(["umount", str(mount)], check=False)
 
 
 @pytest.mark.parametrize("module", [train_command, generate_command])

@@ -230,16 +230,6 @@ def test_hard_split_is_built_once_then_read_from_the_cache(tmp_path, monkeypatch
 # ---------------------------------------------------------------- float32 against float64
 
 
-@pytest.fixture
-def one_thread():
-    """One torch thread: on the shared 2-core machine two threads made small networks ~10x
-    slower (oversubscription); restored afterwards."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
 def test_float32_and_float64_rollouts_agree_over_the_first_frames(one_thread):
     # Measured on these 3 scenes (5 spheres, up to 41 m): |Δp| <= 4.9e-6 m after 10 steps,
     # i.e. a few float32 ulps of the coordinates (the rollout records float32). Bound 4x.

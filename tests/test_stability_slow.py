@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
@@ -62,15 +61,6 @@ TRAIN = [
     "datamodule.pairs_per_epoch=64",
     "datamodule.val_pairs=8",
 ]
-
-
-@pytest.fixture
-def one_thread():
-    """One torch thread: on the shared 2-core machine two threads made the network 30x slower."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
 
 
 def test_trained_model_on_the_resting_pile_reports_a_finite_drift(

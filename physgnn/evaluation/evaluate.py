@@ -54,7 +54,7 @@ from physgnn.report.document import write_report
 
 # What an eval writes into its report_dir (replaced whole by the next eval).
 REPORT_OUTPUTS = ("report.md", "metrics.csv", "stability.csv", "freefall.csv", "bounce.csv",
-                  "figures", "videos", "rollouts")  # fmt: skip
+                  "invariance.csv", "figures", "videos", "rollouts")  # fmt: skip
 MATERIAL_KEYS = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
 
 
@@ -125,11 +125,7 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
         (report_dir / "stability.csv").unlink(missing_ok=True)  # no stale section
     freefall.write_csv(report_dir / "freefall.csv", _freefall(runs, cfg.freefall, settings))
     bounce.write_csv(report_dir / "bounce.csv", _bounce(runs, cfg.get("bounce"), settings))
-    checks = cfg.get("invariance")
-    if checks is not None:
-        sims = [(run.name, run.simulator) for run in runs]
-        rows = [r for sim in sims for r in invariance_rows(*sim, **checks, **settings)]
-        invariance.write_csv(report_dir / "invariance.csv", rows)
+    invariance.write_csv(report_dir / "invariance.csv", _invariance(runs, cfg, settings))
     if out.energies:
         dts = {name: _dt(data, name) for name in out.energies}
         figures.plot_energy(report_dir / "figures" / "energy_ood.png", out.energies, dts)
@@ -162,6 +158,17 @@ def _bounce(runs: list[RunInfo], cfg: DictConfig | None, settings: dict) -> list
     for run in runs:
         rows += bounce_rows(run.name, run.simulator, *args, **settings)
     return rows
+
+
+def _invariance(runs: list[RunInfo], cfg: DictConfig, settings: dict) -> list[dict]:
+    """Every learned run's invariance checks (:mod:`physgnn.evaluation.invariance`); none
+    with ``invariance: null``."""
+    checks = cfg.get("invariance")
+    if checks is None:
+        return []
+    return [
+        r for run in runs for r in invariance_rows(run.name, run.simulator, **checks, **settings)
+    ]
 
 
 def _dt(data: dict, scene: str) -> float:

@@ -20,33 +20,57 @@ from physgnn.physics.scene import Effects, ground_plane
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
 
+DENSITY = 1000.0  # kg/m³, that of the training scenes
+
+
+def ballistic(
+    name, pos0, vel0, radius, mass, material, frames: int, dt: float, fall: bool = True
+) -> Trajectory:
+    """Spheres flying freely from ``pos0 [N, 3]`` with ``vel0 [N, 3]``: exact positions and
+    velocities of frames ``0..frames−1`` over the ground alone, one ``material`` row [4];
+    ``fall=False``: uniform motion (spheres the ground holds: at rest, or sliding on it)."""
+    t = np.arange(frames)[:, None, None] * dt
+    drop = np.array([0.0, 0.0, -0.5 * G if fall else 0.0])
+    pos = pos0[None] + vel0[None] * t + drop * t**2
+    vel = vel0[None] + 2 * drop * t
+    n = len(pos0)
+    quat = np.zeros((frames, n, 4))
+    quat[..., 0] = 1.0
+    return Trajectory(
+        name=name,
+        pos=pos,
+        quat=quat,
+        vel=vel,
+        angvel=np.zeros((frames, n, 3)),
+        radius=np.asarray(radius, np.float64),
+        mass=np.asarray(mass, np.float64),
+        material=np.zeros(n, np.int64),
+        planes=ground_plane()[None].astype(np.float64),
+        plane_kind=np.zeros(1, np.int64),
+        materials=np.asarray(material, np.float64)[None],
+        dt=dt,
+        effects=Effects(),
+    )
+
+
+def sphere_mass(radius, density: float = DENSITY) -> np.ndarray:
+    """Masses (kg) of spheres of ``radius`` (m) and ``density`` (kg/m³)."""
+    return density * 4.0 / 3.0 * np.pi * np.asarray(radius, np.float64) ** 3
+
 
 def free_fall(height: float, seconds: float, dt: float, radius: float = 0.5) -> Trajectory:
     """One sphere of ``radius`` (density 1 000) released at rest at ``height`` m above the
     ground, frames ``k·dt`` for ``k = 0..seconds/dt``, exact positions and velocities."""
-    n = int(round(seconds / dt)) + 1
-    t = np.arange(n) * dt
-    pos = np.zeros((n, 1, 3), np.float64)
-    pos[:, 0, 2] = height - 0.5 * G * t**2
-    vel = np.zeros((n, 1, 3), np.float64)
-    vel[:, 0, 2] = -G * t
-    quat = np.zeros((n, 1, 4), np.float64)
-    quat[..., 0] = 1.0
-    mass = np.full(1, 1000.0 * 4.0 / 3.0 * np.pi * radius**3)
-    return Trajectory(
-        name=f"free_fall_{height:g}m",
-        pos=pos,
-        quat=quat,
-        vel=vel,
-        angvel=np.zeros((n, 1, 3)),
-        radius=np.full(1, radius),
-        mass=mass,
-        material=np.zeros(1, np.int64),
-        planes=ground_plane()[None].astype(np.float64),
-        plane_kind=np.zeros(1, np.int64),
-        materials=np.array([[0.5, 0.7, 0.01, 0.01]]),
-        dt=dt,
-        effects=Effects(),
+    radii = np.full(1, radius)
+    return ballistic(
+        f"free_fall_{height:g}m",
+        np.array([[0.0, 0.0, height]]),
+        np.zeros((1, 3)),
+        radii,
+        sphere_mass(radii),
+        (0.5, 0.7, 0.01, 0.01),
+        int(round(seconds / dt)) + 1,
+        dt,
     )
 
 
@@ -70,17 +94,19 @@ def freefall_rows(
         stable = pred.diverged_at is None
         z_pred = float(pred.pos[-1, 0, 2]) if stable else float("nan")
         fall = float(h - z_true)
-        rows.append({
-            "run": name,
-            "height": h,
-            "seconds": (truth.n_frames - 1) * dt,
-            "dt": dt,
-            "z_true": z_true,
-            "z_pred": z_pred,
-            "z_error": abs(z_pred - z_true),
-            "z_error_pct": 100.0 * abs(z_pred - z_true) / fall,
-            "dvz_first": _first_dvz(pred.pos[:, 0, 2], truth.vel[0, 0, 2], start, dt),
-        })  # fmt: skip
+        rows.append(
+            {
+                "run": name,
+                "height": h,
+                "seconds": (truth.n_frames - 1) * dt,
+                "dt": dt,
+                "z_true": z_true,
+                "z_pred": z_pred,
+                "z_error": abs(z_pred - z_true),
+                "z_error_pct": 100.0 * abs(z_pred - z_true) / fall,
+                "dvz_first": _first_dvz(pred.pos[:, 0, 2], truth.vel[0, 0, 2], start, dt),
+            }
+        )
     return rows
 
 

@@ -34,8 +34,8 @@ import itertools
 import numpy as np
 
 from physgnn.evaluation.bounce import bounce_rows
+from physgnn.evaluation.freefall import ballistic, sphere_mass
 from physgnn.physics.energy import G
-from physgnn.physics.scene import Effects, ground_plane
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
 
@@ -51,38 +51,6 @@ BOUNCE_MATERIALS = (
     (0.7, 0.5, 0.005, 0.005),
     (0.9, 0.5, 0.005, 0.005),
 )
-DENSITY = 1000.0
-
-
-def ballistic(name, pos0, vel0, radius, mass, material, frames: int, dt: float) -> Trajectory:
-    """Spheres flying freely from ``pos0 [N, 3]`` with ``vel0 [N, 3]``: exact positions and
-    velocities of frames ``0..frames−1`` over the ground alone, one ``material`` row [4]."""
-    t = np.arange(frames)[:, None, None] * dt
-    drop = np.array([0.0, 0.0, -0.5 * G])
-    pos = pos0[None] + vel0[None] * t + drop * t**2
-    vel = vel0[None] + 2 * drop * t
-    n = len(pos0)
-    quat = np.zeros((frames, n, 4))
-    quat[..., 0] = 1.0
-    return Trajectory(
-        name=name,
-        pos=pos,
-        quat=quat,
-        vel=vel,
-        angvel=np.zeros((frames, n, 3)),
-        radius=np.asarray(radius, np.float64),
-        mass=np.asarray(mass, np.float64),
-        material=np.zeros(n, np.int64),
-        planes=ground_plane()[None].astype(np.float64),
-        plane_kind=np.zeros(1, np.int64),
-        materials=np.asarray(material, np.float64)[None],
-        dt=dt,
-        effects=Effects(),
-    )
-
-
-def sphere_mass(radius, density: float = DENSITY) -> np.ndarray:
-    return density * 4.0 / 3.0 * np.pi * np.asarray(radius, np.float64) ** 3
 
 
 def flying_block(frames: int = 30, dt: float = 0.1) -> Trajectory:
@@ -106,12 +74,10 @@ def resting_grid(mass: float | None, frames: int, dt: float = 0.1) -> Trajectory
     pos0 = np.concatenate([xy, np.full((25, 1), r)], axis=1)
     radius = np.full(25, r)
     masses = sphere_mass(radius) if mass is None else np.full(25, float(mass))
-    traj = ballistic(
-        "resting_grid", pos0, np.zeros((25, 3)), radius, masses, (0.5, 0.7, 0.01, 0.01), frames, dt
+    material = (0.5, 0.7, 0.01, 0.01)  # resting, not falling: the ground holds them
+    return ballistic(
+        "resting_grid", pos0, np.zeros((25, 3)), radius, masses, material, frames, dt, fall=False
     )
-    traj.pos[:] = pos0  # resting, not falling: the ground holds them
-    traj.vel[:] = 0.0
-    return traj
 
 
 def collision(frames: int = 12, dt: float = 0.1) -> Trajectory:
@@ -131,12 +97,10 @@ def sliding_row(frames: int = 50, dt: float = 0.1) -> Trajectory:
     pos0 = np.array([[2 * r * k, 0.0, r] for k in range(5)])
     vel0 = np.tile([2.0, 0.0, 0.0], (5, 1))
     radius = np.full(5, r)
-    traj = ballistic(
-        "sliding_row", pos0, vel0, radius, sphere_mass(radius), (0.5, 0.0, 0.0, 0.0), frames, dt
+    material = (0.5, 0.0, 0.0, 0.0)  # frictionless, on the ground, not falling
+    return ballistic(
+        "sliding_row", pos0, vel0, radius, sphere_mass(radius), material, frames, dt, fall=False
     )
-    traj.pos[..., 2] = r  # on the ground, not falling
-    traj.vel[..., 2] = 0.0
-    return traj
 
 
 def _velocities(pos: np.ndarray, dt: float) -> np.ndarray:
@@ -173,8 +137,8 @@ def invariance_rows(name: str, simulator, rest_frames: int = 2000, **kwargs) -> 
     return rows
 
 
-def _row(name, kind, setting, value, limit, passed, pred, value2=float("nan")) -> dict:
-    diverged = getattr(pred, "diverged_at", None)
+def _row(name, kind, setting, value, limit, passed, diverged, value2=float("nan")) -> dict:
+    """One row of ``invariance.csv``; a check whose rollout diverged (step ``diverged``) fails."""
     return {
         "run": name,
         "kind": kind,
@@ -197,7 +161,7 @@ def _block_row(name, pred, truth) -> dict:
         change,
         BLOCK_LIMITS[0],
         ok,
-        pred,
+        pred.diverged_at,
         dvz,
     )
 
@@ -214,7 +178,7 @@ def _collision_row(name, pred, truth) -> dict:
         float(error),
         MOMENTUM_LIMIT,
         error <= MOMENTUM_LIMIT,
-        pred,
+        pred.diverged_at,
     )
 
 
@@ -229,7 +193,7 @@ def _row_row(name, pred, truth) -> dict:
         float(change),
         ROW_LIMIT,
         change <= ROW_LIMIT,
-        pred,
+        pred.diverged_at,
     )
 
 
@@ -237,14 +201,12 @@ def _rest_row(name, pred, truth) -> dict:
     moved = np.linalg.norm(np.asarray(pred.pos[-1], np.float64) - truth.pos[0], axis=-1)
     drift = float(moved.max() / truth.radius.max()) if pred.diverged_at is None else np.nan
     setting = f"25 spheres, {truth.mass[0]:.4g} kg each, {truth.n_frames} frames"
-    return _row(name, "resting_grid", setting, drift, REST_LIMIT, drift <= REST_LIMIT, pred)
+    ok = drift <= REST_LIMIT
+    return _row(name, "resting_grid", setting, drift, REST_LIMIT, ok, pred.diverged_at)
 
 
 def _bounce_row(b: dict) -> dict:
     ratio = b["ratio"]
     ok = abs(ratio - 1.0) <= BOUNCE_LIMIT
     setting = f"e = {b['restitution']:g}, {b['mass']:.4g} kg"
-    row = _row(b["run"], "bounce", setting, ratio, BOUNCE_LIMIT, ok, None)
-    row["diverged_at"] = b["diverged_at"]
-    row["passed"] = bool(ok and b["diverged_at"] is None)
-    return row
+    return _row(b["run"], "bounce", setting, ratio, BOUNCE_LIMIT, ok, b["diverged_at"])

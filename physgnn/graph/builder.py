@@ -1,7 +1,6 @@
 """Sphere–sphere (pp) and surface–sphere (ps) edges with their features, rebuilt every step.
 
-Connectivity, with ``gap_ij = |p_i − p_j| − r_i − r_j`` and a per-sphere
-motion allowance ``a_i``:
+Connectivity, with ``gap_ij = |p_i − p_j| − r_i − r_j`` and a per-sphere motion allowance ``a_i``:
 
 - ``approach`` (the default model's): by the pair's *relative* motion. With
   ``n̂_ij = (p_i − p_j)/|p_i − p_j|`` and the closing speed ``c_ij = max(0, −(v_i − v_j)·n̂_ij)``,
@@ -13,8 +12,7 @@ motion allowance ``a_i``:
   its rectangle's clearance ``|δ| − r_i ≤ factor · max(0, −v̂_i·δ̂) · dt + ε``, with the
   ballistic next velocity ``v̂_i = v_i + g·dt`` (a plane is static, so gravity does close the
   gap) and ``δ̂`` the unit offset from the rectangle's closest point (a supporting half-space
-  of the convex rectangle bounds the distance the same way). ``a_i = factor · |v̂_i| · dt``
-  (an upper bound of every approach) only sizes the neighbour search and the feature clip.
+  bounds the distance alike). ``a_i = factor · |v̂_i| · dt`` sizes the search and the clip.
 - ``epsilon``: ``a_i = 0``
 - ``vmax``:    ``a_i = factor · V_max · dt``, V_max the largest speed in the sphere's scene
 - ``vi``:      ``a_i = factor · |v_i| · dt``
@@ -23,9 +21,8 @@ For the last three: pp edge iff ``gap_ij ≤ a_i + a_j + ε``; ps edge to a boun
 plane iff (distance from the centre to the closest point of the rectangle) ``− r_i ≤ a_i + ε``.
 Every rule: the centre is not more than ``r_i`` behind a bounded plane (planes are one-sided: a
 sphere wholly behind one has tunnelled and feels nothing); plus one edge from every sphere's
-ground plane. The
-rules are evaluated in float64 (boundary included); the features are in the input dtype and
-in raw physical units.
+ground plane. The rules are evaluated in float64 (boundary included); the features are in the
+input dtype and in raw physical units.
 
 **Features see no absolute position.** A ps edge carries the offset ``δ`` from the closest
 point of the plane (the rectangle for bounded planes, the infinite plane for the ground) to
@@ -130,12 +127,13 @@ class GraphBuilder:
 
     def __call__(self, state) -> Graph:
         batch = scene_of_sphere(state)
-        allowance = self.allowance(state)
+        velocity = self.rule_velocity(state)  # once per build: the rules and the clip share it
+        allowance = self.allowance(state, velocity=velocity)
         spheres, planes = host_sizes(state)
         src, dst = self._pair_candidates(state, batch, allowance, spheres)
         pp_mask = self._pp_rule(state, batch, allowance, src, dst)
         plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long())
-        ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere)
+        ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere, velocity)
         n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
         keep = compact(pp_mask, n_pp)
         pp_index, pp_attr = _paired(state.pos, src[keep], dst[keep])
@@ -147,11 +145,16 @@ class GraphBuilder:
         ps_attr = _ps_attr(state, ps_index, offset[keep], clip)
         return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance)
 
-    def allowance(self, state, moving: torch.Tensor | None = None) -> torch.Tensor:
+    def rule_velocity(self, state) -> torch.Tensor:
+        """``[N, 3]``: what the rules move spheres with: ``v_t + g·dt`` (approach), else ``v_t``."""
+        return ballistic_velocity(state) if self.connectivity == "approach" else _velocity(state)
+
+    def allowance(self, state, moving=None, velocity=None) -> torch.Tensor:
         """Motion allowance ``a_i`` of every sphere, float64 ``[N]``; ``moving [N]`` (bool):
-        only these spheres move, the others count with speed 0 (sleeping spheres)."""
+        only these spheres move, the others count with speed 0 (sleeping spheres);
+        ``velocity [N, 3]``: :meth:`rule_velocity` where the caller has it."""
         batch = scene_of_sphere(state)
-        vel = ballistic_velocity(state) if self.connectivity == "approach" else _velocity(state)
+        vel = self.rule_velocity(state) if velocity is None else velocity
         speed = vel.to(torch.float64).norm(dim=-1)
         if self.connectivity == "epsilon":
             return torch.zeros_like(speed)
@@ -178,14 +181,18 @@ class GraphBuilder:
             limit = allowance[i] + allowance[j]
         return (batch[i] == batch[j]) & (gap <= limit + self.epsilon)
 
-    def plane_within_reach(self, state, sphere, normal, clearance, allowance) -> torch.Tensor:
+    def plane_within_reach(
+        self, state, sphere, normal, clearance, allowance, velocity=None
+    ) -> torch.Tensor:
         """``[Q]`` bool: a plane at ``clearance [Q]`` (float64, from the sphere's surface along
         the unit direction ``normal [Q, 3]`` pointing from the plane to the sphere) can be
         reached by ``sphere [Q]`` before the next frame: ``approach``'s
-        ``clearance ≤ factor · max(0, −v̂·n) · dt + ε``, else ``clearance ≤ a_i + ε``."""
+        ``clearance ≤ factor · max(0, −v̂·n) · dt + ε``, else ``clearance ≤ a_i + ε``;
+        ``velocity [N, 3]``: :meth:`rule_velocity` where the caller has it."""
         if self.connectivity != "approach":
             return clearance <= allowance[sphere] + self.epsilon
-        vel = ballistic_velocity(state).to(torch.float64)[sphere]
+        vel = self.rule_velocity(state) if velocity is None else velocity
+        vel = vel.to(torch.float64)[sphere]
         along = (vel * normal.to(torch.float64)).sum(-1)
         dt = state.dt.to(torch.float64)[scene_of_sphere(state)[sphere]]
         return clearance <= self.factor * torch.relu(-along) * dt + self.epsilon
@@ -212,12 +219,12 @@ class GraphBuilder:
         """``ρ_i = r_i + a_i + ε``, float64 ``[N]``: the farthest plane a sphere may touch."""
         return state.radius.to(torch.float64) + allowance + self.epsilon
 
-    def _ps_rule(self, state, batch, allowance, plane, sphere) -> tuple[torch.Tensor, ...]:
+    def _ps_rule(self, state, batch, allowance, plane, sphere, vel) -> tuple[torch.Tensor, ...]:
         """``([Q] bool, offsets [Q, 3] float64)`` for (plane, sphere) candidates of one scene
         (the offsets from each rectangle, kept for the edge features): the ground of a scene with
         gravity or surface contact; a wall or static plane of a scene with surface contact
-        whose rectangle is within ``a_i + ε`` of the sphere's surface and which the centre is
-        not more than ``r_i`` behind (planes are one-sided)."""
+        whose rectangle is in reach (:meth:`plane_within_reach` with ``vel``, the rule's
+        velocity) and which the centre is not more than ``r_i`` behind (planes are one-sided)."""
         effects = state.effects[batch[sphere]]
         ground = state.plane_kind[plane] == GROUND
         offset = rectangle_offset(state.pos[sphere], state.planes[plane])
@@ -225,7 +232,8 @@ class GraphBuilder:
         height = (offset * state.planes[plane, 3:6].to(torch.float64)).sum(-1)
         dist = offset.norm(dim=-1, keepdim=True)
         direction = offset / dist.clamp_min(1e-300)
-        near = self.plane_within_reach(state, sphere, direction, dist[:, 0] - radius, allowance)
+        clearance = dist[:, 0] - radius
+        near = self.plane_within_reach(state, sphere, direction, clearance, allowance, vel)
         bounded = ~ground & effects[:, _SURFACE_CONTACT] & near & (height > -radius)
         keep = (ground & (effects[:, _GRAVITY] | effects[:, _SURFACE_CONTACT])) | bounded
         return keep, offset
@@ -241,7 +249,7 @@ def ballistic_velocity(state) -> torch.Tensor:
     gravity)."""
     gravity = state.effects[scene_of_sphere(state), _GRAVITY].to(state.pos.dtype)
     vel = _velocity(state).clone()
-    vel[:, 2] = vel[:, 2] - G * state.dt[scene_of_sphere(state)] * gravity
+    vel[:, 2] = vel[:, 2] - G * state.scene_dt * gravity
     return vel
 
 

@@ -37,6 +37,7 @@ from __future__ import annotations
 import torch
 
 from physgnn.data.state import scene_of_sphere
+from physgnn.graph.builder import ballistic_velocity
 from physgnn.physics.energy import G
 from physgnn.physics.geometry import edge_plane_depth
 from physgnn.physics.scene import EFFECT_NAMES, GROUND
@@ -55,12 +56,19 @@ def pp_contact(graph, state, length_scale, speed_scale) -> torch.Tensor:
     """``[E, 2]``: gap / ℓ and ``(v_i − v_j)·n̂_ij`` / σ_v (i the target; a pair of coincident
     spheres has ``n̂ = 0``)."""
     src, dst = graph.pp_index
-    rel, dist = graph.pp_attr[:, :3], graph.pp_attr[:, 3:4]
-    gap = dist - (state.radius[src] + state.radius[dst])[:, None]
+    normal, gap = _normal_and_gap(graph, state)
     vel = state.vel[:, 0]
-    normal = rel / dist.clamp_min(1e-12)
     closing = ((vel[dst] - vel[src]) * normal).sum(1, keepdim=True)
     return torch.cat([gap / length_scale, closing / speed_scale], 1)
+
+
+def _normal_and_gap(graph, state) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(n̂_ij [E, 3], gap [E, 1])`` of the pp edges: the unit vector from source j to target
+    i (0 for coincident spheres) and ``|p_i − p_j| − r_i − r_j``."""
+    src, dst = graph.pp_index
+    rel, dist = graph.pp_attr[:, :3], graph.pp_attr[:, 3:4]
+    gap = dist - (state.radius[src] + state.radius[dst])[:, None]
+    return rel / dist.clamp_min(1e-12), gap
 
 
 def pair_width(history: int, mass_ratio: bool, materials: bool) -> int:
@@ -80,9 +88,7 @@ def pair_inputs(
     ``m_i / (m_i + m_j)`` with ``mass_ratio``, then the pair's restitution ``e_i·e_j`` and
     lateral friction ``μ_i·μ_j`` (Bullet's combination rules) with ``materials``."""
     src, dst = graph.pp_index
-    rel, dist = graph.pp_attr[:, :3], graph.pp_attr[:, 3:4]
-    normal = rel / dist.clamp_min(1e-12)
-    gap = dist - (state.radius[src] + state.radius[dst])[:, None]
+    normal, gap = _normal_and_gap(graph, state)
     dv = state.vel[dst, :history] - state.vel[src, :history]  # [E, history, 3]
     along = (dv[:, 0] * normal).sum(1, keepdim=True)
     across = torch.linalg.vector_norm(dv[:, 0] - along * normal, dim=1, keepdim=True)
@@ -151,8 +157,5 @@ def recent_contact(state) -> torch.Tensor:
 
 def free_flight(state) -> tuple[torch.Tensor, torch.Tensor]:
     """``(v_t + g·dt, ω_t)`` ``[N, 3]`` each: the ballistic next velocities (g only in scenes
-    with gravity)."""
-    gravity = state.effects[scene_of_sphere(state), GRAVITY].to(state.pos.dtype)
-    vel = state.vel[:, 0].clone()
-    vel[:, 2] = vel[:, 2] - G * state.scene_dt * gravity
-    return vel, state.angvel[:, 0]
+    with gravity; :func:`~physgnn.graph.builder.ballistic_velocity`)."""
+    return ballistic_velocity(state), state.angvel[:, 0]
