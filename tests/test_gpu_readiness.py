@@ -29,33 +29,47 @@ ROLLOUT_FRAME_SYNCS = 2  # one graph build and the divergence test
 
 
 def test_the_counter_sees_each_kind_of_read_back():
-    x = torch.arange(6.0)
+    x, repeats = torch.arange(6.0), torch.tensor([1, 0, 2, 1, 0, 1])
     with counting() as c:
         x.sum().item()
         torch.nonzero(x > 2)
         x[x > 2]
-        torch.repeat_interleave(x, torch.tensor([1, 0, 2, 1, 0, 1]))
+        torch.repeat_interleave(x, repeats)
         x.tolist()
         bool(x.any())
-    assert c.syncs == 6
+    assert c.syncs == 6 and c.copies == 0
     with counting() as c:
-        torch.repeat_interleave(x, torch.tensor([1, 0, 2, 1, 0, 1]), output_size=5)
-        x[torch.tensor([0, 2])]
+        torch.repeat_interleave(x, repeats, output_size=5)
+        x[torch.arange(2)]
         torch.where(x > 2, x, 0.0).cumsum(0)
+        x * torch.tensor(2.0)  # a 0-dim host scalar is a kernel argument, no copy
     assert c.syncs == 0 and c.kernels > 0
+
+
+def test_the_counter_sees_each_host_to_device_copy_once():
+    x = torch.zeros(3, device="meta")
+    with counting() as c:
+        torch.tensor([1, 2, 3])  # host data made a tensor: a copy where the device is a GPU
+        x.new_tensor([1.0, 2.0]).numel()  # on meta nothing is dispatched: not seen here
+        torch.ones(3).to("meta")  # a CPU tensor copied to another device
+        torch.ones(()).to("meta")
+        x.copy_(torch.ones(3))
+        torch.ones(3).to("meta", non_blocking=True)  # does not wait
+    assert c.copies == c.syncs == 4
 
 
 def test_scene_pairs_are_every_same_scene_pair_in_order():
     sizes = (3, 1, 0, 4)
-    i, j = scene_pairs(sizes, "cpu")
     scene = torch.repeat_interleave(torch.arange(4), torch.tensor(sizes))
+    i, j = scene_pairs(sizes, scene)
     brute = [(a, b) for a in range(8) for b in range(a + 1, 8) if scene[a] == scene[b]]
     assert list(zip(i.tolist(), j.tolist(), strict=True)) == brute
 
 
 def test_scene_plane_pairs_pair_each_plane_with_its_scene():
     spheres, planes = (2, 3), (1, 2)
-    plane, sphere = scene_plane_pairs(spheres, planes, torch.tensor([0, 1, 1]))
+    scene = torch.tensor([0, 0, 1, 1, 1])
+    plane, sphere = scene_plane_pairs(spheres, planes, torch.tensor([0, 1, 1]), scene)
     expect = [(0, 0), (0, 1), (1, 2), (1, 3), (1, 4), (2, 2), (2, 3), (2, 4)]
     assert list(zip(plane.tolist(), sphere.tolist(), strict=True)) == expect
 

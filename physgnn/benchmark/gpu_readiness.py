@@ -3,10 +3,12 @@
 Per training step (the default recipe: input noise, contact noise, push-forward, the loss and
 its contact penalty, backward, clipping and Adam, through Lightning as ``make train`` runs it)
 and per rollout frame (:func:`physgnn.rollout.rollout` of the learned model): the host round
-trips (``syncs``) and aten ops (``kernels``) of :mod:`physgnn.benchmark.syncs`, and the host
-time in ms with a tiny network (``hidden`` small, so the arithmetic does not hide the
-overhead). The neighbour backend is ``torch``, which is what ``auto`` picks on CUDA without
-torch-cluster. Counts are the maxima over the steps (push-forward lengths vary), times means.
+trips (``syncs``, host-to-device ``copies`` included) and aten ops (``kernels``) of
+:mod:`physgnn.benchmark.syncs`, and the host time in ms with a tiny network (``hidden`` small,
+so the arithmetic does not hide the overhead). The neighbour backend is ``torch``, which is what
+``auto`` picks on CUDA without torch-cluster. Counts are the maxima over the steps (push-forward
+lengths vary), times means.
+
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn.benchmark.syncs import counting
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 from physgnn.rollout import rollout
+
+_COUNTS = ("syncs", "kernels", "copies")  # copies are counted in syncs too
 
 
 class StepCounter(L.Callback):
@@ -48,7 +52,10 @@ class StepCounter(L.Callback):
             self.steps.append({"host_ms": ms})
             return
         self._context.__exit__(None, None, None)
-        self.steps.append({"syncs": self._counter.syncs, "kernels": self._counter.kernels})
+        counter = self._counter
+        self.steps.append(
+            {"syncs": counter.syncs, "kernels": counter.kernels, "copies": counter.copies}
+        )
         self.where.update(self._counter.where)
 
 
@@ -97,10 +104,7 @@ def rollout_frame_counts(model_cfg: DictConfig, stats: dict, trajectory, frames:
         go(n)
         ms[n] = 1000 * (time.perf_counter() - t0)
     short, long = counted[frames], counted[2 * frames]
-    step = {
-        "syncs": (long.syncs - short.syncs) / frames,
-        "kernels": (long.kernels - short.kernels) / frames,
-    }
+    step = {key: (getattr(long, key) - getattr(short, key)) / frames for key in _COUNTS}
     where = long.where
     where.subtract(short.where)
     return summary([step], [{"host_ms": (ms[2 * frames] - ms[frames]) / frames}], +where, frames)
@@ -127,8 +131,7 @@ def summary(counted: list[dict], timed: list[dict], where: Counter, per: int) ->
     """Maxima of the counts, mean host ms of the timed steps and the sync lines per step (or
     frame)."""
     return {
-        "syncs": max(s["syncs"] for s in counted),
-        "kernels": max(s["kernels"] for s in counted),
+        **{key: max(s[key] for s in counted) for key in _COUNTS},
         "host_ms": sum(s["host_ms"] for s in timed) / len(timed),
         "where": {k: v / per for k, v in where.most_common()},
     }

@@ -10,7 +10,13 @@ every aten op of the code it watches (a ``TorchDispatchMode``) and counts
   boolean-mask indexing and ``masked_select`` (their output size), ``unique`` and
   ``unique_consecutive``, ``bincount`` (its length), ``repeat_interleave`` without
   ``output_size``, ``equal``, ``is_nonzero``; plus ``Tensor.tolist`` and ``Tensor.numpy``,
-  which leave the device without an aten op.
+  which leave the device without an aten op;
+- ``copies`` (counted in ``syncs`` too): host data copied to the device, which waits for the
+  GPU like a read-back (a pageable copy that is not ``non_blocking``): a tensor made from host
+  data (``torch.tensor(list)``, ``new_tensor``, ``as_tensor(array)``: ``lift_fresh``), and a
+  copy of a CPU tensor to another device (``_to_copy``, ``copy_``), each counted once. On the
+  CPU the first kind is what a CUDA run would copy; 0-dim host scalars are left out (a kernel
+  takes them as arguments, no copy).
 
 It runs on the CPU as well, where these ops cost little, which is the point: what a GPU step
 would wait for is counted without a GPU. ``where`` names the Python line of each sync
@@ -33,6 +39,8 @@ _ALWAYS = {
     aten.unique_dim_consecutive, aten.bincount, aten.equal, aten.is_nonzero,
 }  # fmt: skip
 _MASK_INDEXING = {aten.index, aten.index_put, aten.index_put_, aten._index_put_impl_}
+_LIFTS = {aten.lift_fresh, aten.lift_fresh_copy}
+_COPIES = {aten._to_copy, aten.copy_}
 
 
 def reads_back(func, args, kwargs) -> bool:
@@ -50,22 +58,55 @@ def reads_back(func, args, kwargs) -> bool:
     return False
 
 
+def copies_to_device(func, args, kwargs) -> bool:
+    """True when the aten op ``func`` copies a CPU tensor to another device and waits for it
+    (module doc: ``_to_copy``, ``copy_``, not ``non_blocking``)."""
+    if func.overloadpacket not in _COPIES or kwargs.get("non_blocking", False):
+        return False
+    if func.overloadpacket is aten.copy_:
+        target, source = args[0], args[1]
+        to = target.device
+    else:
+        source, to = args[0], kwargs.get("device")
+    return (
+        isinstance(source, torch.Tensor)
+        and source.device.type == "cpu"
+        and to is not None
+        and torch.device(to).type != "cpu"
+    )
+
+
 class DispatchCounter(TorchDispatchMode):
-    """Counts kernels and syncs (module doc) of the code run inside ``with counter:``."""
+    """Counts kernels, syncs and copies (module doc) of the code run inside ``with counter:``."""
 
     def __init__(self, record_where: bool = False):
         super().__init__()
         self.kernels = 0
         self.syncs = 0
+        self.copies = 0
         self.record_where = record_where
         self.where: Counter = Counter()
+        self._lifted = None  # the last tensor made from host data: its copy is the same one
 
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         kwargs = kwargs or {}
         self.kernels += 1
         if reads_back(func, args, kwargs):
             self.count_sync(str(func.overloadpacket.__name__))
-        return func(*args, **kwargs)
+        out = func(*args, **kwargs)
+        if func.overloadpacket in _LIFTS:
+            self._lifted = out
+            if out.dim() > 0:
+                self.count_copy("host data to tensor")
+        elif copies_to_device(func, args, kwargs):
+            source = args[1] if func.overloadpacket is aten.copy_ else args[0]
+            if source is not self._lifted or source.dim() == 0:
+                self.count_copy(f"{func.overloadpacket.__name__} to device")
+        return out
+
+    def count_copy(self, what: str) -> None:
+        self.copies += 1
+        self.count_sync(what)
 
     def count_sync(self, what: str) -> None:
         self.syncs += 1

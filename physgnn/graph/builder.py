@@ -132,7 +132,7 @@ class GraphBuilder:
         spheres, planes = host_sizes(state)
         src, dst = self._pair_candidates(state, batch, allowance, spheres)
         pp_mask = self._pp_rule(state, batch, allowance, src, dst)
-        plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long())
+        plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), batch)
         ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere, velocity)
         n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
         keep = compact(pp_mask, n_pp)
@@ -204,7 +204,7 @@ class GraphBuilder:
         n = state.pos.shape[0]
         total = sum(c * (c - 1) // 2 for c in spheres)
         if total <= max(ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE * n):
-            return scene_pairs(spheres, state.pos.device)
+            return scene_pairs(spheres, batch)
         radius = state.radius.to(torch.float64)
         reach = 2 * float(radius.max()) + 2 * float(allowance.max()) + self.epsilon
         pairs = radius_pairs(state.pos, reach * (1 + 1e-9), batch, self.backend)

@@ -8,9 +8,12 @@ from it every candidate of a small scene is written down without looking at the 
 - :func:`scene_plane_pairs`: every ``(plane, sphere)`` of the same scene,
   ``Q = Σ_s S_s n_s``, sorted by plane then sphere.
 
-Sizes come from host ints, so ``repeat_interleave`` gets its ``output_size`` and nothing is
-read back. The graph rule then makes a boolean mask, and :func:`compact` keeps the masked
-candidates in order given their count: the one value a build must read back.
+Sizes come from host ints, so ``repeat_interleave`` gets its ``output_size`` and nothing is read
+back; the per-scene counts on the device come from the scene of each sphere (a scatter), so
+nothing is copied from the host either. The graph rule then makes a boolean mask, and
+:func:`compact` keeps the masked candidates in order given their count: the one value a build
+must read back.
+
 """
 
 from __future__ import annotations
@@ -18,16 +21,20 @@ from __future__ import annotations
 import torch
 
 
-def scene_pairs(spheres: tuple[int, ...], device) -> tuple[torch.Tensor, torch.Tensor]:
+def scene_counts(scene: torch.Tensor, scenes: int) -> torch.Tensor:
+    """``[scenes]`` long: spheres per scene, from ``scene [N]`` (long, the scene of each
+    sphere) on its device: a scatter, no host copy."""
+    counts = torch.zeros(scenes, dtype=torch.long, device=scene.device)
+    return counts.index_add_(0, scene, torch.ones_like(scene))
+
+
+def scene_pairs(spheres: tuple[int, ...], scene: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """``(i [P], j [P])``: all same-scene pairs with ``i < j`` (module doc), for scenes of
-    ``spheres[s]`` consecutive spheres."""
-    counts = torch.tensor(spheres, dtype=torch.long, device=device)
+    ``spheres[s]`` consecutive spheres; ``scene [N]`` (long) the scene of each sphere."""
+    device = scene.device
     n = sum(spheres)
     total = sum(c * (c - 1) // 2 for c in spheres)
-    scene = torch.repeat_interleave(
-        torch.arange(len(spheres), device=device), counts, output_size=n
-    )
-    end = torch.cumsum(counts, 0)[scene]  # one past the last sphere of each sphere's scene
+    end = torch.cumsum(scene_counts(scene, len(spheres)), 0)[scene]  # one past its scene's last
     node = torch.arange(n, device=device)
     partners = end - 1 - node  # spheres after i in its scene
     i = torch.repeat_interleave(node, partners, output_size=total)
@@ -37,12 +44,16 @@ def scene_pairs(spheres: tuple[int, ...], device) -> tuple[torch.Tensor, torch.T
 
 
 def scene_plane_pairs(
-    spheres: tuple[int, ...], planes: tuple[int, ...], plane_scene: torch.Tensor
+    spheres: tuple[int, ...],
+    planes: tuple[int, ...],
+    plane_scene: torch.Tensor,
+    scene: torch.Tensor,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """``(plane [Q], sphere [Q])``: every plane with every sphere of its scene (module doc);
-    ``plane_scene [S]`` (long) is the scene of each plane, planes grouped by scene."""
+    ``plane_scene [S]`` (long) is the scene of each plane, planes grouped by scene, and
+    ``scene [N]`` (long) the scene of each sphere."""
     device = plane_scene.device
-    counts = torch.tensor(spheres, dtype=torch.long, device=device)
+    counts = scene_counts(scene, len(spheres))
     total = sum(p * s for p, s in zip(planes, spheres, strict=True))
     per_plane = counts[plane_scene]
     plane = torch.repeat_interleave(

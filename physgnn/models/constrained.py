@@ -72,8 +72,9 @@ class ConstrainedSimulator(nn.Module):
         pos_next = state.pos + dt * vel
         pairs = graph.pp_index[:, : graph.pp_index.shape[1] // 2]
         spheres, planes = host_sizes(state)
-        plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long())
-        surfaces = state.effects[scene_of_sphere(state)[sphere], SURFACE_CONTACT]
+        scene = scene_of_sphere(state)
+        plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), scene)
+        surfaces = state.effects[scene[sphere], SURFACE_CONTACT]
         x = project_contacts(
             state.pos, pos_next, state.radius, state.mass, pairs, state.planes,
             state.plane_kind, torch.stack([plane, sphere]), self.iterations, ps_active=surfaces,

@@ -114,9 +114,10 @@ def ps_contact(graph, state, length_scale, speed_scale) -> torch.Tensor:
 
 
 def material_features(state) -> torch.Tensor:
-    """``[N, 4]``: the material rows scaled by :data:`MATERIAL_SCALE`."""
+    """``[N, 4]``: the material rows scaled by :data:`MATERIAL_SCALE`, by a Python scalar (a
+    tensor of the scales would be a host-to-device copy per call)."""
     params = state.material_params
-    return params * params.new_tensor(MATERIAL_SCALE)
+    return torch.stack([params[:, k] * s for k, s in enumerate(MATERIAL_SCALE)], dim=-1)
 
 
 def in_reach(state, graph, builder) -> torch.Tensor:

@@ -46,7 +46,7 @@ def multiply(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 def conjugate(q: torch.Tensor) -> torch.Tensor:
     """``(w, -x, -y, -z)``: the inverse of a unit quaternion. ``[..., 4]``."""
-    return q * q.new_tensor([1.0, -1.0, -1.0, -1.0])
+    return torch.cat([q[..., :1], -q[..., 1:]], dim=-1)  # no host-to-device copy of signs
 
 
 def normalize(q: torch.Tensor, eps: float = 1e-12) -> torch.Tensor:

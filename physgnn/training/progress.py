@@ -1,13 +1,15 @@
 """What a training run keeps through interruptions: its counters, and a clean stop on a signal.
 
-:class:`RunProgress` counts the state pairs and spheres trained on (summed over DDP processes)
-and the training seconds, and stores them in every checkpoint, so a resumed run continues the
-counts of the whole run. :class:`StopOnSignal` turns Ctrl-C (SIGINT), SIGTERM and the
-pre-emption signal of a submitit job (SIGUSR2) into a stop after the current batch: all DDP
-processes stop at the same step, ``last.ckpt`` is saved there (mid-epoch) and ``fit`` ends with
-:class:`StopTraining`. A second Ctrl-C stops at once. A signal whose handler belongs to a job
-scheduler is left to it (submitit ignores SIGTERM), and after the run is recorded
-:meth:`StopOnSignal.chain` hands the pre-emption signal on to it (submitit requeues the job).
+:class:`RunProgress` counts the state pairs and spheres trained on (summed over DDP processes
+once per epoch and before every checkpoint, not per step) and the training seconds, and stores
+them in every checkpoint, so a resumed run continues the counts of the whole run.
+:class:`StopOnSignal` turns Ctrl-C (SIGINT), SIGTERM and the pre-emption signal of a submitit
+job (SIGUSR2) into a stop after the current batch: all DDP processes stop at the same step,
+``last.ckpt`` is saved there (mid-epoch) and ``fit`` ends with :class:`StopTraining`. A second
+Ctrl-C stops at once. A signal whose handler belongs to a job scheduler is left to it (submitit
+ignores SIGTERM), and after the run is recorded :meth:`StopOnSignal.chain` hands the pre-emption
+signal on to it (submitit requeues the job).
+
 """
 
 from __future__ import annotations
@@ -39,6 +41,9 @@ def save_last(trainer: L.Trainer, always: bool = False) -> Path | None:
     ckpt = trainer.checkpoint_callback
     if ckpt is None or not ckpt.dirpath or trainer.fast_dev_run:
         return None
+    for callback in trainer.callbacks:  # every process calls this at the same step
+        if isinstance(callback, RunProgress):
+            callback.flush(trainer)
     last = Path(ckpt.dirpath) / "last.ckpt"
     saved = {getattr(ckpt, "_last_global_step_saved", -1), _saved_at.get(ckpt)}
     if always or (trainer.global_step, trainer.current_epoch) not in saved:
@@ -55,6 +60,7 @@ class RunProgress(L.Callback):
     def __init__(self):
         self.pairs_seen = 0
         self.nodes_seen = 0
+        self._pending = [0, 0]  # this process's pairs and spheres since the last flush
         self._sessions_before = 0
         self._seconds_before = 0.0
         self._start: float | None = None
@@ -75,14 +81,31 @@ class RunProgress(L.Callback):
     def on_train_epoch_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         # Lightning refreshes last.ckpt only with a new best; a killed run (no signal to
         # catch) would restart from that epoch. Runs before ModelCheckpoint's own hook.
+        self.flush(trainer)
         save_last(trainer)
 
     def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx) -> None:
-        counts = torch.tensor([batch.num_graphs, batch.num_nodes], device=pl_module.device)
+        self._pending[0] += batch.num_graphs  # host ints: nothing read from the device
+        self._pending[1] += batch.num_nodes
+
+    def on_validation_start(self, trainer, pl_module) -> None:
+        self.flush(trainer)  # a checkpoint may follow the validation
+
+    def on_train_end(self, trainer, pl_module) -> None:
+        self.flush(trainer)
+
+    def flush(self, trainer: L.Trainer) -> None:
+        """Add the counts since the last flush, summed over the DDP processes (one all-reduce:
+        every process must call it at the same point, as the hooks above do; each has trained
+        on the same number of batches since the last flush, so all or none have counts)."""
+        if self._pending == [0, 0]:
+            return
         if trainer.world_size > 1:
-            counts = trainer.strategy.reduce(counts, reduce_op="sum")
-        self.pairs_seen += int(counts[0])
-        self.nodes_seen += int(counts[1])
+            counts = torch.tensor(self._pending, device=trainer.strategy.root_device)
+            self._pending = trainer.strategy.reduce(counts, reduce_op="sum").tolist()
+        self.pairs_seen += int(self._pending[0])
+        self.nodes_seen += int(self._pending[1])
+        self._pending = [0, 0]
 
     def state_dict(self) -> dict:
         return {
