@@ -1,7 +1,9 @@
 """The capture path: graphs padded to capacity buckets give the unpadded outputs, in a few
-fixed shapes."""
+fixed shapes; a compiled network keeps to a bound of shapes and says when it runs past it."""
 
 from __future__ import annotations
+
+import warnings
 
 import pytest
 import torch
@@ -9,6 +11,7 @@ from simdata import STATS
 from test_contacts import scene
 from torch.testing import assert_close
 
+from physgnn.models.capture import ShapeBoundCall, compile_in_place
 from physgnn.models.learned import LearnedSimulator
 from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.nn.padding import bucket, pad_graph
@@ -74,3 +77,31 @@ def test_the_compiled_padded_network_equals_eager_and_keeps_its_shapes():
             graph = random_graph(n, pairs, n)
             padded, _ = pad_graph(*graph)
             assert_close(compiled(*padded)[:n], net(*graph), rtol=1e-4, atol=1e-5)
+
+
+def test_a_compiled_network_keeps_its_weights_and_warns_past_its_shapes():
+    torch.manual_seed(2)
+    net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=8, M=1).eval()
+    keys = set(net.state_dict())
+    compile_in_place(net, max_shapes=2, backend="eager")  # no code generation: the logic only
+    assert set(net.state_dict()) == keys and isinstance(net.forward, ShapeBoundCall)
+    graphs = [random_graph(n, n, n) for n in (6, 7, 8)]
+    with torch.no_grad():
+        first = [net(*g) for g in graphs[:2]]
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            net(*graphs[0])  # a shape it has compiled: no warning
+        with pytest.warns(UserWarning, match="more than 2 input shapes.*pad_to_buckets"):
+            third = net(*graphs[2])
+        eager = ShapeBoundCall(net, backend="eager").eager
+        for graph, out in zip(graphs, [*first, third], strict=True):
+            assert_close(out, eager(*graph))
+    assert len(net.forward.keys) == 2
+
+
+def test_compile_options_are_checked_in_one_line():
+    net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=8, M=1)
+    with pytest.raises(ValueError, match="unknown compile mode 'fast'"):
+        ShapeBoundCall(net, mode="fast")
+    with pytest.raises(ValueError, match="max_shapes must be >= 1"):
+        ShapeBoundCall(net, max_shapes=0)

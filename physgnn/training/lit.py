@@ -42,15 +42,14 @@ import random
 
 import lightning as L
 import torch
-import torch.nn.functional as F
 
-from physgnn.data.state import scene_of_sphere
+from physgnn.models.capture import compile_in_place
 from physgnn.models.learned import OUTPUTS, LearnedSimulator
-from physgnn.physics.energy import scene_energy, scene_weight
-from physgnn.physics.integrator import euler_step, step
+from physgnn.physics.integrator import step
 from physgnn.training.contacts import contact_penalty, perturb_contacts
 from physgnn.training.epoch_means import EpochMeans
 from physgnn.training.finite import FiniteWatch, NonFiniteLossError  # noqa: F401 (its home)
+from physgnn.training.losses import energy_increase, masked_mse, rest_loss
 from physgnn.training.noise import add_noise, regime_scale  # noqa: F401 (re-exported)
 
 
@@ -70,51 +69,6 @@ def push_forward(state, simulator: LearnedSimulator, steps: int):
     out.target_vel = (state.future_pos[:, steps] - out.pos) / dt[:, None]
     out.target_angvel = state.future_angvel[:, steps]
     return out
-
-
-def energy_increase(state, vel_next: torch.Tensor) -> torch.Tensor:
-    """``[B]``: ``max(E_{t+1} − E_t, 0) / Σ m g`` of every scene (metres of height).
-
-    ``vel_next [N, 3]`` is the predicted ``v̂_{t+1}``; ``E_{t+1}`` uses the Euler-integrated
-    position ``p_t + dt·v̂_{t+1}`` and ``v̂_{t+1}``; ``E_t`` uses ``p_t`` and ``v_t``."""
-    n_scenes = state.num_graphs if hasattr(state, "num_graphs") else 1
-    batch = scene_of_sphere(state)
-    pos_next, _ = euler_step(
-        state.pos, state.quat, vel_next, vel_next, state.scene_dt, rotate=False
-    )
-    args = (state.mass, state.radius, batch, n_scenes)
-    e_now = scene_energy(state.pos, state.vel[:, 0], *args)
-    e_next = scene_energy(pos_next, vel_next, *args)
-    return torch.relu(e_next - e_now) / scene_weight(state.mass, batch, n_scenes)
-
-
-def masked_mse(
-    pred: torch.Tensor,
-    target: torch.Tensor,
-    rotating: torch.Tensor,
-    counted: torch.Tensor | None = None,
-) -> torch.Tensor:
-    """Mean squared error of ``[N, 6]`` outputs, angular part only where ``rotating [N]``, and
-    only spheres of ``counted [N]`` (bool, default all; 0 when none is)."""
-    weight = torch.ones_like(pred)
-    weight[:, 3:] = rotating[:, None].to(pred.dtype)
-    if counted is not None:
-        weight = weight * counted[:, None].to(pred.dtype)
-    return ((pred - target) ** 2 * weight).sum() / weight.sum().clamp_min(1.0)
-
-
-def rest_loss(simulator: LearnedSimulator, state, pred: torch.Tensor, reach) -> torch.Tensor:
-    """Binary cross-entropy of the rest logit ``pred[:, 6]`` against
-    :meth:`~physgnn.models.learned.LearnedSimulator.rest_target`, over the spheres in ``reach``
-    (all when None); 0 without a rest decision."""
-    if not simulator.rest_decision:
-        return pred.new_zeros(())
-    label = simulator.rest_target(state).to(pred.dtype)
-    each = F.binary_cross_entropy_with_logits(pred[:, OUTPUTS], label, reduction="none")
-    if reach is None:
-        return each.mean()
-    weight = reach.to(pred.dtype)
-    return (each * weight).sum() / weight.sum().clamp_min(1.0)
 
 
 def _check_ranges(values: dict, contact_noise_prob: float, noise_rest_scale: float) -> None:
@@ -146,10 +100,9 @@ class LitSimulator(L.LightningModule):
     pushes contacts within ``contact_touch`` in by up to ``contact_noise_depth`` with
     probability ``contact_noise_prob`` (0: off); all three lengths in units of the simulator's
     ``length_scale`` (:mod:`physgnn.training.contacts`).
-    ``compile``: the network is compiled in place (``torch.compile``, dynamic shapes; fixed
-    ones when the simulator pads to buckets) for every call, training, validation and
-    rollouts alike; the weights and checkpoints are the same as without (docs/PERFORMANCE.md
-    has what it gains and costs).
+    ``compile``: the network is compiled for every call (``compile_mode``; at most
+    ``compile_shapes`` shapes: :mod:`physgnn.models.capture`); weights and checkpoints are the
+    same as without (docs/PERFORMANCE.md has what it gains and costs).
     """
 
     def __init__(
@@ -171,6 +124,8 @@ class LitSimulator(L.LightningModule):
         noise_rest_scale: float = 0.05,
         lambda_rest: float = 1.0,
         compile: bool = False,
+        compile_mode: str = "default",
+        compile_shapes: int = 16,
     ):
         super().__init__()
         values = dict(
@@ -193,11 +148,11 @@ class LitSimulator(L.LightningModule):
         self.pushforward_growth = int(pushforward_growth)
         self.lambda_contact = float(lambda_contact)
         self.noise_rest_scale, self.lambda_rest = float(noise_rest_scale), float(lambda_rest)
-        self.contact_tol = float(contact_tol)
+        self.contact_tol, self.contact_noise_prob = float(contact_tol), float(contact_noise_prob)
         self.contact_noise = (float(contact_noise_depth), float(contact_touch))
-        self.contact_noise_prob = float(contact_noise_prob)
-        if compile:  # padded to buckets: a few fixed shapes, compiled each once
-            simulator.network.compile(dynamic=not getattr(simulator, "pad_to_buckets", False))
+        if compile:  # dynamic shapes unless padded to buckets
+            dynamic = not getattr(simulator, "pad_to_buckets", False)
+            compile_in_place(simulator.network, compile_mode, dynamic, compile_shapes)
         self.pairs_seen = self.nodes_seen = 0
         self._finite, self._train_means = FiniteWatch(), EpochMeans()
 

@@ -62,6 +62,30 @@ def check_trainer_config(trainer_cfg: DictConfig) -> None:
         )
 
 
+MATMUL_PRECISIONS = ("highest", "high", "medium")
+
+
+def set_matmul_precision(value: str) -> None:
+    """``torch.set_float32_matmul_precision``: ``high`` lets fp32 matrix products use TF32 on
+    GPUs that have it; a one-line error for another value."""
+    if value not in MATMUL_PRECISIONS:
+        raise ConfigError(
+            f"matmul_precision must be one of {list(MATMUL_PRECISIONS)}, got {value!r}"
+        )
+    torch.set_float32_matmul_precision(value)
+
+
+def _optimizer(cfg: DictConfig):
+    """``lit.optimizer``, not fused under mixed precision: Lightning clips the gradients of a
+    fused optimizer only at full precision (it would stop the run)."""
+    node = cfg.lit.optimizer
+    mixed = str(cfg.trainer.get("precision", "32-true")).endswith("mixed")
+    if mixed and node.get("fused"):
+        log.info("trainer.precision=%s: the optimizer runs without fused", cfg.trainer.precision)
+        node = OmegaConf.merge(node, {"fused": False})
+    return instantiate(node)
+
+
 def check_trainer(cfg: DictConfig) -> None:
     """The trainer's values and the callbacks' monitors (before Lightning fails on them)."""
     check_trainer_config(cfg.trainer)
@@ -90,10 +114,11 @@ def build(cfg: DictConfig, extra_callbacks=()):
     check_optimizer(cfg.get("lit"))
     check_scheduler(cfg.get("lit"))
     check_trainer(cfg)
+    set_matmul_precision(cfg.get("matmul_precision", "highest"))
     datamodule = instantiate(cfg.datamodule)
     simulator = instantiate(cfg.model, stats=datamodule.stats())
     simulator.effects_trained.copy_(datamodule.effects_trained())
-    lit = instantiate(cfg.lit, simulator=simulator)
+    lit = instantiate(cfg.lit, simulator=simulator, optimizer=_optimizer(cfg))
     return datamodule, lit, build_trainer(cfg, extra_callbacks)
 
 

@@ -1,0 +1,58 @@
+"""The terms of the training loss (module doc of :mod:`physgnn.training.lit`): the masked MSE
+of the normalised outputs, the energy increase of a predicted step and the rest decision's
+cross-entropy."""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from physgnn.data.state import scene_of_sphere
+from physgnn.models.learned import OUTPUTS, LearnedSimulator
+from physgnn.physics.energy import scene_energy, scene_weight
+from physgnn.physics.integrator import euler_step
+
+
+def energy_increase(state, vel_next: torch.Tensor) -> torch.Tensor:
+    """``[B]``: ``max(E_{t+1} − E_t, 0) / Σ m g`` of every scene (metres of height).
+
+    ``vel_next [N, 3]`` is the predicted ``v̂_{t+1}``; ``E_{t+1}`` uses the Euler-integrated
+    position ``p_t + dt·v̂_{t+1}`` and ``v̂_{t+1}``; ``E_t`` uses ``p_t`` and ``v_t``."""
+    n_scenes = state.num_graphs if hasattr(state, "num_graphs") else 1
+    batch = scene_of_sphere(state)
+    pos_next, _ = euler_step(
+        state.pos, state.quat, vel_next, vel_next, state.scene_dt, rotate=False
+    )
+    args = (state.mass, state.radius, batch, n_scenes)
+    e_now = scene_energy(state.pos, state.vel[:, 0], *args)
+    e_next = scene_energy(pos_next, vel_next, *args)
+    return torch.relu(e_next - e_now) / scene_weight(state.mass, batch, n_scenes)
+
+
+def masked_mse(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    rotating: torch.Tensor,
+    counted: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """Mean squared error of ``[N, 6]`` outputs, angular part only where ``rotating [N]``, and
+    only spheres of ``counted [N]`` (bool, default all; 0 when none is)."""
+    weight = torch.ones_like(pred)
+    weight[:, 3:] = rotating[:, None].to(pred.dtype)
+    if counted is not None:
+        weight = weight * counted[:, None].to(pred.dtype)
+    return ((pred - target) ** 2 * weight).sum() / weight.sum().clamp_min(1.0)
+
+
+def rest_loss(simulator: LearnedSimulator, state, pred: torch.Tensor, reach) -> torch.Tensor:
+    """Binary cross-entropy of the rest logit ``pred[:, 6]`` against
+    :meth:`~physgnn.models.learned.LearnedSimulator.rest_target`, over the spheres in ``reach``
+    (all when None); 0 without a rest decision."""
+    if not simulator.rest_decision:
+        return pred.new_zeros(())
+    label = simulator.rest_target(state).to(pred.dtype)
+    each = F.binary_cross_entropy_with_logits(pred[:, OUTPUTS], label, reduction="none")
+    if reach is None:
+        return each.mean()
+    weight = reach.to(pred.dtype)
+    return (each * weight).sum() / weight.sum().clamp_min(1.0)
