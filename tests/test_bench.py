@@ -14,10 +14,12 @@ from hydra import compose, initialize_config_dir
 from torch.utils.flop_counter import FlopCounterMode
 
 from physgnn.benchmark import scenes as bench_scenes
+from physgnn.benchmark.gpu import gpu_section
 from physgnn.benchmark.learned import frame_states, make_simulator, time_learned
 from physgnn.benchmark.profile import step_flops
-from physgnn.benchmark.run import BenchError, bench
+from physgnn.benchmark.run import BenchError, bench, quick_config
 from physgnn.benchmark.targets import targets
+from physgnn.benchmark.training_tables import gpu_section as gpu_tables
 from physgnn.data.dataset import compute_stats
 from physgnn.groundtruth.engine import simulate
 from physgnn.models.profiling import StepTimer
@@ -44,10 +46,13 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
     out, result = quick
     data = json.loads((out / "bench.json").read_text())
     assert data == json.loads(json.dumps(result))
-    assert set(data) == {"machine", "learned", "pybullet", "training", "gpu_readiness"}
+    assert set(data) == {"machine", "learned", "pybullet", "training", "gpu_readiness", "gpu"}
     assert set(data["gpu_readiness"]) == {"train_step", "rollout_frame"}
     for counts in data["gpu_readiness"].values():
-        assert set(counts) == {"syncs", "kernels", "host_ms"}
+        assert set(counts) == {"syncs", "kernels", "copies", "host_ms"}
+    if not torch.cuda.is_available():
+        assert data["gpu"] is None
+        assert "Skipped: torch saw no CUDA device" in (out / "bench.md").read_text()
     assert set(data["machine"]) == {"cpu", "threads", "matmul_gflops"}
     assert set(data["training"]) == {"pairs_per_s", "nodes_per_s", "share_of_matmul"}
     learned_keys = {
@@ -383,3 +388,20 @@ def test_training_profile_splits_one_step_into_its_parts(quick):
     assert p["share_of_matmul"] == pytest.approx(p["gflops"] / machine["matmul_gflops"])
     text = (out / "bench.md").read_text()
     assert "Where a training step's time goes" in text and "| push-forward |" in text
+
+
+def test_the_gpu_section_runs_on_any_device():
+    cfg = _cfg("quick=true", "gpu.device=cpu")
+    cfg = quick_config(cfg)
+    rng = np.random.default_rng(0)
+    trajectories = bench_scenes.training_trajectories(cfg, rng)
+    runs = {10: {"traj": bench_scenes.bench_run(cfg, 10, rng)}}
+    out = gpu_section(cfg, trajectories, compute_stats(trajectories), runs)
+    assert [r["variant"] for r in out["training"]] == ["eager", "tf32", "bf16"]
+    for row in out["training"]:
+        assert row["steps_per_s"] > 0 and row["nodes_per_s"] > row["steps_per_s"]
+        assert row["batch_size"] == 4 and row["peak_mib"] is None  # no CUDA memory here
+    [frame] = out["rollout"]
+    assert frame["n_spheres"] == 10 and frame["fps"] > 0
+    assert "| bf16 |" in "\n".join(gpu_tables({"gpu": out}))
+    assert torch.get_float32_matmul_precision() == "highest"  # restored after the tf32 row

@@ -6,7 +6,11 @@ import math
 import os
 
 from physgnn.benchmark.targets import targets
-from physgnn.benchmark.training_tables import gpu_readiness_section, training_sections
+from physgnn.benchmark.training_tables import (
+    gpu_readiness_section,
+    gpu_section,
+    training_sections,
+)
 from physgnn.report.format import fmt, md_table
 
 
@@ -239,6 +243,7 @@ def write_markdown(result: dict, extra: dict) -> str:
         accuracy_table(extra),
         *training_sections(extra),
         *gpu_readiness_section(result),
+        *gpu_section(result),
         "## Cost follows activity",
         activity_table(extra),
         "## Speed work in the measured code",

@@ -23,6 +23,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.benchmark import activity, machine, profile, scenes
+from physgnn.benchmark.gpu import gpu_section
 from physgnn.benchmark.gpu_readiness import gpu_readiness
 from physgnn.benchmark.learned import batched_rows, learned_rows
 from physgnn.benchmark.markdown import write_markdown
@@ -63,6 +64,7 @@ def bench(cfg: DictConfig) -> dict:
             part: {k: v for k, v in counts.items() if k != "where"}
             for part, counts in m["gpu_readiness"].items()
         },
+        "gpu": m["gpu"],
     }
     extra = {
         "machine": info,
@@ -100,6 +102,7 @@ def measure(cfg: DictConfig, rng: np.random.Generator, matmul: float, phases: di
     m["batched"] = timed("batched", batched_rows, cfg, runs, stats)
     moving = runs[cfg.gpu_readiness.rollout_size]["traj"]
     m["gpu_readiness"] = timed("gpu readiness", gpu_readiness, cfg, train_trajs, stats, moving)
+    m["gpu"] = timed("gpu", gpu_section, cfg, train_trajs, stats, runs)
     return m
 
 

@@ -72,15 +72,39 @@ def gpu_readiness_section(result: dict) -> list[str]:
     if not g:
         return []
     body = [
-        [part.replace("_", " "), f"{c['syncs']:.1f}", f"{c['kernels']:.0f}", f"{c['host_ms']:.1f}"]
+        [part.replace("_", " "), f"{c['syncs']:.1f}", f"{c.get('copies', 0):.1f}"]
+        + [f"{c['kernels']:.0f}", f"{c['host_ms']:.1f}"]
         for part, c in g.items()
     ]
     return [
         "## What would make a GPU wait (counted on this machine)",
         "Per training step (the default recipe through Lightning, push-forward drawn each step: "
         "the most of the steps counted) and per rollout frame: host round trips a GPU would "
-        "wait for (syncs), aten ops (about one kernel each) and host ms with a network of "
+        "wait for (syncs, of which host-to-device copies), aten ops (about one kernel each) "
+        "and host ms with a network of "
         "hidden size 4, torch neighbour backend (physgnn/benchmark/gpu_readiness.py; the "
         "source lines of the syncs are in bench_extra.json).",
-        md_table(["", "syncs", "kernels", "host ms"], body),
+        md_table(["", "syncs", "copies", "kernels", "host ms"], body),
+    ]
+
+
+def gpu_section(result: dict) -> list[str]:
+    """The GPU rows of ``make bench`` (physgnn/benchmark/gpu.py), or the line saying why none."""
+    g = result.get("gpu")
+    if not g:
+        return ["## GPU", "Skipped: torch saw no CUDA device in this run."]
+    mib = lambda x: "–" if x is None else f"{x:.0f}"  # noqa: E731
+    train = [
+        [r["variant"], f"{r['steps_per_s']:.1f}", f"{r['nodes_per_s']:.0f}", mib(r["peak_mib"])]
+        for r in g["training"]
+    ]
+    frames = [[f"{r['n_spheres']}", f"{r['fps']:.1f}", mib(r["peak_mib"])] for r in g["rollout"]]
+    return [
+        f"## GPU ({g['device']})",
+        "Training of the default recipe at batch "
+        f"{g['training'][0]['batch_size'] if g['training'] else '–'}: optimiser steps and "
+        "spheres per second, peak memory (physgnn/benchmark/gpu.py).",
+        md_table(["variant", "steps/s", "spheres/s", "peak MiB"], train),
+        "Rollout of the baseline (random weights) through physgnn.rollout:",
+        md_table(["spheres", "FPS", "peak MiB"], frames),
     ]

@@ -1,0 +1,140 @@
+"""The bench on a GPU: training steps per second, rollout frames per second and peak memory.
+
+Run by ``make bench`` when torch sees a CUDA device (otherwise one line says it was skipped):
+
+- **training**: optimiser steps per second and spheres per second of the default recipe
+  (input noise, contact noise, push-forward of U{0..K} steps, the loss, backward, clipping,
+  Adam) at the default batch, for each ``variant``: ``eager``; ``tf32`` (fp32 matrix products
+  as TF32, ``matmul_precision=high``); ``bf16`` (autocast to bfloat16, as
+  ``trainer.precision=bf16-mixed``); ``captured`` (graphs padded to buckets and the network
+  compiled with ``mode="reduce-overhead"``: CUDA graphs);
+- **rollout**: frames per second of the baseline through :func:`physgnn.rollout.rollout` on
+  the bench scenes of ``rollout_sizes``;
+- the peak memory of each row (``torch.cuda.max_memory_allocated``).
+
+The same functions run on any device (the tests run them on the CPU with tiny settings).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+
+import torch
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from physgnn.data.pairs import EpochSampler, PairDataset
+from physgnn.models.capture import compile_in_place
+from physgnn.rollout import rollout
+
+VARIANTS = ("eager", "tf32", "bf16", "captured")
+
+
+def gpu_section(cfg: DictConfig, trajectories: list, stats: dict, runs: dict) -> dict | None:
+    """``{"device", "training": [...], "rollout": [...]}`` (module doc) on ``cfg.gpu.device``
+    (``cuda`` by default), or None with one line when that is CUDA and torch sees none."""
+    c = cfg.gpu
+    device = torch.device(c.device)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        print("gpu: skipped (torch sees no CUDA device)", flush=True)
+        return None
+    name = torch.cuda.get_device_name(device) if device.type == "cuda" else str(device)
+    training = [training_row(cfg, trajectories, stats, device, v) for v in c.variants]
+    sizes = [n for n in c.rollout_sizes if n in runs]
+    frames = [rollout_row(cfg.model, stats, runs[n]["traj"], device) for n in sizes]
+    for row in training:
+        print(f"gpu training {row['variant']}: {row['steps_per_s']:.1f} steps/s", flush=True)
+    for row in frames:
+        print(f"gpu rollout n={row['n_spheres']}: {row['fps']:.1f} FPS", flush=True)
+    return {"device": name, "training": training, "rollout": frames}
+
+
+@contextlib.contextmanager
+def _variant(variant: str, device: torch.device):
+    """The precision settings of ``variant`` for the duration (module doc)."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown gpu.variants entry '{variant}'; choose from {list(VARIANTS)}")
+    before = torch.get_float32_matmul_precision()
+    torch.set_float32_matmul_precision("high" if variant == "tf32" else "highest")
+    autocast = torch.autocast(device.type, dtype=torch.bfloat16, enabled=variant == "bf16")
+    try:
+        with autocast:
+            yield
+    finally:
+        torch.set_float32_matmul_precision(before)
+
+
+def _lit(cfg: DictConfig, stats: dict, device: torch.device, variant: str):
+    model = OmegaConf.merge(cfg.model, {"pad_to_buckets": variant == "captured"})
+    simulator = instantiate(model, stats=stats)
+    lit = instantiate(cfg.gpu.lit, simulator=simulator).to(device)
+    if variant == "captured":
+        compile_in_place(simulator.network, mode="reduce-overhead", max_shapes=64)
+    lit.optimizer = lit.optimizer_factory(lit.parameters())
+    return lit
+
+
+def training_row(cfg, trajectories: list, stats: dict, device, variant: str) -> dict:
+    """Steps per second, spheres per second and peak memory of ``cfg.gpu.steps`` timed steps
+    after ``cfg.gpu.warmup_steps`` (module doc)."""
+    c = cfg.gpu
+    _reset_peak(device)
+    lit = _lit(cfg, stats, device, variant)
+    pairs = PairDataset(trajectories, lit.simulator.H, future=int(c.lit.pushforward_steps))
+    pairs = pairs.to(device)
+    total = int(c.warmup_steps + c.steps)
+    sampler = iter(EpochSampler(len(pairs), total * int(c.batch_size), seed=0))
+    nodes, start = 0, None
+    with _variant(variant, device):
+        for step in range(total):
+            if step == c.warmup_steps:
+                _sync(device)
+                start, nodes = time.perf_counter(), 0
+            index = torch.tensor([next(sampler) for _ in range(int(c.batch_size))])
+            batch = pairs.batch(index)
+            _optimiser_step(lit, batch, step)
+            nodes += batch.num_nodes
+    _sync(device)
+    seconds = time.perf_counter() - start
+    return {
+        "variant": variant,
+        "batch_size": int(c.batch_size),
+        "steps_per_s": c.steps / seconds,
+        "nodes_per_s": nodes / seconds,
+        "peak_mib": _peak_mib(device),
+    }
+
+
+def _optimiser_step(lit, batch, step: int) -> None:
+    lit._unroll_length = lambda: lit.pushforward_steps if step % 2 else 0  # mean of U{0..2}
+    loss = lit.training_step(batch, step)
+    lit.optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(lit.parameters(), 1.0)
+    lit.optimizer.step()
+
+
+def rollout_row(model_cfg: DictConfig, stats: dict, traj, device) -> dict:
+    """Frames per second and peak memory of the baseline rolled out over ``traj``."""
+    _reset_peak(device)
+    simulator = instantiate(model_cfg, stats=stats).to(device).eval()
+    rollout(simulator, [traj], n_frames=simulator.H + 3)  # warm-up
+    [result] = rollout(simulator, [traj], n_frames=traj.n_frames)
+    return {"n_spheres": traj.n_spheres, "fps": result.fps, "peak_mib": _peak_mib(device)}
+
+
+def _sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def _reset_peak(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.reset_peak_memory_stats(device)
+
+
+def _peak_mib(device: torch.device) -> float | None:
+    if device.type != "cuda":
+        return None
+    return torch.cuda.max_memory_allocated(device) / 2**20
