@@ -4,7 +4,8 @@
 once per epoch and before every checkpoint, not per step) and the training seconds, and stores
 them in every checkpoint, so a resumed run continues the counts of the whole run.
 :class:`StopOnSignal` turns Ctrl-C (SIGINT), SIGTERM and the pre-emption signal of a submitit
-job (SIGUSR2) into a stop after the current batch: all DDP processes stop at the same step,
+job (SIGUSR2) into a stop after the current batch (with DDP, within SIGNAL_CHECK_EVERY
+batches, so that steps need not ask every process): all DDP processes stop at the same step,
 ``last.ckpt`` is saved there (mid-epoch) and ``fit`` ends with :class:`StopTraining`. A second
 Ctrl-C stops at once. A signal whose handler belongs to a job scheduler is left to it (submitit
 ignores SIGTERM), and after the run is recorded :meth:`StopOnSignal.chain` hands the pre-emption
@@ -138,6 +139,10 @@ def preemption_signal() -> int | None:
     return getattr(signal, "SIG" + os.environ.get("SUBMITIT_PREEMPT_SIGNAL", "USR2"), None)
 
 
+# With DDP, the processes agree on a stop every this many batches (and at an epoch's end)
+SIGNAL_CHECK_EVERY = 10
+
+
 class StopOnSignal(L.Callback):
     """Stop training cleanly on a signal (module doc); :meth:`install` before ``fit``,
     :meth:`restore` after."""
@@ -185,7 +190,12 @@ class StopOnSignal(L.Callback):
         self.install()  # again: Lightning set its own SIGTERM handler when fit started
 
     def on_train_batch_end(self, trainer, pl_module, outputs, batch, batch_idx) -> None:
-        if not trainer.strategy.reduce_boolean_decision(self.signum is not None, all=False):
+        if trainer.world_size == 1:
+            if self.signum is None:
+                return
+        elif (batch_idx + 1) % SIGNAL_CHECK_EVERY and not trainer.is_last_batch:
+            return  # asking the other processes is an all-reduce and a read-back
+        elif not trainer.strategy.reduce_boolean_decision(self.signum is not None, all=False):
             return
         self.signum = self.signum or signal.SIGTERM  # another process was signalled
         raise StopTraining(self.signum, save_last(trainer, always=True))
