@@ -56,32 +56,64 @@ def assert_same_contents(a: Path, b: Path) -> None:
             np.testing.assert_array_equal(data_a, data_b, err_msg=name)
 
 
-def test_two_shards_through_joblib_are_the_one_process_dataset_byte_for_byte(
-    tiny_dataset, tmp_path
-):
+def sweep(outputs: Path, *args: str) -> subprocess.CompletedProcess:
+    """``python -m physgnn.generate -m`` of the tiny preset in two shards, one job each."""
     cmd = [
         sys.executable,
         "-m",
         "physgnn.generate",
         "-m",
         "data=tiny",
-        f"paths.outputs={tmp_path}",
+        f"paths.outputs={outputs}",
         "workers=1",
         "progress=false",
         "num_shards=2",
         "shard=range(0,2)",
-        "hydra/launcher=joblib",
+        *args,
     ]
-    done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-3000:]
-    out = tmp_path / "data" / "tiny"
-    assert done.stdout.strip().splitlines()[-1] == f"dataset written to {out}"
+    return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+
+
+def assert_one_process_dataset(out: Path, tiny_dataset: Path) -> None:
     assert sorted(p.name for p in out.parent.iterdir()) == ["tiny"]  # the shards are gone
     assert sorted(p.name for p in out.iterdir()) == sorted(OUTPUTS)
     for name in OUTPUTS:  # HDF5 as physgnn writes it holds no time stamps: bytes compare
         assert (out / name).read_bytes() == (tiny_dataset / name).read_bytes(), name
     for split in gen.SPLITS:
         assert_same_contents(out / f"{split}.h5", tiny_dataset / f"{split}.h5")
+
+
+def test_two_shards_through_joblib_are_the_one_process_dataset_byte_for_byte(
+    tiny_dataset, tmp_path
+):
+    done = sweep(tmp_path, "hydra/launcher=joblib")
+    assert done.returncode == 0, done.stderr[-3000:]
+    out = tmp_path / "data" / "tiny"
+    assert done.stdout.strip().splitlines()[-1] == f"dataset written to {out}"
+    assert_one_process_dataset(out, tiny_dataset)
+
+
+@pytest.mark.slow
+def test_two_shards_through_submitit_are_the_one_process_dataset(tiny_dataset, tmp_path):
+    """submitit's local executor: the SLURM launcher's, minus SLURM."""
+    done = sweep(tmp_path, "hydra/launcher=submitit_local")
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert_one_process_dataset(tmp_path / "data" / "tiny", tiny_dataset)
+
+
+@pytest.mark.slow
+def test_a_failed_shard_job_ends_the_sweep_in_one_line_naming_it(tmp_path):
+    in_the_way = tmp_path / "data" / "tiny.shards" / "shard-1-of-2"
+    in_the_way.mkdir(parents=True)
+    (in_the_way / "notes.txt").write_text("mine")
+    done = sweep(tmp_path, "hydra/launcher=joblib")
+    assert done.returncode == 2
+    errors = [line for line in done.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 2 and "Traceback" not in done.stderr
+    assert errors[0].endswith("(this job failed; the sweep goes on)")
+    assert errors[1].startswith("error: shard 1 of 2 missing in ")
+    assert (in_the_way / "notes.txt").read_text() == "mine"
+    assert not (tmp_path / "data" / "tiny").exists()
 
 
 def test_shards_merged_in_process_hold_every_trajectory_once(tiny_dataset, tmp_path):
@@ -198,3 +230,16 @@ def test_the_end_of_a_sweep_merges_only_a_sweep_over_every_shard(tmp_path):
     gen.generate(cfg(tmp_path, "shard=1", "num_shards=2"))
     out = tmp_path / "data" / "tiny"
     assert gen.after_sweep(sweep, {"shard": [0, 1]}) == f"dataset written to {out}"
+
+
+def test_shards_started_together_share_their_folder_a_foreign_one_is_refused(tmp_path):
+    root = tmp_path / "a" / "data" / "tiny.shards"
+    root.mkdir(parents=True)  # made by a shard started at the same moment, not marked yet
+    folder = gen.generate(cfg(tmp_path / "a", "shard=0", "num_shards=2"))
+    assert (folder / MANIFEST).is_file()
+    foreign = tmp_path / "b" / "data" / "tiny.shards"
+    foreign.mkdir(parents=True)
+    (foreign / "notes.txt").write_text("mine")
+    with pytest.raises(FileExistsError, match=r"holds files that physgnn did not write \(notes"):
+        gen.generate(cfg(tmp_path / "b", "shard=0", "num_shards=2"))
+    assert [p.name for p in foreign.iterdir()] == ["notes.txt"]

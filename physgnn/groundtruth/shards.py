@@ -154,17 +154,24 @@ def write_shard(cfg: DictConfig, jobs: list[Job], i: int, n: int, source: Callab
 
 
 def _claim_root(root: Path, preset: str) -> None:
-    """Make the shards' folder ours (marked); one with files physgnn did not write is refused.
-    Shards started together may make it at once: an unmarked one holding only shards is ours."""
-    root.mkdir(parents=True, exist_ok=True)
-    if is_dataset(root):
+    """Make the shards' folder, marked as physgnn's; one with files physgnn did not write is
+    refused. Shards started together make it at once: the one whose ``mkdir`` succeeds marks
+    it, the others take it as it is (holding nothing but the marker and shards)."""
+    try:
+        root.mkdir(parents=True)
+    except FileExistsError:
+        if not root.is_dir():
+            raise FileExistsError(
+                f"{root} is a file: move it, or choose another data.dir"
+            ) from None
+        mine = (DATASET_MARKER, "shard-")
+        foreign = [p.name for p in root.iterdir() if not p.name.startswith(mine)]
+        if foreign and not is_dataset(root):
+            raise FileExistsError(
+                f"{root} holds files that physgnn did not write ({foreign[0]}): move them "
+                "away, or choose another data.dir"
+            ) from None
         return
-    foreign = [p.name for p in root.iterdir() if not p.name.startswith((DATASET_MARKER, "shard-"))]
-    if foreign:
-        raise FileExistsError(
-            f"{root} holds files that physgnn did not write ({foreign[0]}): move them away, "
-            "or choose another data.dir"
-        )
     write_marker(root, preset)
 
 
@@ -258,5 +265,5 @@ def remove_shards(out: Path, n: int) -> None:
     for i in range(n):
         clear(shard_dir(out, i, n))
     root = shards_root(out)
-    if root.is_dir() and all(p.name == DATASET_MARKER for p in root.iterdir()):
+    if is_dataset(root) and all(p.name == DATASET_MARKER for p in root.iterdir()):
         shutil.rmtree(root)
