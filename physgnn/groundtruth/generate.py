@@ -110,7 +110,7 @@ def after_sweep(cfg: DictConfig, swept: dict[str, list]) -> str | None:
     that ran every shard merges them (a shard that failed is then one line naming it); one
     that ran some of them says how to merge once all are written. Other sweeps: nothing."""
     n, ran = cfg.get("num_shards"), swept.get("shard")
-    if ran is None or n is None or cfg.get("merge"):
+    if ran is None or not isinstance(n, int) or cfg.get("merge"):
         return None
     varied = [k for k, values in swept.items() if len(values) > 1 and k != "shard"]
     left = sorted(set(range(n)) - set(ran))
