@@ -13,6 +13,8 @@ PIP := $(VENV)/bin/pip
 TORCH_PIN ?= torch==2.13.0
 PRESET ?= small
 ARGS ?=
+SHARDS ?= 2
+LAUNCHER ?= local
 EXPERIMENT ?= ablation_M
 # OpenMP threads spin briefly, then sleep: the default 300 000 spins made 2-thread steps about
 # 8x slower when other processes kept the cores busy (physgnn/__init__.py, docs/PERFORMANCE.md).
@@ -44,6 +46,9 @@ format: ## Format and autofix with ruff
 
 data: ## Generate the dataset (PRESET=small|tiny|paper) under outputs/data/<preset>
 	$(PY) -m physgnn.generate data=$(PRESET) $(ARGS)
+
+data-shards: ## Generate the dataset in SHARDS shards, one job each of a Hydra launcher, merged at the end (PRESET= SHARDS=2 LAUNCHER=local|slurm_cpu; docs/DATA.md)
+	$(PY) -m physgnn.generate -m data=$(PRESET) num_shards=$(SHARDS) 'shard=range(0,$(SHARDS))' hydra/launcher=$(LAUNCHER) $(ARGS)
 
 data-report: ## Print Table 1 of the dataset (PRESET=small; PHYSGNN_OUTPUTS moves outputs/)
 	$(PY) -m physgnn.data_report preset=$(PRESET) $(ARGS)
@@ -86,4 +91,4 @@ clean: ## Remove caches (keeps outputs/)
 	rm -rf .pytest_cache .ruff_cache .hypothesis site
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +
 
-.PHONY: help install test test-slow lint format data data-report train sweep study eval bench sleep-study clean ship default-table fingerprint learning-curve docs
+.PHONY: help install test test-slow lint format data data-shards data-report train sweep study eval bench sleep-study clean ship default-table fingerprint learning-curve docs

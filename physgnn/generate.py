@@ -1,5 +1,5 @@
 """``python -m physgnn.generate [data=small|tiny|paper] [overwrite=true] [workers=N]
-[export_scene=FOLDER]``.
+[export_scene=FOLDER] [shard=i num_shards=n | merge=true num_shards=n]``.
 
 The work is :func:`physgnn.groundtruth.generate.generate` (``make data``).
 """
