@@ -57,12 +57,12 @@ def check_trainer_config(trainer_cfg: DictConfig) -> None:
 def several_processes(trainer_cfg: DictConfig) -> bool:
     """Whether the trainer may start several processes: ``devices`` other than 1 (2, -1,
     ``auto``, ``"0,1"``, a list of several), or ``num_nodes`` > 1."""
-    devices = trainer_cfg.get("devices", "auto")
-    if int(trainer_cfg.get("num_nodes") or 1) > 1:
+    devices, nodes = trainer_cfg.get("devices", "auto"), trainer_cfg.get("num_nodes")
+    if isinstance(nodes, int) and nodes > 1:
         return True
     if OmegaConf.is_list(devices) or isinstance(devices, list | tuple):
         return len(devices) > 1
-    return str(devices).strip().rstrip(",") not in ("1", "0")  # "0," is GPU 0 only
+    return str(devices).strip().rstrip(",") not in ("1", "0")  # "0,": the GPU of index 0
 
 
 def strategy_of(trainer_cfg: DictConfig):
