@@ -14,8 +14,8 @@ from omegaconf import OmegaConf
 from physgnn.cli import check_outputs_env, command
 from physgnn.data.dataset import DatasetError, generate_hint
 from physgnn.errors import ConfigError
+from physgnn.training.build import check_trainer_config
 from physgnn.training.datamodule import StatePairDataModule
-from physgnn.training.train import check_trainer_config
 
 
 def test_a_preset_folder_is_named_by_its_preset_with_overwrite_when_it_exists(

@@ -1,8 +1,10 @@
-"""The distributed path, run for real on CPU (README "Sweeps, clusters and several GPUs"): a
-2-job sweep with the joblib launcher and with submitit's local executor (the executor of the
-SLURM launcher, minus SLURM), a pre-empted submitit job that is requeued and resumes by itself,
-and 2-process DDP (gloo) whose losses and weights match one process on the same global batch.
-Those start Python processes, so they are slow tests; how the pairs are shared out is not."""
+"""The distributed path, run for real on CPU (docs/CLUSTERS.md): a tiny 2-process DDP run
+(gloo) with test hooks (tests/ddp_hooks.py) that shows each process's own noise, the shared
+push-forward length, one rollout score and checkpoint, and a NaN in one process stopping both;
+the strategy several devices get; and, slow: a 2-job sweep with the joblib launcher and with
+submitit's local executor (the executor of the SLURM launcher, minus SLURM), a pre-empted
+submitit job that is requeued and resumes by itself, and 2-process DDP whose losses and
+weights match one process on the same global batch."""
 
 from __future__ import annotations
 
@@ -13,15 +15,21 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 import torch
 from conftest import compose_generate
+from lightning.pytorch.strategies import DDPStrategy, SingleDeviceStrategy
+from omegaconf import OmegaConf
 from test_train import SHORT, config, outputs_of
 
 from physgnn.data.pairs import EpochSampler
 from physgnn.groundtruth.generate import generate
-from physgnn.training.runs import read_run_json
+from physgnn.training.build import build_trainer, several_processes, strategy_of
+from physgnn.training.callbacks import RolloutCallback
+from physgnn.training.noise import RANK_STRIDE
+from physgnn.training.runs import load_run, read_run_json
 from physgnn.training.train import train
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -88,12 +96,81 @@ def wait_for_glob(root: Path, pattern: str, proc, timeout: float = 300) -> list[
 @pytest.fixture(scope="module")
 def three_sphere_dataset(tmp_path_factory) -> Path:
     """Every scene with exactly 3 spheres: per-process loss means then average to the
-    global one, as DDP averages gradients."""
+    global one, as DDP averages gradients. Two validation trajectories: one for each of two
+    processes' rollouts."""
     outputs = tmp_path_factory.mktemp("outputs")
     cfg = compose_generate(["data=tiny", f"paths.outputs={outputs}", "workers=1",
                             "progress=false", "data.scene.n_min=3", "data.scene.n_max=3",
-                            "data.splits.train=4"])  # fmt: skip
+                            "data.splits.train=4", "data.splits.val=2"])  # fmt: skip
     return generate(cfg)
+
+
+# A tiny 2-process run: 3 epochs of 2 steps of 2 × 4 pairs, hidden size 8, the default noise
+# and contact noise, push-forward from the first step, a validation rollout every epoch; the
+# loss of process 1 is NaN at step 5, epoch 2's last batch.
+TINY_DDP = ["trainer=ddp_cpu", "trainer.devices=2", "data=tiny", "seed=5", "model.M=1",
+            "model.hidden=8", "trainer.max_epochs=3", "trainer.max_time=null",
+            "trainer.enable_progress_bar=false", "trainer.enable_model_summary=false",
+            "datamodule.batch_size=4", "datamodule.pairs_per_epoch=16", "datamodule.val_pairs=8",
+            "lit.pushforward_after=0", "callbacks.rollout.every_n_epochs=1"]  # fmt: skip
+HANG_S = 120  # a run still going after this long hangs
+
+
+@pytest.fixture(scope="module")
+def ddp_run(three_sphere_dataset, tmp_path_factory) -> dict:
+    """``tests/ddp_hooks.py`` (physgnn.train with a probe and the NaN) on 2 gloo processes:
+    exit code, stderr, run folder and what each process probed. Still running after
+    ``HANG_S`` (a hang), both processes are killed and the tests fail."""
+    run_dir, probe = tmp_path_factory.mktemp("ddp") / "run", tmp_path_factory.mktemp("probe")
+    cmd = [sys.executable, str(ROOT / "tests" / "ddp_hooks.py"), *TINY_DDP,
+           f"data.dir={three_sphere_dataset}", f"hydra.run.dir={run_dir}"]  # fmt: skip
+    env = os.environ | {"PHYSGNN_PROBE": str(probe), "PHYSGNN_NAN_AT": "1:5"}
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
+    try:
+        _, err = proc.communicate(timeout=HANG_S)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)  # the launcher and the process it started
+        _, err = proc.communicate()
+        pytest.fail(f"2 DDP processes still running after {HANG_S} s (a hang): {err[-2000:]}")
+    probes = [json.loads((probe / f"rank{r}.json").read_text()) for r in (0, 1)]
+    return {"code": proc.returncode, "err": err, "run_dir": run_dir, "probes": probes}
+
+
+def test_a_nan_in_one_ddp_process_stops_both_with_the_one_line_error(ddp_run):
+    # step 5 is an epoch's last batch, where finiteness is read: process 0's own losses are
+    # all finite there, and without the shared read it would go on and wait for process 1
+    line = ("error: non-finite training loss (nan) at epoch 2, step 5 in DDP process 1 of 2: "
+            "the model exploded, training stopped")  # fmt: skip
+    assert ddp_run["code"] == 1, ddp_run["err"][-3000:]
+    assert ddp_run["err"].count(line) == 2  # one line from each process
+    assert read_run_json(ddp_run["run_dir"])["status"] == "diverged"
+
+
+def test_ddp_processes_draw_their_own_noise_and_the_same_unroll(ddp_run):
+    zero, one = (p["steps"] for p in ddp_run["probes"])
+    # noise of (seed, process, step): process 0 draws what one process draws (seed 5)
+    assert [s[:2] for s in zero] == [[k, 5 * 1_000_003 + k] for k in range(6)]
+    assert [s[1] for s in one] == [s[1] + RANK_STRIDE for s in zero]
+    # the push-forward length (it shapes the graph) is the same in both, and not always 0
+    assert [s[2] for s in one] == [s[2] for s in zero] and any(s[2] for s in zero)
+
+
+def test_ddp_processes_log_one_rollout_score_and_choose_one_checkpoint(
+    ddp_run, three_sphere_dataset
+):
+    zero, one = ddp_run["probes"]
+    # each process rolled out one validation trajectory; both logged the score of the two
+    assert zero["rolled"] == one["rolled"] == [1, 1]
+    assert len(zero["scores"]) == 2 and zero["scores"] == one["scores"]
+    assert zero["best"] == one["best"] and zero["best_score"] == one["best_score"]
+    # the score one process gets from that checkpoint's weights on both trajectories
+    simulator, _, info = load_run(ddp_run["run_dir"])
+    assert info["checkpoint"] == zero["best"]
+    both = RolloutCallback(n_val_trajectories=2, max_frames=None, ood=False)
+    module = SimpleNamespace(simulator=simulator, log=lambda *a, **k: None)
+    alone = both.log_rollouts(module, three_sphere_dataset)["val/rollout_score"]
+    assert alone == pytest.approx(zero["best_score"], rel=1e-5) and alone < float("inf")
 
 
 @pytest.mark.slow
@@ -122,6 +199,30 @@ def test_two_ddp_processes_match_one_on_the_same_global_batch(three_sphere_datas
     w2 = torch.load(two["checkpoints"]["last"], weights_only=True)["state_dict"]
     for key, value in w1.items():
         torch.testing.assert_close(w2[key], value, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("accelerator", ["cpu", "gpu"])
+def test_several_devices_get_ddp_that_finds_unused_parameters(accelerator, tiny_dataset, tmp_path):
+    cfg = config(tiny_dataset, tmp_path, f"trainer={accelerator}", "trainer.devices=2")
+    strategy = strategy_of(cfg.trainer)  # what the Trainer is built with (no GPU needed)
+    assert isinstance(strategy, DDPStrategy)
+    assert strategy._ddp_kwargs == {"find_unused_parameters": True}
+    if accelerator == "cpu":  # the Trainer itself
+        trainer = build_trainer(cfg)
+        assert isinstance(trainer.strategy, DDPStrategy) and trainer.num_devices == 2
+        assert trainer.strategy._ddp_kwargs == {"find_unused_parameters": True}
+    one = build_trainer(config(tiny_dataset, tmp_path, "trainer=cpu"))
+    assert isinstance(one.strategy, SingleDeviceStrategy)
+
+
+@pytest.mark.parametrize(
+    "devices,nodes,several",
+    [(1, 1, False), ("1", 1, False), ([0], 1, False), ("0,", 1, False), (1, 2, True),
+     (2, 1, True), (-1, 1, True), ("auto", 1, True), ("0,1", 1, True), ([0, 1], 1, True)],
+)  # fmt: skip
+def test_what_counts_as_several_processes(devices, nodes, several):
+    trainer = OmegaConf.create({"devices": devices, "num_nodes": nodes})
+    assert several_processes(trainer) is several
 
 
 @pytest.mark.parametrize("num_samples", [12, 13])

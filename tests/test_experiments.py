@@ -13,7 +13,7 @@ from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from simdata import REPORT_MODEL
 
-from physgnn.training.train import build
+from physgnn.training.build import build, strategy_of
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 # Experiments of one run (not sweeps), with their optimiser-step budget.
@@ -175,7 +175,8 @@ def test_other_config_choices_compose(choice, tmp_path):
         assert cfg.logger.offline is True
     if choice == "trainer=ddp":
         # the network skips the MLPs of absent interactions: DDP must allow unused parameters
-        assert cfg.trainer.strategy == "ddp_find_unused_parameters_true"
+        strategy = strategy_of(cfg.trainer)
+        assert strategy._ddp_kwargs == {"find_unused_parameters": True}
         assert cfg.trainer.accelerator == "gpu"
     if choice == "callbacks=rollout":
         names = [type(instantiate(c)).__name__ for c in cfg.callbacks.values()]
@@ -183,6 +184,12 @@ def test_other_config_choices_compose(choice, tmp_path):
         assert cfg.callbacks.rollout.ood is True and cfg.callbacks.checkpoint.monitor == (
             "val/rollout_score"
         )
+
+
+@pytest.mark.parametrize("preset,frames", [("tiny", None), ("small", None), ("paper", 300)])
+def test_the_data_preset_sizes_the_validation_rollouts(preset, frames, tmp_path):
+    rollout = compose_train([f"data={preset}", f"run_dir={tmp_path}"]).callbacks.rollout
+    assert (rollout.n_val_trajectories, rollout.max_frames) == (10, frames)
 
 
 @pytest.mark.parametrize(

@@ -351,6 +351,22 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
         ("lit.optimizer.lr=-1", "lit.optimizer.lr must be a number > 0, got -1 (conf/train.yaml"),
         ("seed=-5", "seed must be a whole number from 0 to 4294967295, got -5 (conf/train.yaml"),
         (
+            "trainer.strategy=ddp",
+            "trainer.strategy=ddp fails at the first batch without contacts (the network "
+            "skips the MLPs a batch lacks): leave trainer.strategy=auto (DDP is chosen for "
+            "several devices) or set trainer.strategy=ddp_find_unused_parameters_true",
+        ),
+        ("data.val_rollout.frames=3", "data.val_rollout.frames must be a whole number >= 4, got 3"),
+        (
+            "~data.val_rollout",
+            "data.val_rollout.trajectories is missing (data=tiny): add val_rollout: "
+            "{trajectories: 10, frames: null} to the preset, as conf/data/small.yaml has it",
+        ),
+        (
+            "callbacks.rollout.n_val_trajectories=0",
+            "callbacks.rollout.n_val_trajectories must be a whole number >= 1, got 0",
+        ),
+        (
             "~callbacks.rollout",
             "callbacks.checkpoint.monitor=val/rollout_score is logged by the "
             "rollout callback only: keep callbacks.rollout, or set callbacks.checkpoint.monitor="

@@ -28,7 +28,7 @@ from test_train import config
 
 from physgnn.data.dataset import read_split
 from physgnn.rollout import rollout
-from physgnn.training.train import build
+from physgnn.training.build import build
 
 PINNED = Path(__file__).with_name("fingerprint.json")
 CONFIG = [

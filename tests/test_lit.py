@@ -27,6 +27,7 @@ from physgnn.training.lit import (
     regime_scale,
     rest_loss,
 )
+from physgnn.training.noise import noise_seed
 
 ADAM = functools.partial(torch.optim.Adam, lr=1e-3)
 
@@ -260,6 +261,37 @@ def test_push_forward_growth_lengthens_the_unroll_step_by_step():
             draws.add(lit._unroll_length())
         highs[step] = max(draws)
     assert highs == {9: 0, 10: 1, 14: 1, 15: 2, 20: 3, 40: 3}
+
+
+class AtRank(AtStep):
+    """... and its DDP process."""
+
+    rank = 0
+
+    @property
+    def global_rank(self) -> int:
+        return self.rank
+
+
+def test_each_ddp_process_draws_its_own_noise_and_all_the_same_unroll():
+    lit = AtRank(LearnedSimulator(STATS, H=1, M=1, hidden=8), ADAM, seed=3, pushforward_after=0)
+    draws = {}
+    for lit.at in range(20):
+        for lit.rank in range(3):
+            noise = torch.rand(4, generator=lit._noise_generator())
+            draws[lit.at, lit.rank] = (noise, lit._unroll_length())
+    # process 0 draws what one process always drew: seeded by seed · 1 000 003 + step
+    alone = torch.Generator().manual_seed(3 * 1_000_003 + 7)
+    assert torch.equal(draws[7, 0][0], torch.rand(4, generator=alone))
+    assert len({tuple(noise.tolist()) for noise, _ in draws.values()}) == 60  # all differ
+    assert all(draws[k, r][1] == draws[k, 0][1] for k, r in draws)
+    assert {draws[k, 0][1] for k in range(20)} == {0, 1, 2}
+    lit.at, lit.rank = 7, 1  # reproducible for (seed, process, step)
+    assert torch.equal(torch.rand(4, generator=lit._noise_generator()), draws[7, 1][0])
+    # the CPU generator takes a seed's low 32 bits: those of any two of 1 024 processes lie
+    # 1.9 million steps apart or more (noise.RANK_STRIDE)
+    low = [(noise_seed(0, 0, d) % 2**32) for d in range(1, 1024)]
+    assert min(min(x, 2**32 - x) for x in low) > 1_900_000
 
 
 def test_contact_settings_out_of_range_are_refused():

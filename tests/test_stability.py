@@ -30,7 +30,7 @@ from physgnn.physics.trajectory import Trajectory
 from physgnn.report import freefall as freefall_report
 from physgnn.report import stability as stability_report
 from physgnn.rollout import rollout
-from physgnn.training.train import build
+from physgnn.training.build import build
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE_DIR = ROOT / "conf" / "scene"

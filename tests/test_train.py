@@ -14,9 +14,10 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from physgnn import train as train_command
+from physgnn.training.build import build
 from physgnn.training.progress import RunProgress
 from physgnn.training.runs import checkpoint_of, load_run
-from physgnn.training.train import build, train
+from physgnn.training.train import train
 
 CONF = str(Path(__file__).resolve().parents[1] / "conf")
 SHORT = [

@@ -24,6 +24,10 @@ model that lets spheres sink scores well on it). The terms are logged too:
 ``val/max_depth``, ``val/tunnelled``, ``val/rest_drift``. Validation data only: test and OOD
 scenes never choose anything. Between two rollout epochs the score of the latest one is logged
 again, so a checkpoint callback monitoring it finds it at every validation.
+
+Under DDP the processes share the rollouts out (process r rolls out every r-th trajectory)
+and gather every row, so each process logs the same values, computed from the rows in file
+order, and the checkpoint callbacks of all processes choose the same checkpoint.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from pathlib import Path
 import lightning as L
 import numpy as np
 import torch
+import torch.distributed as dist
 
 from physgnn import metrics
 from physgnn.data.dataset import read_split
@@ -94,6 +99,21 @@ class RolloutCallback(L.Callback):
             simulator.train(was_training)
         return rows, fps
 
+    def shared_rollouts(self, simulator, trajectories: list) -> tuple[list[dict], list[float]]:
+        """:meth:`rollout_metrics` of ``trajectories``; under DDP each process rolls out its
+        share and gathers the others' rows, so every process returns the same rows."""
+        world = dist.get_world_size() if dist.is_available() and dist.is_initialized() else 1
+        if world == 1:
+            return self.rollout_metrics(simulator, trajectories)
+        mine = trajectories[dist.get_rank() :: world]
+        share = self.rollout_metrics(simulator, mine) if mine else ([], [])
+        parts: list = [None] * world
+        dist.all_gather_object(parts, share)
+        rows: list = [None] * len(trajectories)
+        for rank, (part, _) in enumerate(parts):
+            rows[rank::world] = part
+        return rows, [f for _, fps in parts for f in fps]
+
     def on_validation_epoch_end(self, trainer: L.Trainer, pl_module: L.LightningModule) -> None:
         if trainer.sanity_checking:
             return
@@ -139,7 +159,7 @@ class RolloutCallback(L.Callback):
                 trajs = self._trajectories(data_dir, split)
                 if not trajs:
                     continue
-                rows, fps = self.rollout_metrics(pl_module.simulator, trajs)
+                rows, fps = self.shared_rollouts(pl_module.simulator, trajs)
                 all_fps += fps
                 for key, name in keys.items():
                     vals = [r[key] for r in rows if r[key] is not None]
@@ -155,6 +175,6 @@ class RolloutCallback(L.Callback):
                     )
         if all_fps:
             values["rollout/fps"] = float(np.mean(all_fps))
-        for name, value in values.items():
+        for name, value in values.items():  # the same in every DDP process: nothing to sync
             pl_module.log(name, value, on_step=False, on_epoch=True, sync_dist=False)
         return values

@@ -3,12 +3,15 @@
 ``if not torch.isfinite(loss)`` every step is a host round trip per step on a GPU.
 :class:`FiniteWatch` keeps the first non-finite loss of the steps since its last read on the
 device and reads it back every ``FINITE_CHECK_EVERY`` steps and at the last batch of an epoch,
-before validation or a checkpoint can see the weights that step made.
+before validation or a checkpoint can see the weights that step made. Under DDP every process
+reads at the same steps and gathers the others' watches in that read, so a non-finite loss in
+one process stops them all with the same error (none is left waiting in a collective).
 """
 
 from __future__ import annotations
 
 import torch
+import torch.distributed as dist
 
 from physgnn.errors import PhysgnnError
 
@@ -22,9 +25,29 @@ class NonFiniteLossError(PhysgnnError, RuntimeError):
     exit_code = 1
 
 
+def processes() -> int:
+    """DDP processes of this run (1 without a process group)."""
+    return dist.get_world_size() if dist.is_available() and dist.is_initialized() else 1
+
+
+def first_bad(watch: torch.Tensor) -> tuple[int, float, int]:
+    """``(at, value, process)`` of the earliest non-finite loss of every process's ``watch``
+    ``[at, value]`` (``at`` -1: none): one read-back, one gather under DDP."""
+    world = processes()
+    if world == 1:
+        at, value = watch.tolist()
+        return int(at), value, 0
+    parts = [torch.empty_like(watch) for _ in range(world)]
+    dist.all_gather(parts, watch)
+    found = [(at, rank, value) for rank, (at, value) in enumerate(torch.stack(parts).tolist())]
+    at, rank, value = min((f for f in found if f[0] >= 0), default=(-1, 0, 0.0))
+    return int(at), value, rank
+
+
 class FiniteWatch:
     """Raises :class:`NonFiniteLossError` naming the epoch and step of the first non-finite
-    loss, at the latest ``FINITE_CHECK_EVERY`` steps after it or at its epoch's last batch."""
+    loss (and its process under DDP), at the latest ``FINITE_CHECK_EVERY`` steps after it or at
+    its epoch's last batch."""
 
     def __init__(self):
         self.watch: tuple[torch.Tensor, torch.Tensor] | None = None
@@ -40,11 +63,13 @@ class FiniteWatch:
             self.read()
 
     def read(self) -> None:
-        at, value = torch.stack(self.watch).tolist()  # the one read-back
+        at, value, rank = first_bad(torch.stack(self.watch))
         unchecked, self.unchecked, self.watch = self.unchecked, [], None
         if at >= 0:
-            epoch, step = unchecked[int(at)]
+            epoch, step = unchecked[at]
+            world = processes()
+            where = f" in DDP process {rank} of {world}" if world > 1 else ""
             raise NonFiniteLossError(
-                f"non-finite training loss ({value}) at epoch {epoch}, step {step}: the model "
-                "exploded, training stopped"
+                f"non-finite training loss ({value}) at epoch {epoch}, step {step}{where}: the "
+                "model exploded, training stopped"
             )

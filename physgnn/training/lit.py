@@ -50,7 +50,7 @@ from physgnn.training.contacts import contact_penalty, perturb_contacts
 from physgnn.training.epoch_means import EpochMeans
 from physgnn.training.finite import FiniteWatch, NonFiniteLossError  # noqa: F401 (its home)
 from physgnn.training.losses import energy_increase, masked_mse, rest_loss
-from physgnn.training.noise import add_noise, regime_scale  # noqa: F401 (re-exported)
+from physgnn.training.noise import add_noise, noise_seed, regime_scale  # noqa: F401 (re-exported)
 
 
 @torch.no_grad()
@@ -90,8 +90,8 @@ class LitSimulator(L.LightningModule):
     """Trains a :class:`LearnedSimulator` on one-step pairs.
 
     ``optimizer``: a partial (``_partial_: true``) taking the parameters; ``scheduler``: an
-    optional partial taking the optimizer, stepped once per epoch. ``seed`` seeds the noise and
-    the push-forward length of each step together with the step number.
+    optional partial taking the optimizer, stepped once per epoch. ``seed`` seeds the noise (and
+    the DDP process) and the push-forward length of each step together with the step number.
     ``pushforward_steps`` = K (0: one-step training only) starts at step ``pushforward_after``;
     with ``pushforward_growth`` = G > 0 the longest unroll grows, 1 from ``pushforward_after``,
     then one more every G steps up to K (longer unrolls once the model is good enough to make
@@ -191,21 +191,22 @@ class LitSimulator(L.LightningModule):
             )
 
     def _noise_generator(self) -> torch.Generator:
-        """Seeded by (seed, global step): a resumed run draws the same noise as a straight one."""
+        """Seeded by (seed, DDP process, global step) (:func:`noise_seed`): a resumed run draws
+        the same noise as a straight one, and every process its own."""
         generator = torch.Generator(device=self.device)
-        return generator.manual_seed(self.seed * 1_000_003 + self.global_step)
+        return generator.manual_seed(noise_seed(self.seed, self.global_step, self.global_rank))
 
     def _unroll_length(self) -> int:
         """Push-forward steps of this batch, ``U{0..K}`` (0 before ``pushforward_after``; K
-        grown as the class doc says), drawn on the host from (seed, global step): no value of
-        the device is read for it."""
+        grown as the class doc says), drawn on the host from (seed, global step), the same in
+        every DDP process: no value of the device is read for it."""
         if self.pushforward_steps == 0 or self.global_step < self.pushforward_after:
             return 0
         high = self.pushforward_steps + 1
         if self.pushforward_growth > 0:
             grown = 2 + (self.global_step - self.pushforward_after) // self.pushforward_growth
             high = min(high, grown)
-        return random.Random(self.seed * 1_000_003 + self.global_step).randrange(high)
+        return random.Random(noise_seed(self.seed, self.global_step)).randrange(high)
 
     def training_step(self, batch, batch_idx: int) -> torch.Tensor:
         generator = self._noise_generator()

@@ -8,6 +8,19 @@ import torch
 from physgnn.models.learned import LearnedSimulator
 from physgnn.physics import quaternion as Q
 
+# Seeds of DDP process r: r · RANK_STRIDE above process 0's. The CPU generator takes a seed's
+# low 32 bits; this odd stride (2³² / golden ratio) keeps the seeds of any two of up to 1 024
+# processes at least 1.9 million apart modulo 2³², more steps than any run takes.
+RANK_STRIDE = 2_654_435_761
+
+
+def noise_seed(seed: int, step: int, rank: int = 0) -> int:
+    """The seed of the random draws of training step ``step`` in DDP process ``rank``: every
+    process draws its own noise, reproducible for (seed, rank, step); process 0 (and a run of
+    one process) draws what one process always drew, and rank 0's seed is also what every
+    process shares (the push-forward length)."""
+    return seed * 1_000_003 + step + rank * RANK_STRIDE
+
 
 def regime_scale(state, simulator: LearnedSimulator, rest_scale: float) -> torch.Tensor:
     """``[N, 1, 1]``: each sphere's noise factor ``clamp(s / σ_v, rest_scale, 1)``, s its

@@ -20,106 +20,20 @@ from pathlib import Path
 import lightning as L
 import torch
 from hydra.core.hydra_config import HydraConfig
-from hydra.utils import instantiate
 from lightning.pytorch.callbacks import Timer
 from lightning.pytorch.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError, Interrupted, check_seed, one_line, signal_name
 from physgnn.files import write_text
-from physgnn.training.checkpoint_io import AtomicCheckpointIO
-from physgnn.training.checks import (
-    check_arguments,
-    check_budget,
-    check_checkpoint,
-    check_monitors,
-    check_optimizer,
-    check_run_dir,
-    check_scheduler,
-    resume_from,
-)
+from physgnn.training.build import build
+from physgnn.training.checks import check_checkpoint, check_run_dir, resume_from
 from physgnn.training.lit import NonFiniteLossError
 from physgnn.training.progress import RunProgress, StopOnSignal, StopTraining, save_last
 from physgnn.training.runlog import run_log
 from physgnn.training.runs import write_run_json
 
 log = logging.getLogger(__name__)
-
-NUMERIC_TRAINER_KEYS = ("max_epochs", "max_steps", "gradient_clip_val", "log_every_n_steps")
-
-
-def check_trainer_config(trainer_cfg: DictConfig) -> None:
-    """Catch a non-numeric value before Lightning fails on it deep inside ``fit``."""
-    for key in NUMERIC_TRAINER_KEYS:
-        value = trainer_cfg.get(key)
-        if value is not None and not isinstance(value, int | float):
-            raise ConfigError(f"trainer.{key} must be a number, got {value!r}")
-    if trainer_cfg.get("accelerator") in ("gpu", "cuda") and not torch.cuda.is_available():
-        raise ConfigError(
-            f"trainer.accelerator={trainer_cfg.accelerator} needs a CUDA GPU and torch sees "
-            "none (torch.cuda.is_available() is False): train on the CPU (trainer=cpu, the "
-            "default), or on a machine with a GPU and a CUDA build of torch"
-        )
-
-
-MATMUL_PRECISIONS = ("highest", "high", "medium")
-
-
-def set_matmul_precision(value: str) -> None:
-    """``torch.set_float32_matmul_precision``: ``high`` lets fp32 matrix products use TF32 on
-    GPUs that have it; a one-line error for another value."""
-    if value not in MATMUL_PRECISIONS:
-        raise ConfigError(
-            f"matmul_precision must be one of {list(MATMUL_PRECISIONS)}, got {value!r}"
-        )
-    torch.set_float32_matmul_precision(value)
-
-
-def _optimizer(cfg: DictConfig):
-    """``lit.optimizer``, not fused under mixed precision: Lightning clips the gradients of a
-    fused optimizer only at full precision (it would stop the run)."""
-    node = cfg.lit.optimizer
-    mixed = str(cfg.trainer.get("precision", "32-true")).endswith("mixed")
-    if mixed and node.get("fused"):
-        log.info("trainer.precision=%s: the optimizer runs without fused", cfg.trainer.precision)
-        node = OmegaConf.merge(node, {"fused": False})
-    return instantiate(node)
-
-
-def check_trainer(cfg: DictConfig) -> None:
-    """The trainer's values and the callbacks' monitors (before Lightning fails on them)."""
-    check_trainer_config(cfg.trainer)
-    check_budget(cfg.trainer)
-    check_monitors(cfg.get("callbacks"))
-
-
-def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
-    """The Lightning trainer of ``cfg.trainer`` with ``cfg.callbacks`` (then
-    ``extra_callbacks``) and ``cfg.logger``."""
-    check_trainer(cfg)
-    callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
-    callbacks += list(extra_callbacks)
-    logger = instantiate(cfg.logger) if cfg.get("logger") else False
-    root = str(cfg.run_dir)
-    # The data module shares the pairs out between DDP processes itself (EpochSampler)
-    # Checkpoints go through a temporary file and a rename (checkpoint_io.py)
-    return instantiate(cfg.trainer, callbacks=callbacks, logger=logger, default_root_dir=root,
-                       use_distributed_sampler=False, plugins=[AtomicCheckpointIO()])  # fmt: skip
-
-
-def build(cfg: DictConfig, extra_callbacks=()):
-    """``(datamodule, LitSimulator, trainer)`` of a composed training config, every value
-    checked before anything is built."""
-    check_arguments(cfg)
-    check_optimizer(cfg.get("lit"))
-    check_scheduler(cfg.get("lit"))
-    check_trainer(cfg)
-    set_matmul_precision(cfg.get("matmul_precision", "highest"))
-    datamodule = instantiate(cfg.datamodule)
-    simulator = instantiate(cfg.model, stats=datamodule.stats())
-    simulator.effects_trained.copy_(datamodule.effects_trained())
-    lit = instantiate(cfg.lit, simulator=simulator, optimizer=_optimizer(cfg))
-    return datamodule, lit, build_trainer(cfg, extra_callbacks)
 
 
 class TrainingInterrupted(Interrupted):

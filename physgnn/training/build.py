@@ -1,0 +1,171 @@
+"""The Lightning trainer of a training config, and the data module and Lightning module it
+trains, every value checked before anything is built.
+
+Several processes (``trainer.devices`` other than 1, or ``trainer.num_nodes`` > 1) train with
+DDP that looks for parameters without gradient at every step, whatever the accelerator: the
+network skips the MLPs of interactions a batch lacks (no contacts: no pp MLP), and plain DDP
+fails at the first such step. The config's ``strategy: auto`` (Lightning's default) is turned
+into that strategy; a DDP strategy that does not look for them is refused in one line.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import lightning as L
+import torch
+from hydra.utils import instantiate
+from lightning.pytorch.strategies import DDPStrategy
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import InterpolationResolutionError
+
+from physgnn.errors import ConfigError
+from physgnn.training.checkpoint_io import AtomicCheckpointIO
+from physgnn.training.checks import (
+    check_arguments,
+    check_budget,
+    check_monitors,
+    check_optimizer,
+    check_scheduler,
+)
+
+NUMERIC_TRAINER_KEYS = ("max_epochs", "max_steps", "gradient_clip_val", "log_every_n_steps")
+FINDS_UNUSED = "_find_unused_parameters_true"
+
+
+log = logging.getLogger(__name__)
+
+
+def check_trainer_config(trainer_cfg: DictConfig) -> None:
+    """Catch a non-numeric value before Lightning fails on it deep inside ``fit``."""
+    for key in NUMERIC_TRAINER_KEYS:
+        value = trainer_cfg.get(key)
+        if value is not None and not isinstance(value, int | float):
+            raise ConfigError(f"trainer.{key} must be a number, got {value!r}")
+    if trainer_cfg.get("accelerator") in ("gpu", "cuda") and not torch.cuda.is_available():
+        raise ConfigError(
+            f"trainer.accelerator={trainer_cfg.accelerator} needs a CUDA GPU and torch sees "
+            "none (torch.cuda.is_available() is False): train on the CPU (trainer=cpu, the "
+            "default), or on a machine with a GPU and a CUDA build of torch"
+        )
+    strategy = trainer_cfg.get("strategy")
+    if isinstance(strategy, str) and strategy.startswith("ddp"):
+        if not strategy.endswith(FINDS_UNUSED):
+            fix = strategy.removesuffix("_find_unused_parameters_false") + FINDS_UNUSED
+            raise ConfigError(
+                f"trainer.strategy={strategy} fails at the first batch without contacts (the "
+                f"network skips the MLPs a batch lacks): leave trainer.strategy=auto (DDP is "
+                f"chosen for several devices) or set trainer.strategy={fix}"
+            )
+
+
+def several_processes(trainer_cfg: DictConfig) -> bool:
+    """Whether the trainer may start several processes: ``devices`` other than 1 (2, -1,
+    ``auto``, ``"0,1"``, a list of several), or ``num_nodes`` > 1."""
+    devices, nodes = trainer_cfg.get("devices", "auto"), trainer_cfg.get("num_nodes")
+    if isinstance(nodes, int) and nodes > 1:
+        return True
+    if OmegaConf.is_list(devices) or isinstance(devices, list | tuple):
+        return len(devices) > 1
+    return str(devices).strip().rstrip(",") not in ("1", "0")  # "0,": the GPU of index 0
+
+
+def strategy_of(trainer_cfg: DictConfig):
+    """The trainer's strategy: the config's, but for ``auto`` (or none) on several processes
+    a :class:`DDPStrategy` that finds unused parameters (module doc)."""
+    strategy = trainer_cfg.get("strategy") or "auto"
+    if strategy == "auto" and several_processes(trainer_cfg):
+        return DDPStrategy(find_unused_parameters=True)
+    return strategy
+
+
+def check_val_rollout(cfg: DictConfig) -> None:
+    """The validation rollouts' size, named by the key that sets it (``data.val_rollout`` of
+    the preset, or ``callbacks.rollout``): whole numbers, at least one trajectory, and frames
+    null (whole trajectories) or enough for one predicted frame (``model.H`` + 2)."""
+    node = OmegaConf.select(cfg, "callbacks.rollout")
+    if node is None:
+        return
+    least = {"n_val_trajectories": 1, "max_frames": int(cfg.model.H) + 2}
+    for key, origin in (("n_val_trajectories", "trajectories"), ("max_frames", "frames")):
+        from_data = OmegaConf.is_interpolation(node, key)
+        name = f"data.val_rollout.{origin}" if from_data else f"callbacks.rollout.{key}"
+        try:
+            value = node[key]
+        except InterpolationResolutionError:
+            raise ConfigError(
+                f"{name} is missing (data={cfg.data.name}): add val_rollout: {{trajectories: "
+                "10, frames: null} to the preset, as conf/data/small.yaml has it"
+            ) from None
+        if key == "max_frames" and value is None:
+            continue
+        if not isinstance(value, int) or isinstance(value, bool) or value < least[key]:
+            raise ConfigError(f"{name} must be a whole number >= {least[key]}, got {value!r}")
+
+
+def check_trainer(cfg: DictConfig) -> None:
+    """The trainer's values and the callbacks' monitors and sizes (before Lightning fails on
+    them)."""
+    check_trainer_config(cfg.trainer)
+    check_budget(cfg.trainer)
+    check_monitors(cfg.get("callbacks"))
+    check_val_rollout(cfg)
+
+
+def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
+    """The Lightning trainer of ``cfg.trainer`` (its strategy: :func:`strategy_of`) with
+    ``cfg.callbacks`` (then ``extra_callbacks``) and ``cfg.logger``."""
+    check_trainer(cfg)
+    callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
+    callbacks += list(extra_callbacks)
+    logger = instantiate(cfg.logger) if cfg.get("logger") else False
+    # The data module shares the pairs out between DDP processes itself (EpochSampler);
+    # checkpoints go through a temporary file and a rename (checkpoint_io.py)
+    return instantiate(
+        cfg.trainer,
+        strategy=strategy_of(cfg.trainer),
+        callbacks=callbacks,
+        logger=logger,
+        default_root_dir=str(cfg.run_dir),
+        use_distributed_sampler=False,
+        plugins=[AtomicCheckpointIO()],
+    )
+
+
+def build(cfg: DictConfig, extra_callbacks=()):
+    """``(datamodule, LitSimulator, trainer)`` of a composed training config, every value
+    checked before anything is built."""
+    check_arguments(cfg)
+    check_optimizer(cfg.get("lit"))
+    check_scheduler(cfg.get("lit"))
+    check_trainer(cfg)
+    set_matmul_precision(cfg.get("matmul_precision", "highest"))
+    datamodule = instantiate(cfg.datamodule)
+    simulator = instantiate(cfg.model, stats=datamodule.stats())
+    simulator.effects_trained.copy_(datamodule.effects_trained())
+    lit = instantiate(cfg.lit, simulator=simulator, optimizer=_optimizer(cfg))
+    return datamodule, lit, build_trainer(cfg, extra_callbacks)
+
+
+MATMUL_PRECISIONS = ("highest", "high", "medium")
+
+
+def set_matmul_precision(value: str) -> None:
+    """``torch.set_float32_matmul_precision``: ``high`` lets fp32 matrix products use TF32 on
+    GPUs that have it; a one-line error for another value."""
+    if value not in MATMUL_PRECISIONS:
+        raise ConfigError(
+            f"matmul_precision must be one of {list(MATMUL_PRECISIONS)}, got {value!r}"
+        )
+    torch.set_float32_matmul_precision(value)
+
+
+def _optimizer(cfg: DictConfig):
+    """``lit.optimizer``, not fused under mixed precision: Lightning clips the gradients of a
+    fused optimizer only at full precision (it would stop the run)."""
+    node = cfg.lit.optimizer
+    mixed = str(cfg.trainer.get("precision", "32-true")).endswith("mixed")
+    if mixed and node.get("fused"):
+        log.info("trainer.precision=%s: the optimizer runs without fused", cfg.trainer.precision)
+        node = OmegaConf.merge(node, {"fused": False})
+    return instantiate(node)
