@@ -109,6 +109,7 @@ def test_all_pairs_candidates_give_the_radius_search_graph_bit_for_bit(
         fast = builder(state)
         monkeypatch.setattr(builder_module, "ALL_PAIRS_MAX", 0)
         monkeypatch.setattr(builder_module, "ALL_PAIRS_PER_SPHERE", 0)
+        monkeypatch.setattr(builder_module, "CPU_PAIRS_PER_SPHERE", 0)
         searched = builder(state)
         monkeypatch.undo()
         assert fast.num_pairs > 0 and fast.ps_index.shape[1] > 0
@@ -182,6 +183,7 @@ def test_a_rollout_is_the_same_with_either_candidate_path(tiny_dataset, bench_cf
     fast = rollout(simulator, trajectories, n_frames=12)
     monkeypatch.setattr(builder_module, "ALL_PAIRS_MAX", 0)
     monkeypatch.setattr(builder_module, "ALL_PAIRS_PER_SPHERE", 0)
+    monkeypatch.setattr(builder_module, "CPU_PAIRS_PER_SPHERE", 0)
     searched = rollout(simulator, trajectories, n_frames=12)
     for a, b in zip(fast, searched, strict=True):
         assert (a.pos == b.pos).all() and (a.vel == b.vel).all()

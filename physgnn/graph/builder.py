@@ -45,7 +45,7 @@ import torch
 
 from physgnn.data.state import host_sizes, scene_of_sphere
 from physgnn.graph.candidates import compact, scene_pairs, scene_plane_pairs
-from physgnn.graph.neighbors import BACKENDS, radius_pairs
+from physgnn.graph.neighbors import BACKENDS, radius_pairs, resolve_backend
 from physgnn.physics.energy import G
 from physgnn.physics.geometry import rectangle_offset
 from physgnn.physics.scene import EFFECT_NAMES, GROUND
@@ -55,9 +55,9 @@ _GRAVITY = EFFECT_NAMES.index("gravity")
 _SPHERE_CONTACT = EFFECT_NAMES.index("sphere_contact")
 _SURFACE_CONTACT = EFFECT_NAMES.index("surface_contact")
 # Up to this many same-scene pairs (or this many per sphere) the pp candidates are all pairs of
-# each scene, written down with no read-back; beyond it a radius search proposes them.
-ALL_PAIRS_MAX = 1 << 18
-ALL_PAIRS_PER_SPHERE = 64
+# each scene, written down with no read-back; beyond it a radius search proposes them. With the
+# CPU's k-d tree, where a read-back costs nothing, the search takes over from 8 per sphere.
+ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE, CPU_PAIRS_PER_SPHERE = 1 << 18, 64, 8
 
 
 @dataclass
@@ -198,12 +198,13 @@ class GraphBuilder:
         return clearance <= self.factor * torch.relu(-along) * dt + self.epsilon
 
     def _pair_candidates(self, state, batch, allowance, spheres) -> tuple[torch.Tensor, ...]:
-        """Candidate pairs ``(i, j)``, ``i < j``, sorted: every pair of each scene while there
-        are at most ``ALL_PAIRS_MAX`` of them (or ``ALL_PAIRS_PER_SPHERE`` per sphere), else
-        a radius search (:func:`~physgnn.graph.neighbors.radius_pairs`, reads sizes back)."""
-        n = state.pos.shape[0]
-        total = sum(c * (c - 1) // 2 for c in spheres)
-        if total <= max(ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE * n):
+        """Candidate pairs ``(i, j)``, ``i < j``, sorted: all pairs of each scene up to the
+        ``ALL_PAIRS_*`` (k-d tree: ``CPU_PAIRS_PER_SPHERE``) limits, else a radius search (reads
+        sizes back, :func:`~physgnn.graph.neighbors.radius_pairs`); the same edges either way."""
+        n, total = state.pos.shape[0], sum(c * (c - 1) // 2 for c in spheres)
+        kdtree = resolve_backend(self.backend, state.pos) == "kdtree"
+        limit = CPU_PAIRS_PER_SPHERE * n if kdtree else max(ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE * n)
+        if total <= limit:
             return scene_pairs(spheres, batch)
         radius = state.radius.to(torch.float64)
         reach = 2 * float(radius.max()) + 2 * float(allowance.max()) + self.epsilon

@@ -89,9 +89,15 @@ def _check(pos, batch, r) -> tuple[torch.Tensor, torch.Tensor, float]:
     return pos, batch.long(), r
 
 
+def resolve_backend(backend: str, pos: torch.Tensor) -> str:
+    """The backend ``backend`` names for points ``pos`` (``auto``: the k-d tree on the CPU,
+    torch-cluster on CUDA when installed, else ``torch``)."""
+    return _auto_backend(pos) if backend == "auto" else backend
+
+
 def _auto_backend(pos: torch.Tensor) -> str:
-    if pos.is_cuda:
-        return "cluster" if has_torch_cluster() else "torch"
+    if pos.device.type != "cpu":
+        return "cluster" if has_torch_cluster() and pos.is_cuda else "torch"
     return "kdtree"
 
 
