@@ -33,8 +33,12 @@ ROOT = Path(__file__).resolve().parents[1]
          "it ('+' adds a key that is not there): did you mean lit.optimizer.lr?"),
         ("train", "+trainer.max_epoch=5", "+trainer.max_epoch=5: trainer.max_epoch is not an "
          "argument of lightning.Trainer (did you mean trainer.max_epochs or trainer.min_epochs?)"),
-        ("train", "+model.Mx=3", "+model.Mx=3: model.Mx is not an argument of "
-         "physgnn.models.learned.LearnedSimulator (did you mean model.M?)"),
+        ("train", "+model.Hx=3", "+model.Hx=3: model.Hx is not an argument of "
+         "physgnn.models.learned.LearnedSimulator (did you mean model.H?)"),
+        ("train", "+model.network.Mx=3", "+model.network.Mx=3: model.network.Mx is not an "
+         "argument of physgnn.nn.epd.EncodeProcessDecode (did you mean model.network.M?)"),
+        ("train", "+model.M=3", "+model.M=3: model.M is not an argument of "
+         "physgnn.models.learned.LearnedSimulator (did you mean model.network.M?)"),
         ("generate", "+data.scene.n_maxx=2", "+data.scene.n_maxx=2: data.scene.n_maxx is not a "
          "key of the generate config and nothing reads it ('+' adds a key that is not there): "
          "did you mean data.scene.n_max?"),

@@ -8,14 +8,13 @@ import lightning as L
 import pytest
 import torch
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint
-from simdata import REPORT_MODEL, STATS, batch, trajectory
+from simdata import REPORT_MODEL, batch, learned, trajectory
 from test_contacts import scene
 from torch.testing import assert_close
 from torch_geometric.data import Batch
 from torch_geometric.loader import DataLoader
 
 from physgnn.data.state import SceneState
-from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.scene import Effects
 from physgnn.training.lit import (
     LitSimulator,
@@ -33,7 +32,7 @@ ADAM = functools.partial(torch.optim.Adam, lr=1e-3)
 def make_lit(model: dict | None = None, **kwargs) -> LitSimulator:
     """The default model (or ``model``'s switches) with H = 1, M = 1, 8 hidden units."""
     torch.manual_seed(0)
-    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8, **(model or {}))
+    sim = learned(H=1, M=1, hidden=8, **(model or {}))
     return LitSimulator(sim, ADAM, **kwargs)
 
 
@@ -248,7 +247,7 @@ class AtStep(LitSimulator):
 
 
 def test_push_forward_growth_lengthens_the_unroll_step_by_step():
-    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8)
+    sim = learned(H=1, M=1, hidden=8)
     lit = AtStep(sim, ADAM, pushforward_steps=3, pushforward_after=10, pushforward_growth=5)
     highs = {}
     for step in (9, 10, 14, 15, 20, 40):

@@ -126,9 +126,9 @@ def test_the_wheel_generates_trains_and_simulates_from_another_folder(tmp_path):
         assert run(script, name, "--help").strip(), name
     out = elsewhere / "outputs"
     run(script, "generate", "data=tiny", "workers=1", "progress=false")
-    run(script, "train", "data=tiny", "model.M=1", "model.hidden=16", "trainer.max_epochs=1",
-        "datamodule.pairs_per_epoch=8", "datamodule.batch_size=8", "run_dir=outputs/runs/one",
-        "trainer.enable_progress_bar=false")  # fmt: skip
+    run(script, "train", "data=tiny", "model.network.M=1", "model.network.hidden=16",
+        "trainer.max_epochs=1", "datamodule.pairs_per_epoch=8", "datamodule.batch_size=8",
+        "run_dir=outputs/runs/one", "trainer.enable_progress_bar=false")  # fmt: skip
     assert (out / "runs" / "one" / "run.json").is_file()
     run(python, "-m", "physgnn.simulate", "scene=throw", "run=outputs/runs/one", "frames=8",
         "video=false", "out=sim")  # fmt: skip

@@ -9,13 +9,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from simdata import STATS
+from simdata import learned
 
 import physgnn.evaluation.simulate as S
 from physgnn import metrics
 from physgnn.data.dataset import read_split
 from physgnn.models.constrained import ConstrainedSimulator
-from physgnn.models.learned import LearnedSimulator
 from physgnn.rollout import rollout
 from physgnn.simulate import main
 from physgnn.training.runs import load_run
@@ -50,7 +49,7 @@ def test_truth_only_writes_hdf5_metrics_and_video(scene_file, tmp_path, capsys):
 
 
 def test_learned_rollout_from_the_same_start(scene_file, tmp_path, monkeypatch):
-    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8).eval()
+    sim = learned(H=1, M=1, hidden=8).eval()
     monkeypatch.setattr(
         S, "learned", lambda run, truth, steps: (S.rollout_prediction(sim, truth), {"run": run})
     )
@@ -119,7 +118,7 @@ def test_missing_run_folder(scene_file, tmp_path, capsys):
 
 
 def test_constraints_wrap_the_learned_simulator_and_are_recorded(scene_file, tmp_path, monkeypatch):
-    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8, gravity_prior=True).eval()
+    sim = learned(H=1, M=1, hidden=8, gravity_prior=True).eval()
     monkeypatch.setattr(S, "load_run", lambda run_dir: (sim, None, {"checkpoint": "ck"}))
     out = tmp_path / "out"
     argv = [f"scene={scene_file}", f"out={out}", f"run={tmp_path}", "video=false", "constraints=4"]

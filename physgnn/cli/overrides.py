@@ -75,10 +75,25 @@ def _not_an_argument(node: DictConfig, section: str, name: str) -> str | None:
     if name in params or any(p.kind is p.VAR_KEYWORD for p in params.values()):
         return None
     known = [k for k in params if k not in ("self", "args", "kwargs")]
-    like = difflib.get_close_matches(name, known, n=2)
+    like = [f"{k}.{name}" for k in _nodes_taking(node, name)]  # model.M: model.network.M
+    like = like or difflib.get_close_matches(name, known, n=2)
     hint = f"did you mean {' or '.join(f'{section}.{k}' for k in like)}?" if like else (
         f"known: {', '.join(known)}")  # fmt: skip
     return f"{section}.{name} is not an argument of {node._target_} ({hint})"
+
+
+def _nodes_taking(node: DictConfig, name: str) -> list[str]:
+    """The keys of ``node``'s ``_target_`` nodes whose target takes the argument ``name``."""
+    found = []
+    for key in node:
+        child = node._get_node(key)
+        if isinstance(child, DictConfig) and "_target_" in child:
+            try:
+                if name in inspect.signature(get_object(child._target_)).parameters:
+                    found.append(str(key))
+            except (ImportError, ValueError, TypeError, AttributeError):
+                continue
+    return found
 
 
 def _resembling(cfg: DictConfig, key: str) -> list[str]:

@@ -94,16 +94,17 @@ class GraphBuilder:
     the :func:`physgnn.graph.neighbors.radius_pairs` backend. ``clip_margin`` (metres) moves
     the clip of the ps features beyond the reach, to ``ρ_i + clip_margin``: with 0, a sphere at
     rest on the ground (height r) and one at rest high above it (height clipped at r + ε) look
-    almost alike to the network, though only the second falls.
+    almost alike to the network, though only the second falls. The defaults are the default
+    model's graph (``conf/model/baseline.yaml``, ``graph``).
     """
 
     def __init__(
         self,
-        connectivity: str = "vi",
+        connectivity: str = "approach",
         epsilon: float = 0.01,
         factor: float = 1.0,
         backend: str = "auto",
-        clip_margin: float = 0.0,
+        clip_margin: float = 1.0,
     ):
         if connectivity not in CONNECTIVITIES:
             raise ValueError(
