@@ -70,16 +70,18 @@ def test_an_added_key_nothing_reads_is_refused(tmp_path, monkeypatch, capsys, co
     "arg,message",
     [
         ("tol=-1", "tol must be a number >= 0 (a fraction of the diameter; 0: any overlap "
-         "counts), got '-1'"),
+         "counts), got -1"),
         ("tol=nan", "tol must be a number >= 0"),
-        ("frames=abc", "frames must be a whole number >= 2, got 'abc' (e.g. frames=100)"),
-        ("frames=1", "frames must be a whole number >= 2, got '1'"),
+        ("frames=abc", "frames must be a whole number >= 2 (the first frame is the start; e.g. "
+         "frames=100), got 'abc'"),
+        ("frames=1", "frames must be a whole number >= 2"),
+        ("video=yes", "video must be true or false, got 'yes'"),
     ],
 )  # fmt: skip
 def test_bad_simulate_values_are_one_line(tmp_path, capsys, arg, message):
-    scene = ROOT / "conf" / "scenes" / "head_on.yaml"
+    scene = ROOT / "conf" / "scene" / "head_on.yaml"
     with pytest.raises(SystemExit) as exit_info:
-        simulate_command.main([f"scene={scene}", "video=false", f"out={tmp_path / 'o'}", arg])
+        simulate_command.main([f"scene_file={scene}", "video=false", f"out={tmp_path / 'o'}", arg])
     err = capsys.readouterr().err
     assert exit_info.value.code == 2 and len(err.splitlines()) == 1
     assert err.startswith(f"error: {message}")

@@ -155,7 +155,7 @@ def refusal(key: str, folder: Path) -> str:
 
 def test_simulate_writes_over_no_folder_it_did_not_write(tmp_path, capsys):
     folder = folder_of_mine(tmp_path / "mine")
-    args = [f"scene={ROOT / 'conf' / 'scenes' / 'head_on.yaml'}", "frames=3", "video=false"]
+    args = [f"scene_file={ROOT / 'conf' / 'scene' / 'head_on.yaml'}", "frames=3", "video=false"]
     with pytest.raises(SystemExit) as exit_info:
         simulate_command.main([*args, f"out={folder}"])
     assert exit_info.value.code == 2 and capsys.readouterr().err == refusal("out", folder)
