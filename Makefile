@@ -53,7 +53,7 @@ data-shards: ## Generate the dataset in SHARDS shards, one job each of a Hydra l
 data-report: ## Print Table 1 of the dataset (PRESET=small; PHYSGNN_OUTPUTS moves outputs/)
 	$(PY) -m physgnn.data_report preset=$(PRESET) $(ARGS)
 
-train: ## Train the baseline on data=small (ARGS: Hydra overrides, e.g. ARGS="model.M=3 seed=1")
+train: ## Train the baseline on data=small (ARGS: Hydra overrides, e.g. ARGS="model.network.M=3 seed=1")
 	$(PY) -m physgnn.train $(ARGS)
 
 sweep: ## Run a whole ablation sweep (EXPERIMENT=ablation_H|ablation_M|ablation_connectivity|ablation_lambda|ablation_components|ablation_contacts)

@@ -21,7 +21,7 @@ FRAMES = 12  # a short film; the scene file asks for 60
 
 # %%
 model = pg.load_model("pretrained")
-scene = pg.load_scene("throw")  # conf/scenes/throw.yaml: a sphere thrown at a row of three
+scene = pg.load_scene("throw")  # conf/scene/throw.yaml: a sphere thrown at a row of three
 print(f"model with history H={model.H}; scene {scene.name}: {scene.n_spheres} spheres")
 
 # %% [markdown]

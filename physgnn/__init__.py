@@ -18,8 +18,9 @@ def _conf_dir() -> str:
 
 
 CONF_DIR = _conf_dir()
-# The example scene files (``simulate scene=throw`` finds ``throw.yaml`` here).
-SCENES_DIR = str(_Path(CONF_DIR) / "scenes")
+# The scenes known by name, the config group ``scene``: scene families and the example scene
+# files (``simulate scene=throw`` and ``load_scene("throw")`` find ``throw.yaml`` here).
+SCENES_DIR = str(_Path(CONF_DIR) / "scene")
 
 # OpenMP threads that wait for work spin 300 000 rounds by default (GNU OpenMP, which torch's
 # CPU wheel uses) before they sleep. When other processes keep the cores busy, those spinning

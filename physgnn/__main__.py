@@ -1,7 +1,7 @@
 """``physgnn <command> [arguments]``: the console script; ``python -m physgnn`` is the same.
 
 Each command is its ``python -m physgnn.<module>`` (same arguments, same ``--help``):
-``physgnn train model.M=3`` runs ``python -m physgnn.train model.M=3``.
+``physgnn train model.network.M=3`` runs ``python -m physgnn.train model.network.M=3``.
 """
 
 from __future__ import annotations

@@ -51,8 +51,8 @@ def tiny_run(tiny_dataset, tmp_path_factory) -> Path:
         f"data.dir={tiny_dataset}",
         f"run_dir={run_dir}",
         "debug=short",
-        "model.M=1",
-        "model.hidden=16",
+        "model.network.M=1",
+        "model.network.hidden=16",
         "trainer.max_epochs=1",
         "datamodule.pairs_per_epoch=8",
         "trainer.enable_progress_bar=false",
@@ -62,7 +62,7 @@ def tiny_run(tiny_dataset, tmp_path_factory) -> Path:
         cfg = compose("train", overrides=overrides)
     train(cfg)
     # train() keeps the config where load_run looks, also without Hydra's output folder
-    assert OmegaConf.load(run_dir / ".hydra" / "config.yaml").model.M == 1
+    assert OmegaConf.load(run_dir / ".hydra" / "config.yaml").model.network.M == 1
     return run_dir
 
 

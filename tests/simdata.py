@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import torch
 from torch_geometric.data import Batch
 
 from physgnn.data.state import TrajectoryFrames
+from physgnn.graph.builder import GraphBuilder
+from physgnn.models.learned import LearnedSimulator
+from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.physics import quaternion as Q
 from physgnn.physics.scene import Effects, Material, ground_plane, make_plane
 from physgnn.physics.trajectory import Trajectory
+from physgnn.training.layout import FLAT_KEYS
 
 STATS = {
     "vel": {"mean": [0.1, -0.2, -3.0], "std": [1.0, 2.0, 4.0]},
@@ -22,7 +28,7 @@ STATS = {
     "n_pairs": 100,
 }
 
-# The report's model (conf/model/report.yaml) as LearnedSimulator arguments, beyond H, M and
+# The report's model (conf/model/report.yaml) as keys of :func:`learned`, beyond H, M and
 # hidden: vi connectivity, pp inputs [p_i − p_j, |p_i − p_j|], absolute mass among the node
 # inputs, summed messages, 6 outputs, no contact or material inputs, no gravity prior, no rest
 # decision. The constructor's defaults are the default model's (conf/model/baseline.yaml);
@@ -38,6 +44,18 @@ REPORT_MODEL = {
     "aggregation": "sum",
     "rest_decision": False,
 }
+
+
+def learned(stats: dict = STATS, **keys) -> LearnedSimulator:
+    """A LearnedSimulator from its model keys in the flat layout (``H=1, M=2, connectivity="vi"``;
+    ``physgnn.training.layout.FLAT_KEYS``): the network's and the graph builder's keys are
+    handed to them, the others to the simulator."""
+    nodes: dict[str, dict] = {"network": {}, "graph": {}}
+    for key in [k for k in keys if k in FLAT_KEYS]:
+        node, name = FLAT_KEYS[key]
+        nodes[node][name] = keys.pop(key)
+    network = partial(EncodeProcessDecode, **nodes["network"])
+    return LearnedSimulator(stats, network=network, graph=GraphBuilder(**nodes["graph"]), **keys)
 
 
 def trajectory(

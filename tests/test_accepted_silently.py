@@ -33,8 +33,12 @@ ROOT = Path(__file__).resolve().parents[1]
          "it ('+' adds a key that is not there): did you mean lit.optimizer.lr?"),
         ("train", "+trainer.max_epoch=5", "+trainer.max_epoch=5: trainer.max_epoch is not an "
          "argument of lightning.Trainer (did you mean trainer.max_epochs or trainer.min_epochs?)"),
-        ("train", "+model.Mx=3", "+model.Mx=3: model.Mx is not an argument of "
-         "physgnn.models.learned.LearnedSimulator (did you mean model.M?)"),
+        ("train", "+model.Hx=3", "+model.Hx=3: model.Hx is not an argument of "
+         "physgnn.models.learned.LearnedSimulator (did you mean model.H?)"),
+        ("train", "+model.network.Mx=3", "+model.network.Mx=3: model.network.Mx is not an "
+         "argument of physgnn.nn.epd.EncodeProcessDecode (did you mean model.network.M?)"),
+        ("train", "+model.M=3", "+model.M=3: model.M is not an argument of "
+         "physgnn.models.learned.LearnedSimulator (did you mean model.network.M?)"),
         ("generate", "+data.scene.n_maxx=2", "+data.scene.n_maxx=2: data.scene.n_maxx is not a "
          "key of the generate config and nothing reads it ('+' adds a key that is not there): "
          "did you mean data.scene.n_max?"),
@@ -66,16 +70,18 @@ def test_an_added_key_nothing_reads_is_refused(tmp_path, monkeypatch, capsys, co
     "arg,message",
     [
         ("tol=-1", "tol must be a number >= 0 (a fraction of the diameter; 0: any overlap "
-         "counts), got '-1'"),
+         "counts), got -1"),
         ("tol=nan", "tol must be a number >= 0"),
-        ("frames=abc", "frames must be a whole number >= 2, got 'abc' (e.g. frames=100)"),
-        ("frames=1", "frames must be a whole number >= 2, got '1'"),
+        ("frames=abc", "frames must be a whole number >= 2 (the first frame is the start; e.g. "
+         "frames=100), got 'abc'"),
+        ("frames=1", "frames must be a whole number >= 2"),
+        ("video=yes", "video must be true or false, got 'yes'"),
     ],
 )  # fmt: skip
 def test_bad_simulate_values_are_one_line(tmp_path, capsys, arg, message):
-    scene = ROOT / "conf" / "scenes" / "head_on.yaml"
+    scene = ROOT / "conf" / "scene" / "head_on.yaml"
     with pytest.raises(SystemExit) as exit_info:
-        simulate_command.main([f"scene={scene}", "video=false", f"out={tmp_path / 'o'}", arg])
+        simulate_command.main([f"scene_file={scene}", "video=false", f"out={tmp_path / 'o'}", arg])
     err = capsys.readouterr().err
     assert exit_info.value.code == 2 and len(err.splitlines()) == 1
     assert err.startswith(f"error: {message}")

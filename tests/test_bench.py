@@ -197,7 +197,7 @@ def test_step_timer_records_the_size_of_every_graph_it_watched():
     cfg = _cfg("quick=true")
     scene = bench_scenes.bench_scene(cfg.scene, 12, np.random.default_rng(0), 8.0, 4.0, 5)
     traj = simulate(scene, {"substeps": 2})
-    sim = make_simulator(cfg.model, {"hidden": 16, "M": 2}, compute_stats([traj]))
+    sim = make_simulator(cfg.model, {"network": {"hidden": 16, "M": 2}}, compute_stats([traj]))
     states = frame_states(traj, sim.H)[:2]
     timer = StepTimer()
     with timer.watch(sim):
@@ -213,7 +213,7 @@ def test_time_learned_counts_the_flops_of_the_graphs_it_ran(tmp_path):
     scene = bench_scenes.bench_scene(cfg.scene, 12, rng, 8.0, 4.0, 5)
     assert scene.n_spheres == 12
     traj = simulate(scene, {"substeps": 2})
-    sim = make_simulator(cfg.model, {"hidden": 16, "M": 2}, compute_stats([traj]))
+    sim = make_simulator(cfg.model, {"network": {"hidden": 16, "M": 2}}, compute_stats([traj]))
     states = frame_states(traj, sim.H)
     t = time_learned(sim, states, 2)
     expected = 0
@@ -320,15 +320,15 @@ def _row(run, exp, overrides, split, chamfer, fps, diverged=None):
 
 def test_learned_and_pybullet_points():
     rows = [
-        _row("a", "ablation_M", "model.M=1 seed=0", "test", 2.0, 100.0),
-        _row("b", "ablation_M", "model.M=1 seed=1", "test", 4.0, 300.0),
-        _row("c", "ablation_M", "model.M=9 seed=0", "test", 1.0, 10.0, diverged=5),
+        _row("a", "ablation_M", "model.network.M=1 seed=0", "test", 2.0, 100.0),
+        _row("b", "ablation_M", "model.network.M=1 seed=1", "test", 4.0, 300.0),
+        _row("c", "ablation_M", "model.network.M=9 seed=0", "test", 1.0, 10.0, diverged=5),
         _row("g", "ground_truth", "", "test", 0.0, None),
     ]
     pts = pareto.learned_points(rows, "test", "chamfer")
     assert [(p.label, p.error, p.valid) for p in pts] == [
-        ("ablation_M: model.M=1", 3.0, True),
-        ("ablation_M: model.M=9", 1.0, False),
+        ("ablation_M: model.network.M=1", 3.0, True),
+        ("ablation_M: model.network.M=9", 1.0, False),
     ]
     assert math.isclose(pts[0].ms_per_frame, 1000 / 200.0)
     bench = {"pybullet": [{"n_spheres": 154, "substeps": 5, "fps": 50.0, "mse_vs_reference": 0.1}]}

@@ -8,8 +8,9 @@ from pathlib import Path
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
+from hydra.utils import instantiate
 from omegaconf import OmegaConf
-from simdata import REPORT_MODEL, STATS, batch, trajectory
+from simdata import REPORT_MODEL, STATS, batch, learned, trajectory
 from test_graph import make_state
 from torch.testing import assert_close
 from torch_geometric.data import Batch
@@ -27,7 +28,7 @@ def make(**kwargs) -> LearnedSimulator:
     """The report's model with boundary features (model=gns builds on model=report)."""
     torch.manual_seed(0)
     args = dict(H=0, M=1, hidden=16, boundary_features=True, boundary_radius=R) | kwargs
-    return LearnedSimulator(STATS, **(REPORT_MODEL | args))
+    return learned(**(REPORT_MODEL | args))
 
 
 def box(half: float) -> tuple[list, list]:
@@ -115,11 +116,11 @@ def test_node_in_grows_by_6_only_when_enabled():
 def test_default_features_are_unchanged(model):
     state = batch([trajectory(3, seed=1), trajectory(2, seed=2)])
     switches = REPORT_MODEL if model == "report" else {}
-    plain = LearnedSimulator(STATS, H=2, M=1, hidden=16, **switches)
+    plain = learned(H=2, M=1, hidden=16, **switches)
     assert not plain.use_boundary
     x = plain.node_features(state)
     assert x.shape == (5, 6 * 3 + 2 if model == "report" else 6 * 3 + 1 + 4)
-    with_boundary = LearnedSimulator(STATS, H=2, M=1, hidden=16, boundary_features=True, **switches)
+    with_boundary = learned(H=2, M=1, hidden=16, boundary_features=True, **switches)
     assert torch.equal(with_boundary.node_features(state)[:, :-6], x)
 
 
@@ -151,7 +152,7 @@ def test_config_keys_are_accepted(model):
         cfg = compose("train", overrides=[f"model={model}"])
     check_arguments(cfg)
     assert cfg.model.boundary_features == (model == "gns") and cfg.model.boundary_radius == R
-    sim = LearnedSimulator(STATS, **{k: v for k, v in cfg.model.items() if k != "_target_"})
+    sim = instantiate(cfg.model, stats=STATS)
     assert sim.use_boundary == (model == "gns") and sim.boundary_radius == R
 
 

@@ -7,12 +7,11 @@ import warnings
 
 import pytest
 import torch
-from simdata import STATS
+from simdata import learned
 from test_contacts import scene
 from torch.testing import assert_close
 
 from physgnn.models.capture import ShapeBoundCall, compile_in_place
-from physgnn.models.learned import LearnedSimulator
 from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.nn.padding import bucket, pad_graph
 
@@ -54,8 +53,8 @@ def test_a_padded_graph_gives_the_network_the_same_outputs(n, pairs, f):
 
 def test_the_padded_simulator_predicts_as_the_plain_one():
     torch.manual_seed(0)
-    plain = LearnedSimulator(STATS, H=1, M=2, hidden=16, gravity_prior=True).eval()
-    padded = LearnedSimulator(STATS, H=1, M=2, hidden=16, gravity_prior=True, pad_to_buckets=True)
+    plain = learned(H=1, M=2, hidden=16, gravity_prior=True).eval()
+    padded = learned(H=1, M=2, hidden=16, gravity_prior=True, pad_to_buckets=True)
     padded.load_state_dict(plain.state_dict())
     state = scene(
         [[0, 0, 0.5], [0.9, 0, 0.5], [3, 0, 2.0]],

@@ -5,12 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from simdata import STATS
+from simdata import learned
 from test_contacts import DT, ballistic, scene
 from torch.testing import assert_close
 
 from physgnn.models.constrained import ConstrainedSimulator
-from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.constraints import project_contacts
 from physgnn.physics.scene import GROUND, STATIC, ground_plane, make_plane
 
@@ -146,7 +145,7 @@ def test_energy_never_rises_on_random_falls():
 
 def make_sim(**kwargs):
     torch.manual_seed(0)
-    return LearnedSimulator(STATS, H=2, M=1, hidden=8, gravity_prior=True, **kwargs)
+    return learned(H=2, M=1, hidden=8, gravity_prior=True, **kwargs)
 
 
 def test_a_scene_without_contact_is_untouched_bit_for_bit():

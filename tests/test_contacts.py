@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from simdata import REPORT_MODEL, STATS
+from simdata import REPORT_MODEL, learned
 from torch.testing import assert_close
 from torch_geometric.data import Batch
 
@@ -56,7 +56,7 @@ def ballistic(state):
 def make(**kwargs) -> LearnedSimulator:
     torch.manual_seed(0)
     args = dict(H=2, M=2, hidden=16, contact_features=True, material_features=True)
-    return LearnedSimulator(STATS, **(args | kwargs))
+    return learned(**(args | kwargs))
 
 
 @pytest.mark.parametrize("relative_pairs", [False, True])
@@ -118,7 +118,7 @@ def test_material_values_are_node_features(mass_ratio):
 
 
 def test_report_inputs_are_the_old_widths():
-    sim = LearnedSimulator(STATS, H=2, M=1, hidden=8, **REPORT_MODEL)
+    sim = learned(H=2, M=1, hidden=8, **REPORT_MODEL)
     assert (sim.network.pp_in, sim.network.ps_in, sim.node_in) == (4, 10, 20)
 
 
@@ -215,7 +215,7 @@ SWITCHES = [("contact_features", True), ("material_features", True), ("gravity_p
 def test_each_switch_alone_builds_and_predicts(key, value):
     """Each switch of the default model alone on the report's model."""
     assert REPORT_MODEL.get(key, False) != value
-    sim = LearnedSimulator(STATS, H=2, M=1, hidden=8, **(REPORT_MODEL | {key: value}))
+    sim = learned(H=2, M=1, hidden=8, **(REPORT_MODEL | {key: value}))
     state = scene([[0, 0, 0.5], [1.0, 0, 0.5]], [[0, 0, 0]] * 2, [0.5, 0.5])
     vel, angvel = sim(state)
     assert torch.isfinite(vel).all() and torch.isfinite(angvel).all()

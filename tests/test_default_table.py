@@ -28,7 +28,7 @@ def test_the_default_table_names_each_rows_commit(tmp_path, capsys):
                           text=True).stdout.strip()  # fmt: skip
     registry, out = tmp_path / "registry.jsonl", tmp_path / "default.md"
     lines = [record(0, 30.0, head), record(1, 34.0, "0000000", diverged=12)]
-    lines.append(record(2, 99.0, head) | {"key": "model.M=1"})  # another configuration
+    lines.append(record(2, 99.0, head) | {"key": "model.network.M=1"})  # another configuration
     registry.write_text("".join(json.dumps(r) + "\n" for r in lines))
     assert main([str(registry), str(out)]) == 0
     rows = [line for line in out.read_text().splitlines() if line.startswith("| ")]

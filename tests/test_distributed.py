@@ -36,8 +36,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def sweep(outputs: Path, name: str, *args: str, background: bool = False):
-    """``python -m physgnn.train -m model.M=1,2`` of two tiny jobs (experiment ``name``)."""
-    cmd = [sys.executable, "-m", "physgnn.train", "-m", "model.M=1,2", "data=tiny",
+    """``python -m physgnn.train -m model.network.M=1,2`` of two tiny jobs (experiment ``name``)."""
+    cmd = [sys.executable, "-m", "physgnn.train", "-m", "model.network.M=1,2", "data=tiny",
            f"paths.outputs={outputs}", f"experiment_name={name}", *SHORT[1:], *args]  # fmt: skip
     if background:
         return subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
@@ -57,7 +57,7 @@ def test_joblib_sweep_runs_two_jobs_in_worker_processes(tiny_dataset):
     assert done.returncode == 0, done.stderr[-3000:]
     jobs = jobs_of(outputs, "joblib")
     assert [j["status"] for j in jobs] == ["finished", "finished"]
-    assert [j["overrides"][0] for j in jobs] == ["model.M=1", "model.M=2"]
+    assert [j["overrides"][0] for j in jobs] == ["model.network.M=1", "model.network.M=2"]
     pids = {read_run_json(j["run_dir"])["pid"] for j in jobs}
     assert len(pids) == 2 and os.getpid() not in pids
 
@@ -178,9 +178,10 @@ def test_two_ddp_processes_match_one_on_the_same_global_batch(three_sphere_datas
     # No random draws (noise, contact noise, push-forward) and no gravity prior: its loss is a
     # mean over the spheres in reach of a contact, and two processes average two such means,
     # which equals one process's mean only when both count as many spheres.
-    common = ["model.M=1", "model.hidden=16", "trainer.max_epochs=2", "trainer.max_time=null",
-              "trainer.enable_progress_bar=false", "trainer.enable_model_summary=false",
-              "datamodule.pairs_per_epoch=32", "datamodule.val_pairs=8", "lit.noise_std=0",
+    common = ["model.network.M=1", "model.network.hidden=16", "trainer.max_epochs=2",
+              "trainer.max_time=null", "trainer.enable_progress_bar=false",
+              "trainer.enable_model_summary=false", "datamodule.pairs_per_epoch=32",
+              "datamodule.val_pairs=8", "lit.noise_std=0",
               "lit.contact_noise_depth=0", "model.gravity_prior=false",
               "lit.pushforward_steps=0", f"data.dir={three_sphere_dataset}"]  # fmt: skip
     one = train(config(three_sphere_dataset, tmp_path / "one", *common, "datamodule.batch_size=8"))

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 from omegaconf import OmegaConf
-from simdata import STATS, batch, trajectory
+from simdata import batch, learned, trajectory
 
 from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.scene import EFFECT_NAMES, GROUND, Effects
@@ -25,7 +25,7 @@ CONF = Path(__file__).resolve().parents[1] / "conf"
 
 def make() -> LearnedSimulator:
     torch.manual_seed(0)
-    sim = LearnedSimulator(STATS, **MODEL).eval()
+    sim = learned(**MODEL).eval()
     sim.effects_trained.fill_(True)
     return sim
 
@@ -113,7 +113,8 @@ def test_effects_trained_round_trip_through_a_lightning_checkpoint(tmp_path):
     trainer.save_checkpoint(tmp_path / "checkpoints" / "last.ckpt")
     # every key of the model, as a run's config holds it (a run without the keys added since
     # is an earlier physgnn's, loaded with the earlier model's values)
-    model = OmegaConf.merge(OmegaConf.load(CONF / "model" / "baseline.yaml"), MODEL)
+    nodes = {"H": 1, "network": {"M": 2, "hidden": 16}, "graph": {"epsilon": 0.05}}  # MODEL
+    model = OmegaConf.merge(OmegaConf.load(CONF / "model" / "baseline.yaml"), nodes)
     (tmp_path / ".hydra").mkdir()
     OmegaConf.save(OmegaConf.create({"model": model}), tmp_path / ".hydra" / "config.yaml")
     loaded, _, info = load_run(tmp_path)

@@ -49,15 +49,15 @@ def fake_outputs(out: Path) -> Path:
     make_run(out / "runs" / "baseline" / "2026-01-01_00-00-00")
     make_run(out / "runs" / "baseline" / "2026-01-01_00-00-01", status="running")
     make_run(
-        out / "multirun" / "ablation_M" / "t0" / "model.M=3,seed=1",
+        out / "multirun" / "ablation_M" / "t0" / "model.network.M=3,seed=1",
         "ablation_M",
-        ["+experiment=ablation_M", "model.M=3", "seed=1"],
+        ["+experiment=ablation_M", "model.network.M=3", "seed=1"],
         seed=1,
     )
     make_run(
-        out / "multirun" / "ablation_M" / "t0" / "model.M=5,seed=1",
+        out / "multirun" / "ablation_M" / "t0" / "model.network.M=5,seed=1",
         "ablation_M",
-        ["model.M=5", "seed=1"],
+        ["model.network.M=5", "seed=1"],
         seed=1,
         status="diverged",
     )
@@ -71,12 +71,15 @@ def outputs(tmp_path):
 
 def test_find_runs_keeps_finished_runs_only(outputs):
     names = [eval_runs.run_name(p, outputs) for p in eval_runs.find_runs(None, outputs)]
-    assert names == ["multirun/ablation_M/t0/model.M=3,seed=1", "runs/baseline/2026-01-01_00-00-00"]
+    assert names == [
+        "multirun/ablation_M/t0/model.network.M=3,seed=1",
+        "runs/baseline/2026-01-01_00-00-00",
+    ]
 
 
 def test_find_runs_of_a_multirun_folder_and_of_one_run(outputs):
     multirun = outputs / "multirun" / "ablation_M" / "t0"
-    assert eval_runs.find_runs(str(multirun), outputs) == [multirun / "model.M=3,seed=1"]
+    assert eval_runs.find_runs(str(multirun), outputs) == [multirun / "model.network.M=3,seed=1"]
     one = outputs / "runs" / "baseline" / "2026-01-01_00-00-00"
     assert eval_runs.find_runs(str(one), outputs) == [one]
 
@@ -98,11 +101,11 @@ def test_find_runs_errors_are_one_line(outputs, target, message):
 
 
 def test_run_info_joins_overrides_and_reads_seed(outputs):
-    run = outputs / "multirun" / "ablation_M" / "t0" / "model.M=3,seed=1"
+    run = outputs / "multirun" / "ablation_M" / "t0" / "model.network.M=3,seed=1"
     info = eval_runs.run_info(run, outputs)
     assert (info.experiment, info.overrides, info.seed) == (
         "ablation_M",
-        "+experiment=ablation_M model.M=3 seed=1",
+        "+experiment=ablation_M model.network.M=3 seed=1",
         1,
     )
 
@@ -207,7 +210,7 @@ def test_save_rollouts_writes_each_learned_run_in_the_dataset_schema(evaluated):
         assert pred.attrs["run"] == "runs/baseline/2026-01-01_00-00-00"
         assert int(pred.attrs["diverged_at"]) == -1 and int(pred.attrs["start"]) == want.start
     diverging = outputs / "report" / "rollouts" / "multirun" / "ablation_M" / "t0"
-    bad = read_split(diverging / "model.M=3,seed=1" / "ood.h5")
+    bad = read_split(diverging / "model.network.M=3,seed=1" / "ood.h5")
     assert all(int(p.attrs["diverged_at"]) == p.n_frames for p in bad)
     assert not (outputs / "report" / "rollouts" / "ground_truth").exists()
 
@@ -260,7 +263,7 @@ def test_report_links_figures_and_one_video_per_ood_scene(evaluated):
     assert "![energy](figures/energy_ood.png)" in text
     assert "with sleeping off and on" in text and "| on |" in text
     # the multirun run that never finished is listed, not evaluated
-    assert "`multirun/ablation_M/t0/model.M=5,seed=1`: status diverged" in text
+    assert "`multirun/ablation_M/t0/model.network.M=5,seed=1`: status diverged" in text
 
 
 def test_ground_truth_rows_equal_the_data_report_measured_as_rollouts_are(evaluated):
@@ -280,8 +283,8 @@ def test_ground_truth_rows_equal_the_data_report_measured_as_rollouts_are(evalua
 
 TINY_TRAIN = [
     "data=tiny",
-    "model.M=1",
-    "model.hidden=16",
+    "model.network.M=1",
+    "model.network.hidden=16",
     "trainer.max_epochs=1",
     "trainer.max_time=null",
     "trainer.enable_progress_bar=false",

@@ -14,6 +14,7 @@ from omegaconf import OmegaConf
 from simdata import REPORT_MODEL
 
 from physgnn.training.build import build, strategy_of
+from physgnn.training.layout import dotted_model, key_of_today
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 # Experiments of one run (not sweeps), with their optimiser-step budget.
@@ -59,7 +60,7 @@ def test_every_experiment_is_listed():
 
 def test_the_long_run_is_ten_default_budgets_with_milestones(tiny_dataset, tmp_path):
     base = ["data=tiny", f"paths.outputs={Path(tiny_dataset).parents[1]}", f"run_dir={tmp_path}"]
-    cfg = compose_train(["+experiment=long", "model.hidden=8", *base])
+    cfg = compose_train(["+experiment=long", "model.network.hidden=8", *base])
     assert cfg.hydra.mode != RunMode.MULTIRUN and cfg.experiment_name == "long"
     steps = cfg.trainer.max_epochs * cfg.datamodule.pairs_per_epoch // cfg.datamodule.batch_size
     assert steps == SINGLE["long"] == 10 * 2250
@@ -76,7 +77,7 @@ def test_experiment_composes_and_every_job_instantiates(name, tiny_dataset, tmp_
         "data=tiny",
         f"paths.outputs={Path(tiny_dataset).parents[1]}",
         f"run_dir={tmp_path}",
-        "model.hidden=8",
+        "model.network.hidden=8",
     ]
     cfg = compose_train([f"+experiment={name}", *base])
     assert cfg.hydra.mode == RunMode.MULTIRUN and cfg.experiment_name == name
@@ -98,8 +99,8 @@ def test_experiment_composes_and_every_job_instantiates(name, tiny_dataset, tmp_
         assert lit.simulator.H == job_cfg.model.H == job_cfg.datamodule.H
         built = {
             "model.H": lit.simulator.H,
-            "model.M": lit.simulator.M,
-            "model.connectivity": lit.simulator.graph_builder.connectivity,
+            "model.network.M": lit.simulator.M,
+            "model.graph.connectivity": lit.simulator.graph_builder.connectivity,
             "lit.lambda_energy": lit.lambda_energy,
         }
         assert built[key] == OmegaConf.select(job_cfg, key) == parse(value)
@@ -109,23 +110,23 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
     base = ["data=tiny", f"paths.outputs={Path(tiny_dataset).parents[1]}", f"run_dir={tmp_path}"]
     baseline = compose_train([*base, "+variant=baseline"])
     expected = {
-        "m1": {"model.M": 1},
-        "epsilon": {"model.connectivity": "epsilon"},
+        "m1": {"model.network.M": 1},
+        "epsilon": {"model.graph.connectivity": "epsilon"},
         "h0": {"model.H": 0},
         "energy": {"lit.lambda_energy": 10.0},
         "no_noise": {"lit.noise_std": 0.0},
-        "no_third_law": {"model.third_law": False},
+        "no_third_law": {"model.network.third_law": False},
         "gns": {
-            "model.third_law": False,
-            "model.use_surfaces": False,
+            "model.network.third_law": False,
+            "model.network.use_surfaces": False,
             "model.boundary_features": True,
             **REPORT_INPUTS,
         },
         # each invariance of the default model undone alone
-        "vi_connectivity": {"model.connectivity": "vi"},
+        "vi_connectivity": {"model.graph.connectivity": "vi"},
         "absolute_pairs": {"model.relative_pairs": False},
         "absolute_mass": {"model.mass_ratio": False},
-        "sum_aggregation": {"model.aggregation": "sum"},
+        "sum_aggregation": {"model.network.aggregation": "sum"},
         "no_rest_decision": {"model.rest_decision": False},
         "uniform_noise": {"lit.noise_rest_scale": 1.0},
         "no_dense_data": {},  # the data only (below)
@@ -134,20 +135,22 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
     for variant, changes in expected.items():
         cfg = compose_train([*base, f"+variant={variant}"])
         lit = instantiate(cfg.lit, simulator=instantiate(cfg.model, stats=stats))
-        assert lit.simulator.M == cfg.model.M and lit.noise_std == cfg.lit.noise_std
-        for section in ("model", "lit"):
-            for key, value in cfg[section].items():
-                want = changes.get(f"{section}.{key}", baseline[section][key])
+        assert lit.simulator.M == cfg.model.network.M and lit.noise_std == cfg.lit.noise_std
+        for section in ("model", "lit"):  # the keys of the network and the graph too
+            default = dotted_model(baseline[section])
+            for key, value in dotted_model(cfg[section]).items():
+                want = changes.get(f"{section}.{key}", default[key])
                 assert value == want, (variant, key)
-    assert baseline.model.M == 5 and baseline.model.H == 2 and baseline.lit.lambda_energy == 0
-    assert baseline.model.connectivity == "approach" and baseline.lit.noise_std == 0.03
-    assert baseline.model.aggregation == "mean" and baseline.lit.noise_rest_scale == 0.05
+    assert baseline.model.network.M == 5 and baseline.model.H == 2
+    assert baseline.lit.lambda_energy == 0
+    assert baseline.model.graph.connectivity == "approach" and baseline.lit.noise_std == 0.03
+    assert baseline.model.network.aggregation == "mean" and baseline.lit.noise_rest_scale == 0.05
     nodense = compose_train([*base, "+variant=no_dense_data"]).data
     assert nodense.fit_scene.dense_fraction == 0.0 and nodense.dir.endswith("small_nodense")
 
 
 # the report's model (model=report, which model=gns builds on) against the default
-REPORT_INPUTS = {f"model.{key}": value for key, value in REPORT_MODEL.items()}
+REPORT_INPUTS = {key_of_today(f"model.{key}"): value for key, value in REPORT_MODEL.items()}
 
 
 def test_gns_model_config_is_the_gns_variant(tiny_dataset, tmp_path):

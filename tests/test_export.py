@@ -31,7 +31,7 @@ def test_an_exported_run_predicts_as_its_source_from_a_third_of_the_file(tiny_ru
         assert_close(shipped.state_dict()[key], value, rtol=0, atol=0)
     assert info["status"] == "finished" and info["weights_format"] == 1
     assert info["checkpoint_step"] == torch.load(source, weights_only=True)["global_step"]
-    assert cfg.model.M == 1 and info["exported_from"].endswith(f"({source.name})")
+    assert cfg.model.network.M == 1 and info["exported_from"].endswith(f"({source.name})")
 
 
 def test_pretrained_names_the_shipped_folder(exported, monkeypatch):

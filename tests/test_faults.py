@@ -155,7 +155,7 @@ def refusal(key: str, folder: Path) -> str:
 
 def test_simulate_writes_over_no_folder_it_did_not_write(tmp_path, capsys):
     folder = folder_of_mine(tmp_path / "mine")
-    args = [f"scene={ROOT / 'conf' / 'scenes' / 'head_on.yaml'}", "frames=3", "video=false"]
+    args = [f"scene_file={ROOT / 'conf' / 'scene' / 'head_on.yaml'}", "frames=3", "video=false"]
     with pytest.raises(SystemExit) as exit_info:
         simulate_command.main([*args, f"out={folder}"])
     assert exit_info.value.code == 2 and capsys.readouterr().err == refusal("out", folder)
@@ -208,8 +208,9 @@ def test_a_signal_mid_epoch_stops_saves_and_resumes(tiny_dataset, tmp_path, sign
     assert torch.load(last, weights_only=True)["global_step"] == 2  # mid-epoch
     note = f"`runs/stopped`: status interrupted (stopped by {signum.name})"
     assert load_runs(compose_eval(tmp_path), tmp_path) == ([], [note])  # eval lists it
-    with pytest.raises(ConfigError, match="model.M must be a whole number"):  # a typo on restart
-        train(config(tiny_dataset, run_dir, *budget, "model.M=abc"))
+    typo = "model.network.M must be a whole number"  # a typo on restart
+    with pytest.raises(ConfigError, match=typo):
+        train(config(tiny_dataset, run_dir, *budget, "model.network.M=abc"))
     resumed = train(config(tiny_dataset, run_dir, *budget))  # the same folder: resumes
     assert resumed["status"] == "finished" and resumed["resumed_from"] == str(last)
     assert resumed["global_step"] == 8 and resumed["pairs_seen"] == 32
@@ -250,7 +251,7 @@ def test_failing_jobs_never_stop_a_sweep(tiny_dataset, tmp_path, monkeypatch, ca
 
 def test_debug_fast_leaves_nothing_eval_takes_for_a_model(tiny_dataset, tmp_path):
     run_dir = tmp_path / "runs" / "smoke"
-    train(config(tiny_dataset, run_dir, "debug=fast", "model.hidden=16"))
+    train(config(tiny_dataset, run_dir, "debug=fast", "model.network.hidden=16"))
     assert read_run_json(run_dir)["status"] == "debug" and not list(run_dir.rglob("*.ckpt"))
     assert find_runs(None, tmp_path) == []
     eval_cfg = compose_eval(tmp_path)
@@ -290,7 +291,7 @@ def hydra_args(tiny_dataset, run_dir) -> list[str]:
 def test_resuming_a_missing_or_foreign_checkpoint_is_one_line(tiny_dataset, tmp_path,
                                                               monkeypatch, capsys):  # fmt: skip
     monkeypatch.setattr(sys, "argv", ["physgnn.train", *hydra_args(tiny_dataset, tmp_path / "m1"),
-                                      *SHORT, "model.M=1"])  # fmt: skip
+                                      *SHORT, "model.network.M=1"])  # fmt: skip
     train_command.main()  # a run with its .hydra/config.yaml
     missing = tmp_path / "none.ckpt"
     code, line = run_main(monkeypatch, capsys, *hydra_args(tiny_dataset, tmp_path / "a"),
@@ -298,9 +299,9 @@ def test_resuming_a_missing_or_foreign_checkpoint_is_one_line(tiny_dataset, tmp_
     assert code == 2 and line.startswith(f"error: ckpt_path={missing}: no such file")
     last = tmp_path / "m1" / "checkpoints" / "last.ckpt"
     code, line = run_main(monkeypatch, capsys, *hydra_args(tiny_dataset, tmp_path / "b"),
-                          *SHORT, "model.M=2", f"ckpt_path={last}")  # fmt: skip
+                          *SHORT, "model.network.M=2", f"ckpt_path={last}")  # fmt: skip
     assert code == 2 and line.startswith(f"error: ckpt_path={last} does not fit this model")
-    assert "model.M is 1 there, 2 here" in line
+    assert "model.network.M is 1 there, 2 here" in line
     assert read_run_json(tmp_path / "b")["status"] == "failed"
 
 
@@ -344,7 +345,7 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
 @pytest.mark.parametrize(
     "override,message",
     [
-        ("model.M=abc", "model.M must be a whole number, got 'abc'"),
+        ("model.network.M=abc", "model.network.M must be a whole number, got 'abc'"),
         ("datamodule.batch_size=1.5", "datamodule.batch_size must be a whole number, got 1.5"),
         ("lit.scheduler.gamma=-1", "lit.scheduler.gamma must be a number > 0 (lr x gamma^epoch"),
         ("trainer.max_epochs=0", "trainer.max_epochs=0 trains nothing: give at least 1"),

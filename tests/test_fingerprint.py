@@ -34,13 +34,13 @@ PINNED = Path(__file__).with_name("fingerprint.json")
 CONFIG = [
     "seed=0",
     # the model, every key that shapes its numerics
-    "model.H=2", "model.M=1", "model.hidden=16", "model.connectivity=vi", "model.epsilon=0.01",
-    "model.factor=1.0", "model.third_law=true", "model.use_surfaces=true",
-    "model.boundary_features=false", "model.contact_features=true",
-    "model.material_features=true", "model.gravity_prior=true", "model.layer_norm=false",
-    "model.clip_margin=1.0",
+    "model.H=2", "model.network.M=1", "model.network.hidden=16", "model.graph.connectivity=vi",
+    "model.graph.epsilon=0.01", "model.graph.factor=1.0", "model.network.third_law=true",
+    "model.network.use_surfaces=true", "model.boundary_features=false",
+    "model.contact_features=true", "model.material_features=true", "model.gravity_prior=true",
+    "model.network.layer_norm=false", "model.graph.clip_margin=1.0",
     # the invariance keys (default since), at the values the fingerprint was measured with
-    "model.relative_pairs=false", "model.mass_ratio=false", "model.aggregation=sum",
+    "model.relative_pairs=false", "model.mass_ratio=false", "model.network.aggregation=sum",
     "model.rest_decision=false", "model.rest_speed=0.01",
     # the recipe: noise, push-forward (from step 2 of 4), contact terms, Adam, schedule
     "lit.noise_std=0.03", "lit.pushforward_steps=2", "lit.pushforward_after=2",

@@ -56,9 +56,9 @@ def full_tmpfs(tmp_path):
 
 def test_simulate_onto_a_real_full_disk_is_one_line_and_leaves_nothing(full_tmpfs, capsys):
     out = full_tmpfs / "sim"
-    scene = ROOT / "conf" / "scenes" / "throw.yaml"
+    scene = ROOT / "conf" / "scene" / "throw.yaml"
     with pytest.raises(SystemExit) as exit_info:
-        simulate_command.main([f"scene={scene}", "frames=1000", "video=false", f"out={out}"])
+        simulate_command.main([f"scene_file={scene}", "frames=1000", "video=false", f"out={out}"])
     err = capsys.readouterr().err
     assert exit_info.value.code == 2 and len(err.splitlines()) == 1
     assert err.startswith("error: No space left on device: ")

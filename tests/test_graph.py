@@ -109,7 +109,7 @@ def test_exactly_touching_and_coincident_spheres_have_finite_features_and_gradie
 
 
 def test_one_sphere_zero_speed_and_ground_only():
-    g = GraphBuilder()(make_state([[1, 2, 3]], vel=[[1, 0, 0]]))
+    g = GraphBuilder("vi", clip_margin=0.0)(make_state([[1, 2, 3]], vel=[[1, 0, 0]]))
     assert g.pp_index.shape == (2, 0) and g.pp_attr.shape == (0, 4)
     assert ps_of(g) == [(0, 0)]
     # height 3 clipped at the reach r + |v|·dt + ε = 0.5 + 0.125 + 0.01
@@ -164,7 +164,7 @@ def test_sphere_exactly_on_a_wall_on_its_edge_and_on_its_corner():
 
 def test_ps_features_by_hand():
     state = make_state([[3.5, 0, 3]], vel=[[1, 0, 0]], planes=[WALL_ROW], kinds=[WALL])
-    g = GraphBuilder("epsilon", epsilon=0.0)(state)
+    g = GraphBuilder("epsilon", epsilon=0.0, clip_margin=0.0)(state)
     assert ps_of(g) == [(0, 0), (1, 0)]
     ground = [1, 0, 0, 0, 0, 1, 0, 0, 0.5, 0.5]  # height 3 clipped at the reach r = 0.5
     # wall: n = (−1, 0, 0), (p − p_s)·n = 0.5, so ((p − p_s)·n) n = (−0.5, 0, 0)
@@ -337,7 +337,7 @@ def check_features(state: Batch, g: Graph, eps: float) -> None:
 def test_paired_layout_and_features():
     gen = torch.Generator().manual_seed(6)
     state = Batch.from_data_list([random_scene(gen, 40), random_scene(gen, 30)])
-    g = GraphBuilder("vi", epsilon=0.1)(state)
+    g = GraphBuilder("vi", epsilon=0.1, clip_margin=0.0)(state)
     half = g.num_pairs
     assert g.pp_index.shape[1] == 2 * half and half > 10
     torch.testing.assert_close(g.pp_index[:, half:], g.pp_index[:, :half].flip(0))
@@ -420,7 +420,7 @@ def box_lattice_state(nx: int, ny: int, nz: int) -> SceneState:
 def test_tight_pack_of_10000_spheres(backend):
     nx, ny, nz = 25, 20, 20
     state = box_lattice_state(nx, ny, nz)
-    g = GraphBuilder("vi", epsilon=0.01, backend=backend)(state)
+    g = GraphBuilder("vi", epsilon=0.01, backend=backend, clip_margin=0.0)(state)
     touching = (nx - 1) * ny * nz + nx * (ny - 1) * nz + nx * ny * (nz - 1)
     assert g.num_pairs == touching
     assert g.ps_index.shape[1] == 10_000 + ny * nz  # every ground edge + the x = 0 layer
@@ -462,7 +462,7 @@ def test_planes_are_one_sided():
 
 
 def test_clip_margin_separates_resting_from_falling_and_keeps_heights_out():
-    builder = GraphBuilder(epsilon=0.01, clip_margin=1.0)
+    builder = GraphBuilder("vi", epsilon=0.01, clip_margin=1.0)
     resting = builder(make_state([[0, 0, 0.5]]))
     hovering = builder(make_state([[0, 0, 0.52]]))
     assert float(resting.ps_attr[0, 9]) == pytest.approx(0.5)

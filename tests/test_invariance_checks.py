@@ -6,10 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from simdata import STATS
+from simdata import learned
 
 from physgnn.evaluation import invariance as inv
-from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.energy import G
 from physgnn.report import invariance as section
 
@@ -42,7 +41,7 @@ def test_resting_grids_touch_and_weigh_what_they_say():
 
 def test_an_untrained_default_keeps_the_block_and_every_row_is_there():
     torch.manual_seed(0)
-    sim = LearnedSimulator(STATS, H=2, M=1, hidden=8).eval()
+    sim = learned(H=2, M=1, hidden=8).eval()
     rows = inv.invariance_rows("untrained", sim, rest_frames=4)
     kinds = [r["kind"] for r in rows]
     assert kinds.count("flying_block") == 1 and kinds.count("collision") == 1

@@ -11,7 +11,7 @@ import itertools
 import numpy as np
 import pytest
 import torch
-from simdata import REPORT_MODEL, STATS
+from simdata import REPORT_MODEL, learned
 from test_contacts import MATERIALS, scene
 from test_graph import make_state
 from test_scenes import scene_cfg
@@ -35,7 +35,7 @@ DT = 0.125
 def make(**kwargs) -> LearnedSimulator:
     """The default model, small and untrained (random weights)."""
     torch.manual_seed(0)
-    return LearnedSimulator(STATS, **(dict(H=2, M=2, hidden=16) | kwargs)).eval()
+    return learned(**(dict(H=2, M=2, hidden=16) | kwargs)).eval()
 
 
 def random_spheres(n: int, seed: int, side: float, speed: float, min_gap: float | None = None):
@@ -222,7 +222,9 @@ def test_a_star_of_k_identical_neighbours_sums_k_times_and_averages_to_one(k):
         assert_close(mean_k[0], mean_1[0])  # the mean does not
         assert_close(outs[k][0], outs[1][0])  # nor the centre's prediction
         assert_close(outs[k][1:], outs[1][1:].expand(k, -1))  # every leaf as the one
-        summed = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=16, M=2)
+        summed = EncodeProcessDecode(
+            node_in=5, pp_in=4, ps_in=10, hidden=16, M=2, aggregation="sum"
+        )
         summed.load_state_dict(net.state_dict())
         assert not torch.allclose(summed(*star(k))[0], summed(*star(1))[0])  # control
 

@@ -8,7 +8,7 @@ import lightning as L
 import pytest
 import torch
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint
-from simdata import REPORT_MODEL, STATS, batch, trajectory
+from simdata import REPORT_MODEL, batch, learned, trajectory
 from test_contacts import scene
 from torch.testing import assert_close
 from torch_geometric.data import Batch
@@ -16,7 +16,6 @@ from torch_geometric.loader import DataLoader
 
 from physgnn.data.state import SceneState
 from physgnn.models.capture import ShapeBoundCall
-from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.scene import Effects
 from physgnn.training.lit import (
     LitSimulator,
@@ -35,7 +34,7 @@ ADAM = functools.partial(torch.optim.Adam, lr=1e-3)
 def make_lit(model: dict | None = None, **kwargs) -> LitSimulator:
     """The default model (or ``model``'s switches) with H = 1, M = 1, 8 hidden units."""
     torch.manual_seed(0)
-    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8, **(model or {}))
+    sim = learned(H=1, M=1, hidden=8, **(model or {}))
     return LitSimulator(sim, ADAM, **kwargs)
 
 
@@ -250,7 +249,7 @@ class AtStep(LitSimulator):
 
 
 def test_push_forward_growth_lengthens_the_unroll_step_by_step():
-    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8)
+    sim = learned(H=1, M=1, hidden=8)
     lit = AtStep(sim, ADAM, pushforward_steps=3, pushforward_after=10, pushforward_growth=5)
     highs = {}
     for step in (9, 10, 14, 15, 20, 40):
@@ -274,7 +273,7 @@ class AtRank(AtStep):
 
 
 def test_each_ddp_process_draws_its_own_noise_and_all_the_same_unroll():
-    lit = AtRank(LearnedSimulator(STATS, H=1, M=1, hidden=8), ADAM, seed=3, pushforward_after=0)
+    lit = AtRank(learned(H=1, M=1, hidden=8), ADAM, seed=3, pushforward_after=0)
     draws = {}
     for lit.at in range(20):
         for lit.rank in range(3):

@@ -106,8 +106,8 @@ def test_a_run_dir_leaves_no_stray_hydra_folder(tiny_dataset, tmp_path, monkeypa
     outputs = tmp_path / "outputs"
     shutil.copytree(tiny_dataset, outputs / "data" / "tiny")
     run_dir = tmp_path / "run"
-    args = ["data=tiny", f"paths.outputs={outputs}", f"run_dir={run_dir}", "model.hidden=8",
-            "model.M=1", "trainer.max_epochs=1", "datamodule.pairs_per_epoch=8",
+    args = ["data=tiny", f"paths.outputs={outputs}", f"run_dir={run_dir}", "model.network.hidden=8",
+            "model.network.M=1", "trainer.max_epochs=1", "datamodule.pairs_per_epoch=8",
             "trainer.enable_progress_bar=false"]  # fmt: skip
     monkeypatch.setattr(sys, "argv", ["physgnn.train", *args])
     train_command.main()

@@ -43,8 +43,14 @@ def one_line_exit(monkeypatch, capsys, module, *args) -> str:
             "datamodule.batch_size=0",
             "datamodule.batch_size must be a whole number >= 1 (pairs per step), got 0",
         ),
-        ("model.M=0", "model.M must be a whole number >= 1 (message-passing steps), got 0"),
-        ("model.hidden=0", "model.hidden must be a whole number >= 1 (units per layer), got 0"),
+        (
+            "model.network.M=0",
+            "model.network.M must be a whole number >= 1 (message-passing steps), got 0",
+        ),
+        (
+            "model.network.hidden=0",
+            "model.network.hidden must be a whole number >= 1 (units per layer), got 0",
+        ),
         (
             "lit.noise_std=-1",
             "lit.noise_std must be a number >= 0 (input noise, normalised units; 0: none), got -1",
@@ -147,10 +153,10 @@ def test_a_truncated_checkpoint_is_one_line_naming_it_and_the_one_that_loads(tin
 
 def test_weights_of_another_m_name_the_key(run_copy):
     config = run_copy / ".hydra" / "config.yaml"
-    config.write_text(config.read_text().replace("\n  M: 1\n", "\n  M: 2\n"))
+    config.write_text(config.read_text().replace("\n    M: 1\n", "\n    M: 2\n"))
     with pytest.raises(
         RunError,
-        match=r"does not fit the model .* describes \(model\.M is 1 in "
+        match=r"does not fit the model .* describes \(model\.network\.M is 1 in "
         r"the weights, 2 in the config\): the weights and the config are of "
         "different runs",
     ):

@@ -32,14 +32,16 @@ def test_every_subpackage_is_in_the_wheel_list():
 
 def test_a_checkout_reads_its_top_level_conf():
     assert Path(physgnn.CONF_DIR) == ROOT / "conf"
-    assert Path(physgnn.SCENES_DIR) == ROOT / "conf" / "scenes"
+    assert Path(physgnn.SCENES_DIR) == ROOT / "conf" / "scene"
 
 
 def test_an_example_scene_is_found_by_its_name():
-    assert scene_file("throw") == ROOT / "conf" / "scenes" / "throw.yaml"
-    assert load_scene("throw.yaml").name == load_scene(ROOT / "conf/scenes/throw.yaml").name
-    with pytest.raises(SceneError, match="does not exist;.*head_on, throw, tilted_drop"):
+    assert scene_file("throw") == ROOT / "conf" / "scene" / "throw.yaml"
+    assert load_scene("throw.yaml").name == load_scene(ROOT / "conf/scene/throw.yaml").name
+    with pytest.raises(SceneError, match="does not exist;.*\\(head_on, throw, tilted_drop\\)"):
         scene_file("no_such_scene")
+    with pytest.raises(SceneError, match="does not exist"):  # a scene family, not a file
+        scene_file("random_box")
 
 
 def test_the_console_script_lists_its_commands(capsys):
@@ -105,7 +107,7 @@ def test_the_wheel_generates_trains_and_simulates_from_another_folder(tmp_path):
         names = set(zf.namelist())
     assert {
         "physgnn/conf/train.yaml",
-        "physgnn/conf/scenes/throw.yaml",
+        "physgnn/conf/scene/throw.yaml",
         "physgnn/py.typed",
     } <= names
     python = _fresh_venv(tmp_path / "venv")
@@ -126,9 +128,9 @@ def test_the_wheel_generates_trains_and_simulates_from_another_folder(tmp_path):
         assert run(script, name, "--help").strip(), name
     out = elsewhere / "outputs"
     run(script, "generate", "data=tiny", "workers=1", "progress=false")
-    run(script, "train", "data=tiny", "model.M=1", "model.hidden=16", "trainer.max_epochs=1",
-        "datamodule.pairs_per_epoch=8", "datamodule.batch_size=8", "run_dir=outputs/runs/one",
-        "trainer.enable_progress_bar=false")  # fmt: skip
+    run(script, "train", "data=tiny", "model.network.M=1", "model.network.hidden=16",
+        "trainer.max_epochs=1", "datamodule.pairs_per_epoch=8", "datamodule.batch_size=8",
+        "run_dir=outputs/runs/one", "trainer.enable_progress_bar=false")  # fmt: skip
     assert (out / "runs" / "one" / "run.json").is_file()
     run(python, "-m", "physgnn.simulate", "scene=throw", "run=outputs/runs/one", "frames=8",
         "video=false", "out=sim")  # fmt: skip

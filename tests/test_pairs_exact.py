@@ -13,14 +13,13 @@ import lightning as L
 import pytest
 import torch
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint
-from simdata import STATS, trajectory
+from simdata import learned, trajectory
 from torch.testing import assert_close
 from torch_geometric.loader import DataLoader as PygLoader
 
 from physgnn.data.dataset import compute_stats, read_split, write_split, write_stats
 from physgnn.data.pairs import EpochSampler, PairDataset
 from physgnn.data.state import TrajectoryFrames
-from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.scene import Effects
 from physgnn.training.datamodule import StatePairDataModule
 from physgnn.training.lit import LitSimulator
@@ -120,7 +119,7 @@ class Losses(Callback):
 def short_training(fit) -> tuple[Losses, dict]:
     """Two epochs with noise and push-forward from the first step; ``fit(trainer, lit)``."""
     torch.manual_seed(0)
-    simulator = LearnedSimulator(STATS, H=2, M=2, hidden=16)
+    simulator = learned(H=2, M=2, hidden=16)
     adam = functools.partial(torch.optim.Adam, lr=1e-2)
     lit = LitSimulator(simulator, adam, noise_std=0.05, seed=3, pushforward_steps=2)
     losses = Losses()

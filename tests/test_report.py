@@ -52,13 +52,13 @@ def fake_rows():
             rows.append(make_row(ref, ref, "", None, "ood", s, mse, fps=None))
     for m in (1, 3, 5):
         for seed in (0, 1):
-            run = f"multirun/ablation_M/t/model.M={m},seed={seed}"
+            run = f"multirun/ablation_M/t/model.network.M={m},seed={seed}"
             for t in range(2):
                 rows.append(
                     make_row(
                         run,
                         "ablation_M",
-                        f"model.M={m} seed={seed}",
+                        f"model.network.M={m} seed={seed}",
                         seed,
                         "test",
                         f"traj_{t:05d}",
@@ -70,7 +70,7 @@ def fake_rows():
                     make_row(
                         run,
                         "ablation_M",
-                        f"model.M={m} seed={seed}",
+                        f"model.network.M={m} seed={seed}",
                         seed,
                         "ood",
                         s,
@@ -96,7 +96,10 @@ def fake_rows():
 
 
 def test_config_label_drops_seed_experiment_and_hydra_keys():
-    assert config_label("+experiment=ablation_M model.M=3 seed=2 hydra.job.num=1") == "model.M=3"
+    assert (
+        config_label("+experiment=ablation_M model.network.M=3 seed=2 hydra.job.num=1")
+        == "model.network.M=3"
+    )
     assert config_label("seed=0") == "default"
     assert config_label("+variant=h0 seed=1 trainer=gpu") == "variant=h0"
     assert (
@@ -105,7 +108,10 @@ def test_config_label_drops_seed_experiment_and_hydra_keys():
 
 
 def test_sweep_axis_finds_the_varying_key():
-    assert sweep_axis(["model.M=3 debug=fast", "model.M=5 debug=fast"]) == ("model.M", ["3", "5"])
+    assert sweep_axis(["model.network.M=3 debug=fast", "model.network.M=5 debug=fast"]) == (
+        "model.network.M",
+        ["3", "5"],
+    )
 
 
 def test_stat_is_mean_and_population_std_of_finite_values():
@@ -134,13 +140,14 @@ def test_report_from_fake_rows_has_every_section(tmp_path):
     assert (tmp_path / "figures" / "sweep_ablation_M.png").stat().st_size > 1000
     assert (tmp_path / "figures" / "fps.png").stat().st_size > 1000
     # the M sweep groups the two seeds: test mse of M=3 is mean of 3, 3, 4, 4 = 3.5 ± 0.5
-    line = next(ln for ln in text.splitlines() if ln.startswith("| model.M=3 |"))
+    line = next(ln for ln in text.splitlines() if ln.startswith("| model.network.M=3 |"))
     assert "| 2 | 3.5 ± 0.5 |" in line
     # every learned M beats static (50) and gravity_only (40) on test; M=5 ood (50, 51) does not
     assert (
-        "`ablation_M: model.M=1` beats static and gravity_only on mse and chamfer: test ✓" in text
+        "`ablation_M: model.network.M=1` beats static and gravity_only on mse and chamfer: test ✓"
+        in text
     )
-    m5 = next(ln for ln in text.splitlines() if "ablation_M: model.M=5` beats" in ln)
+    m5 = next(ln for ln in text.splitlines() if "ablation_M: model.network.M=5` beats" in ln)
     assert "ood_cubes ✗" in m5
 
 

@@ -15,7 +15,7 @@ from physgnn import metrics
 from physgnn.evaluation.rerun_log import RerunMissing, log_rerun
 from physgnn.simulate import main
 
-SCENE = Path(__file__).resolve().parents[1] / "conf" / "scenes" / "head_on.yaml"
+SCENE = Path(__file__).resolve().parents[1] / "conf" / "scene" / "head_on.yaml"
 
 
 def read_back(path) -> dict:
@@ -54,7 +54,7 @@ def test_recording_holds_truth_prediction_planes_and_energy(tmp_path):
 def test_simulate_writes_the_recording(tmp_path, capsys):
     pytest.importorskip("rerun")
     rrd = tmp_path / "head_on.rrd"
-    main([f"scene={SCENE}", f"out={tmp_path}", "frames=5", "video=false", f"rerun={rrd}"])
+    main([f"scene_file={SCENE}", f"out={tmp_path}", "frames=5", "video=false", f"rerun={rrd}"])
     assert f"rerun: {rrd}" in capsys.readouterr().out
     chunks = read_back(rrd)
     assert chunks["/truth/spheres"].num_rows == 5 and "/prediction/spheres" not in chunks
@@ -63,7 +63,7 @@ def test_simulate_writes_the_recording(tmp_path, capsys):
 def test_simulate_without_the_extra_is_one_line_before_any_work(tmp_path, monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "rerun", None)  # import rerun raises ImportError
     with pytest.raises(SystemExit) as e:
-        main([f"scene={SCENE}", f"out={tmp_path}", "rerun=x.rrd"])
+        main([f"scene_file={SCENE}", f"out={tmp_path}", "rerun=x.rrd"])
     err = capsys.readouterr().err
     assert e.value.code == 2 and err.count("\n") == 1
     assert 'needs the optional rerun-sdk: pip install -e ".[rerun]"' in err

@@ -221,12 +221,10 @@ def test_unseen_effect_warns_once_and_seen_effects_are_silent():
 def test_no_frame_reaches_the_host_before_the_rollout_ends(monkeypatch):
     """The device path (graph building by the torch backend, as on a GPU): the number of
     ``.cpu()`` / ``.numpy()`` calls of a rollout does not grow with its frames."""
-    from simdata import STATS, trajectory
-
-    from physgnn.models.learned import LearnedSimulator
+    from simdata import learned, trajectory
 
     torch.manual_seed(0)
-    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8, neighbor_backend="torch").eval()
+    sim = learned(H=1, M=1, hidden=8, neighbor_backend="torch").eval()
     sim.effects_trained.fill_(True)
     traj = trajectory(4, frames=30, seed=3)
     calls = {"cpu": 0, "numpy": 0}
@@ -250,14 +248,13 @@ def test_no_frame_reaches_the_host_before_the_rollout_ends(monkeypatch):
 def test_evaluation_batches_a_split_and_equals_one_by_one_up_to_rounding():
     """``make eval``'s default: a split's scenes in one rollout call give the one-by-one
     rollouts up to float rounding, the same frames, and fps as scene-frames per second."""
-    from simdata import STATS, trajectory
+    from simdata import learned, trajectory
 
     from physgnn.evaluation.rollouts import predict, predict_split
     from physgnn.evaluation.runs import RunInfo
-    from physgnn.models.learned import LearnedSimulator
 
     torch.manual_seed(0)
-    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8, neighbor_backend="torch").eval()
+    sim = learned(H=1, M=1, hidden=8, neighbor_backend="torch").eval()
     sim.effects_trained.fill_(True)
     job = RunInfo("run", "baseline", simulator=sim)
     trajs = [trajectory(n, frames=15, seed=n) for n in (2, 3, 5)]

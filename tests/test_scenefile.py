@@ -14,11 +14,17 @@ from conftest import compose_generate
 from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.layouts import check_no_overlap
 from physgnn.groundtruth.scene_schema import SCHEMA
-from physgnn.groundtruth.scenefile import load_scene, scene_from_dict, scene_to_dict, write_scene
+from physgnn.groundtruth.scenefile import (
+    example_scenes,
+    load_scene,
+    scene_from_dict,
+    scene_to_dict,
+    write_scene,
+)
 from physgnn.physics.scene import SceneError
 
 ROOT = Path(__file__).resolve().parents[1]
-EXAMPLES = sorted((ROOT / "conf" / "scenes").glob("*.yaml"))
+EXAMPLES = example_scenes()  # the scene files among conf/scene/
 ARRAYS = ("radius", "mass", "material", "pos", "quat", "vel", "angvel", "planes", "plane_kind")
 
 

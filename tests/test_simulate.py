@@ -9,17 +9,20 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from simdata import STATS
+import yaml
+from simdata import learned
 
 import physgnn.evaluation.simulate as S
 from physgnn import metrics
+from physgnn.cli import compose_config
 from physgnn.data.dataset import read_split
+from physgnn.groundtruth.scenefile import scene_from_dict
 from physgnn.models.constrained import ConstrainedSimulator
-from physgnn.models.learned import LearnedSimulator
 from physgnn.rollout import rollout
 from physgnn.simulate import main
 from physgnn.training.runs import load_run
 
+EXAMPLE = Path(__file__).resolve().parents[1] / "conf" / "scene" / "head_on.yaml"
 SCENE = """
 name: tiny
 dt: 0.1
@@ -28,6 +31,11 @@ spheres:
   - {radius: 0.5, position: [0, 0, 2], velocity: [1, 0, 0]}
   - {radius: 0.5, position: [1.5, 0, 0.5]}
 """
+
+
+def load_scene_text(text: str):
+    """The scene of a scene file's text (what simulate records as ``scene_config``)."""
+    return scene_from_dict(yaml.safe_load(text))
 
 
 @pytest.fixture
@@ -39,7 +47,7 @@ def scene_file(tmp_path):
 
 def test_truth_only_writes_hdf5_metrics_and_video(scene_file, tmp_path, capsys):
     out = tmp_path / "out"
-    main([f"scene={scene_file}", f"out={out}"])
+    main([f"scene_file={scene_file}", f"out={out}"])
     assert "tiny: 2 spheres, 6 frames" in capsys.readouterr().out
     with h5py.File(out / "simulate.h5") as f:
         assert list(f) == ["truth"] and f["truth/pos"].shape == (6, 2, 3)
@@ -50,12 +58,13 @@ def test_truth_only_writes_hdf5_metrics_and_video(scene_file, tmp_path, capsys):
 
 
 def test_learned_rollout_from_the_same_start(scene_file, tmp_path, monkeypatch):
-    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8).eval()
+    sim = learned(H=1, M=1, hidden=8).eval()
     monkeypatch.setattr(
         S, "learned", lambda run, truth, steps: (S.rollout_prediction(sim, truth), {"run": run})
     )
     out = tmp_path / "out"
-    result = S.run(S.parse_args([f"scene={scene_file}", f"out={out}", "run=R", "video=false"]))
+    args = [f"scene_file={scene_file}", f"out={out}", "run=R", "video=false"]
+    result = S.run(compose_config("simulate", args))
     with h5py.File(out / "simulate.h5") as f:
         assert list(f) == ["prediction", "truth"]
         assert (f["truth/pos"][:2] == f["prediction/pos"][:2]).all()  # H + 1 start frames
@@ -64,7 +73,7 @@ def test_learned_rollout_from_the_same_start(scene_file, tmp_path, monkeypatch):
 
 def test_a_trained_run_end_to_end(tiny_run, scene_file, tmp_path, capsys):
     out = tmp_path / "out"
-    main([f"scene={scene_file}", f"run={tiny_run}", f"out={out}", "frames=8"])
+    main([f"scene_file={scene_file}", f"run={tiny_run}", f"out={out}", "frames=8"])
     printed = capsys.readouterr().out
     result = json.loads((out / "metrics.json").read_text())
     simulator, _, info = load_run(tiny_run)
@@ -86,12 +95,12 @@ def test_default_out_follows_paths_outputs_as_every_command(scene_file, tmp_path
     cwd.mkdir()
     monkeypatch.chdir(cwd)
     monkeypatch.delenv("PHYSGNN_OUTPUTS", raising=False)
-    main([f"scene={scene_file}", "video=false"])
+    main([f"scene_file={scene_file}", "video=false"])
     assert (cwd / "outputs" / "simulate" / "tiny" / "metrics.json").is_file()
     monkeypatch.setenv("PHYSGNN_OUTPUTS", str(tmp_path / "env"))
-    main([f"scene={scene_file}", "video=false"])
+    main([f"scene_file={scene_file}", "video=false"])
     assert (tmp_path / "env" / "simulate" / "tiny" / "metrics.json").is_file()
-    main([f"scene={scene_file}", "video=false", f"paths.outputs={tmp_path / 'arg'}"])
+    main([f"scene_file={scene_file}", "video=false", f"paths.outputs={tmp_path / 'arg'}"])
     assert (tmp_path / "arg" / "simulate" / "tiny" / "metrics.json").is_file()
     assert [p.name for p in cwd.iterdir()] == ["outputs"]
 
@@ -99,12 +108,17 @@ def test_default_out_follows_paths_outputs_as_every_command(scene_file, tmp_path
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        ([], "missing scene=FILE"),
-        (["scene=x.yaml", "frame=3"], "bad argument 'frame=3'"),
-        (["scene=/nonexistent.yaml"], "does not exist"),
-        (["scene=x.yaml", "constraints=-1"], "constraints must be a whole number >= 0"),
+        ([], "scene: missing (scene=NAME: an example or a scene family of conf/scene/"),
+        (["scene=throw", "scene_file=x.yaml"], "scene: both given: give one"),
+        (["scene_file=x.yaml", "frame=3"],
+         "frame=3: frame is not a key of the simulate config: did you mean frames?"),
+        (["scene=x.yaml"], "scene=x.yaml: no 'x.yaml' in the config group scene (options: "),
+        (["scene=my/x.yaml"], "a YAML scene file of yours is scene_file=my/x.yaml"),
+        (["scene_file=/nonexistent.yaml"], "does not exist"),
+        (["scene_file=x.yaml", "constraints=-1"], "constraints must be a whole number >= 0"),
+        (["scene=ood_spaced_drop", "seed=-1"], "seed must be a whole number >= 0"),
     ],
-)
+)  # fmt: skip
 def test_errors_are_one_line(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
         main(argv)
@@ -112,18 +126,42 @@ def test_errors_are_one_line(argv, message, capsys):
     assert e.value.code == 2 and message in err and err.count("\n") == 1
 
 
+def test_scene_names_an_example_or_a_family_of_the_scene_group(tmp_path):
+    """``scene=head_on`` is the example file conf/scene/head_on.yaml, as ``scene_file=`` reads
+    it; ``scene=ood_spaced_drop`` one scene of that family, drawn with ``seed``."""
+    runs = {}
+    for name, args in {"group": ["scene=head_on"], "file": [f"scene_file={EXAMPLE}"],
+                       "family": ["scene=ood_spaced_drop", "seed=3"]}.items():  # fmt: skip
+        cfg = compose_config(
+            "simulate", [*args, "frames=4", "video=false", f"out={tmp_path / name}"]
+        )
+        runs[name] = S.run(cfg)
+    assert runs["group"]["metrics"] == runs["file"]["metrics"] and runs["group"]["n_frames"] == 4
+    assert runs["family"]["scene"] == "ood_spaced_drop" and runs["family"]["n_frames"] == 4
+    h5 = read_split(tmp_path / "family" / "simulate.h5")[0]
+    assert load_scene_text(h5.attrs["scene_config"]).n_spheres == runs["family"]["n_spheres"]
+
+
+def test_help_names_the_keys_and_the_scenes(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert e.value.code in (0, None) and "scene_file: null" in out and "throw" in out
+
+
 def test_missing_run_folder(scene_file, tmp_path, capsys):
+    args = [f"scene_file={scene_file}", f"out={tmp_path / 'out'}", "run=/no/such/run"]
     with pytest.raises(SystemExit):
-        main([f"scene={scene_file}", f"out={tmp_path / 'out'}", "run=/no/such/run", "video=false"])
+        main([*args, "video=false"])
     assert "run folder /no/such/run does not exist" in capsys.readouterr().err
 
 
 def test_constraints_wrap_the_learned_simulator_and_are_recorded(scene_file, tmp_path, monkeypatch):
-    sim = LearnedSimulator(STATS, H=1, M=1, hidden=8, gravity_prior=True).eval()
+    sim = learned(H=1, M=1, hidden=8, gravity_prior=True).eval()
     monkeypatch.setattr(S, "load_run", lambda run_dir: (sim, None, {"checkpoint": "ck"}))
     out = tmp_path / "out"
-    argv = [f"scene={scene_file}", f"out={out}", f"run={tmp_path}", "video=false", "constraints=4"]
-    result = S.run(S.parse_args(argv))
+    argv = [f"scene_file={scene_file}", f"out={out}", f"run={tmp_path}", "constraints=4"]
+    result = S.run(compose_config("simulate", [*argv, "video=false"]))
     assert result["constraints"] == 4
     groups = {t.attrs["group"]: t for t in read_split(out / "simulate.h5")}
     expected = rollout(ConstrainedSimulator(sim, 4), [groups["truth"]])[0]

@@ -25,7 +25,7 @@ def write(tmp_path, text, name="scene.yaml"):
 def test_the_prediction_says_what_made_it_and_how_fast(tiny_run, tmp_path):
     scene = write(tmp_path, SCENE)
     out = tmp_path / "out"
-    main([f"scene={scene}", f"run={tiny_run}", f"out={out}", "video=false", "constraints=2"])
+    main([f"scene_file={scene}", f"run={tiny_run}", f"out={out}", "video=false", "constraints=2"])
     result = json.loads((out / "metrics.json").read_text())
     assert result["ms_per_frame"]["pybullet"] > 0 and result["ms_per_frame"]["learned"] > 0
     with h5py.File(out / "simulate.h5") as f:
@@ -41,7 +41,7 @@ def test_the_prediction_says_what_made_it_and_how_fast(tiny_run, tmp_path):
 def test_a_scene_far_outside_training_is_named_in_one_warning_line(tiny_run, tmp_path, capsys):
     scene = write(tmp_path, HUGE)
     out = tmp_path / "out"
-    main([f"scene={scene}", f"run={tiny_run}", f"out={out}", "video=false", "frames=5"])
+    main([f"scene_file={scene}", f"run={tiny_run}", f"out={out}", "video=false", "frames=5"])
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning")]
     assert len(err) == 1 and "lies outside what the run was trained on" in err[0]
     assert "radius (m) 500–500 (trained on 0.5–1)" in err[0] and "mass (kg)" in err[0]
@@ -57,7 +57,7 @@ def test_a_diverged_prediction_reports_no_metrics(tmp_path, monkeypatch, capsys)
 
     monkeypatch.setattr(S, "learned", diverged)
     out = tmp_path / "out"
-    main([f"scene={scene}", "run=R", f"out={out}", "video=false"])
+    main([f"scene_file={scene}", "run=R", f"out={out}", "video=false"])
     printed = capsys.readouterr().out
     metrics = json.loads((out / "metrics.json").read_text())["metrics"]
     assert metrics["diverged_at"] == 3 and metrics["mse"] is None and metrics["chamfer"] is None

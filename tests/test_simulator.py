@@ -7,13 +7,17 @@ from pathlib import Path
 
 import pytest
 import torch
+from hydra.utils import get_class, instantiate
 from omegaconf import OmegaConf
-from simdata import REPORT_MODEL, STATS, batch, trajectory
+from simdata import REPORT_MODEL, STATS, batch, learned, trajectory
 from torch.testing import assert_close
 
+from physgnn.graph.builder import GraphBuilder
 from physgnn.models.learned import LearnedSimulator, StatsError
 from physgnn.models.profiling import StepTimer
+from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.physics.scene import Effects
+from physgnn.training.layout import FLAT_KEYS, dotted_model
 
 MODEL_CONF = Path(__file__).resolve().parents[1] / "conf" / "model"
 
@@ -21,7 +25,7 @@ MODEL_CONF = Path(__file__).resolve().parents[1] / "conf" / "model"
 def make(**kwargs) -> LearnedSimulator:
     torch.manual_seed(0)
     args = dict(H=2, M=2, hidden=16) | kwargs
-    return LearnedSimulator(STATS, **args)
+    return learned(**args)
 
 
 def report(**kwargs) -> LearnedSimulator:
@@ -29,22 +33,41 @@ def report(**kwargs) -> LearnedSimulator:
     return make(**(REPORT_MODEL | kwargs))
 
 
-def constructor_defaults() -> dict:
-    params = inspect.signature(LearnedSimulator).parameters.values()
+def defaults_of(cls) -> dict:
+    params = inspect.signature(cls).parameters.values()
     return {p.name: p.default for p in params if p.default is not inspect.Parameter.empty}
+
+
+# The nodes of the model config, the constructor each is built with and that constructor's
+# arguments the config leaves to the code (the widths the simulator sets; an evaluation detail).
+NODES = {"network": (EncodeProcessDecode, {"pp_in", "ps_in", "out_dim", "concat_trick"}),
+         "graph": (GraphBuilder, set())}  # fmt: skip
 
 
 def test_constructor_defaults_are_the_default_model_and_report_model_is_the_reports():
     baseline = OmegaConf.to_container(OmegaConf.load(MODEL_CONF / "baseline.yaml"))
-    baseline.pop("_target_")
-    assert constructor_defaults() == baseline
+    assert get_class(baseline.pop("_target_")) is LearnedSimulator
+    for node, (cls, left) in NODES.items():
+        keys = baseline.pop(node)
+        assert get_class(keys.pop("_target_")) is cls and keys.pop("_partial_", node == "graph")
+        assert keys == {k: v for k, v in defaults_of(cls).items() if k not in left}, node
+    assert defaults_of(LearnedSimulator) == baseline | {"network": None, "graph": None}
     own = OmegaConf.load(MODEL_CONF / "report.yaml")
     own.pop("defaults")
-    composed = OmegaConf.to_container(
-        OmegaConf.merge(OmegaConf.load(MODEL_CONF / "baseline.yaml"), own)
-    )
-    composed.pop("_target_")
-    assert constructor_defaults() | REPORT_MODEL == composed
+    default = OmegaConf.load(MODEL_CONF / "baseline.yaml")
+    composed = dotted_model(OmegaConf.merge(default, own))
+    report_keys = {".".join(FLAT_KEYS.get(k, (k,))): v for k, v in REPORT_MODEL.items()}
+    assert dotted_model(default) | report_keys == composed
+
+
+def test_default_simulator_is_the_default_config_model():
+    cfg = OmegaConf.load(MODEL_CONF / "baseline.yaml")
+    torch.manual_seed(0)
+    built = instantiate(cfg, stats=STATS).state_dict()
+    torch.manual_seed(0)
+    plain = LearnedSimulator(STATS).state_dict()
+    assert built.keys() == plain.keys()
+    assert all(torch.equal(built[k], plain[k]) for k in built)
 
 
 def test_default_and_report_widths():
@@ -173,7 +196,7 @@ def test_checkpoint_is_self_contained():
     stats = LearnedSimulator.stats_from_state_dict(sd)
     assert stats["delta_vel"]["std"] == pytest.approx(STATS["delta_vel"]["std"])
     assert stats["mass"]["mean"] == pytest.approx(2.0)
-    twin = LearnedSimulator(stats, H=2, M=2, hidden=16)
+    twin = learned(stats, H=2, M=2, hidden=16)
     twin.load_state_dict(sd)
     state = batch([trajectory(3, seed=7)])
     assert_close(twin(state)[0], sim(state)[0])

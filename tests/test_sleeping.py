@@ -273,13 +273,12 @@ def test_rollout_with_sleeping_holds_sleepers_exactly_and_wakes_them_when_hit():
 
 
 def test_rollout_where_nobody_sleeps_is_bit_identical_to_no_sleeping():
-    from simdata import STATS, trajectory
+    from simdata import learned, trajectory
 
-    from physgnn.models.learned import LearnedSimulator
     from physgnn.rollout import rollout
 
     torch.manual_seed(0)
-    sim = LearnedSimulator(STATS, H=1, M=2, hidden=16).eval()
+    sim = learned(H=1, M=2, hidden=16).eval()
     sim.effects_trained.fill_(True)
     trajs = [trajectory(4, frames=12, seed=s) for s in range(2)]
     ref = rollout(sim, trajs)
@@ -374,14 +373,13 @@ def test_sleep_study_compare_rows_and_missing_run_error():
 
 
 def test_learned_rollout_with_a_whole_scene_asleep_in_the_batch():
-    from simdata import STATS, trajectory
+    from simdata import learned, trajectory
     from torch.testing import assert_close
 
-    from physgnn.models.learned import LearnedSimulator
     from physgnn.rollout import rollout
 
     torch.manual_seed(0)
-    sim = LearnedSimulator(STATS, H=1, M=2, hidden=16).eval()
+    sim = learned(H=1, M=2, hidden=16).eval()
     sim.effects_trained.fill_(True)
     resting = _traj(4, seed=3)  # 3 frames at rest
     resting.pos[..., 2] = 0.5  # on the ground

@@ -12,7 +12,7 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
-from simdata import STATS, trajectory
+from simdata import learned, trajectory
 from torch import nn
 
 import physgnn.evaluation.stability as S
@@ -24,7 +24,6 @@ from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.layouts import pile_positions
 from physgnn.metrics import MetricError
 from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
-from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.scene import WALL, Material, ground_plane, make_plane
 from physgnn.physics.trajectory import Trajectory
 from physgnn.report import freefall as freefall_report
@@ -234,7 +233,7 @@ def test_float32_and_float64_rollouts_agree_over_the_first_frames(one_thread):
     # Measured on these 3 scenes (5 spheres, up to 41 m): |Δp| <= 4.9e-6 m after 10 steps,
     # i.e. a few float32 ulps of the coordinates (the rollout records float32). Bound 4x.
     torch.manual_seed(0)
-    sim = LearnedSimulator(STATS, H=1, M=2, hidden=32).eval()
+    sim = learned(H=1, M=2, hidden=32).eval()
     trajs = [trajectory(5, 12, seed=s) for s in range(3)]
     with pytest.warns(UserWarning, match="never saw"):
         r32 = rollout(sim, trajs)
@@ -259,9 +258,10 @@ def train_cfg(tiny_dataset, run_dir, *overrides):
 def sgd_step(tiny_dataset, run_dir, clip) -> float:
     """Norm of the parameter change of one SGD step (lr 1) with ``gradient_clip_val=clip``."""
     cfg = train_cfg(
-        tiny_dataset, run_dir, "model.M=1", "model.hidden=16", "+trainer.max_steps=1",
-        "trainer.max_epochs=1", "trainer.max_time=null", "trainer.enable_progress_bar=false",
-        "trainer.enable_model_summary=false", "+trainer.limit_val_batches=0",
+        tiny_dataset, run_dir, "model.network.M=1", "model.network.hidden=16",
+        "+trainer.max_steps=1", "trainer.max_epochs=1", "trainer.max_time=null",
+        "trainer.enable_progress_bar=false", "trainer.enable_model_summary=false",
+        "+trainer.limit_val_batches=0",
         "datamodule.batch_size=4", "datamodule.pairs_per_epoch=4", "datamodule.val_pairs=4",
         "lit.optimizer._target_=torch.optim.SGD", "lit.optimizer.lr=1.0", "lit.noise_std=0",
         "~logger", "callbacks=none", f"trainer.gradient_clip_val={clip}",

@@ -51,8 +51,8 @@ def test_engine_without_sleeping_creeps_slowly():
 
 TRAIN = [
     "data=tiny",
-    "model.M=1",
-    "model.hidden=16",
+    "model.network.M=1",
+    "model.network.hidden=16",
     "trainer.max_epochs=2",
     "trainer.max_time=null",
     "trainer.enable_progress_bar=false",

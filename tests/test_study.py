@@ -47,7 +47,7 @@ def test_the_default_study_adds_the_contact_switches_to_the_reports_sweeps(tmp_p
     extra = [c.key for c in study_configs(sweeps)][18:]
     assert extra == ["model.contact_features=False", "model.material_features=False",
                      "model.gravity_prior=False", "lit.lambda_contact=0",
-                     "lit.contact_noise_depth=0", "model.layer_norm=True",
+                     "lit.contact_noise_depth=0", "model.network.layer_norm=True",
                      "lit.pushforward_steps=0",
                      "lit.pushforward_growth=450 lit.pushforward_steps=4"]  # fmt: skip
 
@@ -64,17 +64,17 @@ def test_the_five_sweeps_are_18_configurations_the_baseline_shared():
                            "ablation_lambda": "0"}  # fmt: skip
     by_key = {c.key: c for c in configs}
     # the variant m1 and the sweep's M = 1 are one configuration, trained once
-    assert by_key["model.M=1"].points == {"ablation_components": "m1", "ablation_M": "1"}
+    assert by_key["model.network.M=1"].points == {"ablation_components": "m1", "ablation_M": "1"}
     assert by_key["lit.lambda_energy=10"].points == {"ablation_components": "energy",
                                                      "ablation_lambda": "10"}  # fmt: skip
     assert by_key["model.H=0"].overrides == ["+variant=h0"]  # datamodule.H follows, not a key
-    assert by_key["model.connectivity=vi"].points == {"ablation_connectivity": "vi"}
+    assert by_key["model.graph.connectivity=vi"].points == {"ablation_connectivity": "vi"}
     gns = [k for k in keys if "use_surfaces=False" in k]
     assert gns == [
-        "model.aggregation=sum model.boundary_features=True model.connectivity=vi "
-        "model.contact_features=False model.gravity_prior=False model.mass_ratio=False "
-        "model.material_features=False model.relative_pairs=False model.rest_decision=False "
-        "model.third_law=False model.use_surfaces=False"
+        "model.boundary_features=True model.contact_features=False model.graph.connectivity=vi "
+        "model.gravity_prior=False model.mass_ratio=False model.material_features=False "
+        "model.network.aggregation=sum model.network.third_law=False "
+        "model.network.use_surfaces=False model.relative_pairs=False model.rest_decision=False"
     ]  # the GNS-style model is the report's (tests/simdata.py, REPORT_MODEL)
     jobs = study_jobs(configs, [0, 1, 2])
     assert len(jobs) == 54
@@ -100,7 +100,7 @@ def test_runs_of_another_default_model_are_not_this_studys(tmp_path, capsys):
     before the default model changed is neither skipped as done nor shown."""
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         now = compose("train")
-        other = compose("train", ["model.M=3"])
+        other = compose("train", ["model.network.M=3"])
     assert defaults_fingerprint(now) == defaults_fingerprint(now.copy())
     assert defaults_fingerprint(now) != defaults_fingerprint(other)
     cfg = study_cfg(tmp_path, "dry_run=true", "sweeps=[ablation_M]", "seeds=[0]")  # has M = 5
@@ -210,7 +210,7 @@ def test_dry_run_lists_every_job_and_trains_nothing(tmp_path, capsys):
     run_study(cfg)
     out = capsys.readouterr().out
     assert "4 configurations × 2 seeds = 8 runs" in out and "8 to run" in out
-    assert out.count("to run (~") == 8 and "model.connectivity=vmax" in out
+    assert out.count("to run (~") == 8 and "model.graph.connectivity=vmax" in out
     assert not (tmp_path / "study").exists() and not (tmp_path / "registry.jsonl").exists()
 
 
@@ -233,7 +233,7 @@ def test_a_tiny_study_runs_resumes_from_the_registry_and_survives_failures(
     shutil.copytree(tiny_dataset, tmp_path / "data" / "tiny")
     tiny = ["sweeps=[ablation_connectivity]", "seeds=[0]", "preset=tiny", "budget.steps=2",
             "budget.steps_per_epoch=1", "budget.batch_size=4", "horizon=12"]  # fmt: skip
-    broken = study_cfg(tmp_path, *tiny, "budget.extra=['model.M=0']")
+    broken = study_cfg(tmp_path, *tiny, "budget.extra=['model.network.M=0']")
     with pytest.raises(Exception, match="4 of 4 runs failed"):
         run_study(broken)
     failed = read_registry(tmp_path / "registry.jsonl")
@@ -245,8 +245,8 @@ def test_a_tiny_study_runs_resumes_from_the_registry_and_survives_failures(
     report = run_study(cfg)  # of this budget: tried again, like the two never run
     records = [r for r in read_registry(tmp_path / "registry.jsonl") if r["budget"] == budget]
     assert sorted(r["key"] for r in records) == [
-        "baseline", "model.connectivity=epsilon", "model.connectivity=vi",
-        "model.connectivity=vmax"]  # fmt: skip
+        "baseline", "model.graph.connectivity=epsilon", "model.graph.connectivity=vi",
+        "model.graph.connectivity=vmax"]  # fmt: skip
     assert {r["status"] for r in records} == {"finished"}
     assert all(len(r["splits"]["ood"]) == 4 and r["steps"] == 2 for r in records)
     assert all(r["curve"] and r["curve"][0]["step"] >= 1 for r in records)  # learning curve
@@ -291,7 +291,7 @@ def test_the_report_is_rebuilt_from_the_registry_alone(tmp_path):
     records = []
     for seed in range(3):
         for config in configs:
-            gone = 7 if config.key == "model.M=1" and seed == 1 else None
+            gone = 7 if config.key == "model.network.M=1" and seed == 1 else None
             mse = 4.0 + 0.01 * seed if config.key == "baseline" else 5.0 + seed
             lam = float(config.points.get("ablation_lambda", "nan"))
             r = rec(config.key, seed, [(mse, gone), (mse, None)], share=0.01 if lam else 0.0)

@@ -21,8 +21,8 @@ from physgnn.training.train import train
 
 CONF = str(Path(__file__).resolve().parents[1] / "conf")
 SHORT = [
-    "model.M=1",
-    "model.hidden=16",
+    "model.network.M=1",
+    "model.network.hidden=16",
     "trainer.max_epochs=1",
     "trainer.max_time=null",
     "trainer.enable_progress_bar=false",
@@ -48,7 +48,7 @@ def weights(path) -> dict:
 
 
 def test_fast_dev_run(tiny_dataset, tmp_path):
-    info = train(config(tiny_dataset, tmp_path, "debug=fast", "model.hidden=16"))
+    info = train(config(tiny_dataset, tmp_path, "debug=fast", "model.network.hidden=16"))
     assert info["status"] == "debug" and info["global_step"] == 1
     assert info["pairs_seen"] == 8  # debug=fast's batch, not the default 256
     assert info["train_loss"] > 0 and info["val_loss"] > 0
@@ -106,7 +106,7 @@ def test_load_run_rebuilds_the_simulator(runs):
     simulator, run_cfg, loaded = load_run(run_dir)
     assert loaded["checkpoint"] == runs["a"]["checkpoints"]["best"]
     assert loaded["status"] == "finished" and loaded["seed"] == 3
-    assert run_cfg.model.M == 1 and not simulator.training
+    assert run_cfg.model.network.M == 1 and not simulator.training
     saved = weights(loaded["checkpoint"])
     for key, value in simulator.state_dict().items():
         assert torch.equal(value, saved[f"simulator.{key}"])
@@ -155,7 +155,7 @@ def test_missing_dataset_is_one_line(monkeypatch, capsys, tmp_path):
 
 def test_bad_config_value_is_one_line(monkeypatch, capsys, tiny_dataset, tmp_path):
     args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"hydra.run.dir={tmp_path}"]
-    code, line = run_main(monkeypatch, capsys, *args, "model.connectivity=nearest")
+    code, line = run_main(monkeypatch, capsys, *args, "model.graph.connectivity=nearest")
     assert code == 2 and line.startswith("error: ") and "unknown connectivity 'nearest'" in line
 
 
@@ -181,7 +181,7 @@ def test_real_multirun_two_jobs(tiny_dataset, tmp_path):
         "-m",
         "physgnn.train",
         "-m",
-        "model.M=1,2",
+        "model.network.M=1,2",
         "data=tiny",
         f"paths.outputs={outputs}",
         "experiment_name=mr",
@@ -190,11 +190,14 @@ def test_real_multirun_two_jobs(tiny_dataset, tmp_path):
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     runs = sorted((outputs / "multirun" / "mr").glob("*/*/run.json"))
-    assert [json.loads(p.read_text())["overrides"][0] for p in runs] == ["model.M=1", "model.M=2"]
+    assert [json.loads(p.read_text())["overrides"][0] for p in runs] == [
+        "model.network.M=1",
+        "model.network.M=2",
+    ]
     assert all(json.loads(p.read_text())["status"] == "finished" for p in runs)
     names = [p.parent.name for p in runs]  # job number + overrides, without paths
-    assert names[0].startswith("0_") and "model.M=1" in names[0] and "paths" not in names[0]
-    assert names[1].startswith("1_") and "model.M=2" in names[1]
+    assert names[0].startswith("0_") and "model.network.M=1" in names[0] and "paths" not in names[0]
+    assert names[1].startswith("1_") and "model.network.M=2" in names[1]
 
 
 def test_last_checkpoint_holds_the_final_weights_after_a_mid_epoch_stop(tiny_dataset, tmp_path):

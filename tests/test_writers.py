@@ -25,7 +25,7 @@ from physgnn.training.runs import PRETRAINED_DIR, read_run_json
 from physgnn.training.train import train
 
 ROOT = Path(__file__).resolve().parents[1]
-SCENES = ROOT / "conf" / "scenes"
+SCENES = ROOT / "conf" / "scene"
 
 
 @pytest.fixture
@@ -102,7 +102,7 @@ def eval_config(outputs: Path, *overrides):
 
 
 def simulate(out: Path, scene: str, *extra: str) -> None:
-    simulate_command.main([f"scene={SCENES / scene}", "frames=3", "video=false", f"out={out}",
+    simulate_command.main([f"scene_file={SCENES / scene}", "frames=3", "video=false", f"out={out}",
                            *extra])  # fmt: skip
 
 

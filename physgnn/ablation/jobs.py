@@ -3,9 +3,9 @@
 A sweep is a file ``conf/experiment/<name>.yaml`` whose ``hydra.sweeper.params`` list the values
 of each key (``model.H: 0,1,2,3,4``; ``seed`` is the study's, not the file's). Each combination
 is composed with ``conf/train.yaml`` and reduced to what it changes from the default training:
-``+variant=m1`` and ``model.M=1`` both become ``model.M=1``, and every sweep's default value
-becomes the one ``baseline``, so each configuration is trained once per seed however many sweeps
-name it. :class:`Config` keeps, per sweep, the value the sweep plots it at.
+``+variant=m1`` and ``model.network.M=1`` both become ``model.network.M=1``, and every sweep's
+default value becomes the one ``baseline``, so each configuration is trained once per seed
+however many sweeps name it. :class:`Config` keeps, per sweep, the value the sweep plots it at.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn import CONF_DIR
 from physgnn.cli import compose_config
 from physgnn.errors import PhysgnnError
+from physgnn.training.layout import flat_layout
 
 BASELINE = "baseline"
 # The parts of the training config that make a configuration (the rest is where and how long).
@@ -36,7 +37,7 @@ class StudyError(PhysgnnError, ValueError):
 @dataclass
 class Config:
     """One unique training configuration: ``key`` (its changes from the default,
-    ``"model.M=1"``, or ``baseline``), ``overrides`` (the first sweep's, as given to
+    ``"model.network.M=1"``, or ``baseline``), ``overrides`` (the first sweep's, as given to
     ``physgnn.train``) and ``points`` (``{sweep: x}``: where each sweep plots it)."""
 
     key: str
@@ -131,8 +132,10 @@ def study_jobs(configs: list[Config], seeds: list[int]) -> list[Job]:
 def defaults_fingerprint(train_cfg: DictConfig) -> str:
     """Ten hex digits naming the configuration-making parts of a composed training config: the
     default model and recipe every study key is a change from. A study's records carry it, so
-    runs of an earlier default are never mistaken for the current one's."""
-    text = json.dumps(_flat(train_cfg), sort_keys=True, default=str)
+    runs of an earlier default are never mistaken for the current one's. Model keys count in
+    the flat layout (:func:`~physgnn.training.layout.flat_layout`): the fingerprint names the
+    model, not where its config spells each key."""
+    text = json.dumps(flat_layout(_flat(train_cfg)), sort_keys=True, default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:10]
 
 

@@ -5,6 +5,8 @@ key, seed, budget, status, machine, wall times and per-trajectory figures
 (:mod:`physgnn.ablation.measure`). ``make study`` reads it to decide what is left, so a study
 resumes from a clean checkout on any machine (``outputs/`` may be gone), and the study report is
 rebuilt from it alone. Lines are only appended; a job measured twice keeps its latest line.
+A record's key is read in today's model layout (``model.M=1``, written before the network had
+a config node of its own, reads as ``model.network.M=1``).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import os
 from pathlib import Path
 
 from physgnn.errors import PhysgnnError
+from physgnn.training.layout import key_of_today
 
 # Statuses of a run whose result is in: trained to the budget (or stopped by the clock guard,
 # ``truncated``) and measured, or exploded in training (``diverged``: a result too).
@@ -41,6 +44,7 @@ def _record(line: str, where: str) -> dict:
     """One line of the registry read as a record, else :class:`RegistryError` naming it."""
     try:
         record = json.loads(line)
+        record["key"] = study_key_of_today(record["key"])
         record_id(record)
     except json.JSONDecodeError as err:
         problem = f"not a JSON line ({err.msg})"
@@ -52,6 +56,15 @@ def _record(line: str, where: str) -> dict:
         f"{where}: {problem}: repair or delete that line (one JSON record per run; a run whose "
         "line is deleted is trained again by make study)"
     )
+
+
+def study_key_of_today(key: str) -> str:
+    """A study key (``"k=v k=v"`` sorted by key, or ``baseline``) in today's model layout."""
+    parts = key.split(" ")
+    today = [key_of_today(part) for part in parts]
+    if today == parts:
+        return key
+    return " ".join(sorted(today, key=lambda part: part.partition("=")[0]))
 
 
 def record_id(record: dict) -> tuple:

@@ -19,6 +19,7 @@ from physgnn.cli import compose_config
 from physgnn.data.dataset import is_dataset
 from physgnn.errors import PhysgnnError
 from physgnn.groundtruth.generate import generate
+from physgnn.training.layout import key_of_today
 
 
 class StudyFailed(PhysgnnError, RuntimeError):
@@ -60,7 +61,8 @@ def job_spec(job: Job, cfg: DictConfig, common: list[str], rev: str | None, budg
 
 def _cost(overrides: list[str]) -> float:
     """Relative cost of a configuration: the network's share grows with M (baseline 1)."""
-    m = next((int(o.split("=")[1]) for o in overrides if o.startswith("model.M=")), 5)
+    today = [key_of_today(o) for o in overrides]  # a record's of the flat layout too
+    m = next((int(o.split("=")[1]) for o in today if o.startswith("model.network.M=")), 5)
     m = 1 if "+variant=m1" in overrides else m
     return 0.3 + 0.7 * m / 5
 

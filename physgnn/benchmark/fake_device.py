@@ -94,7 +94,7 @@ def _models(data: Path, hidden: int):
         conf = Path(__file__).resolve().parents[1] / "conf"  # an installed wheel
     model = OmegaConf.load(conf / "model" / "baseline.yaml")
     model.pop("defaults", None)
-    model.hidden = hidden
+    model.network.hidden = hidden
     lit_cfg = OmegaConf.load(conf / "train.yaml").lit
     lit_cfg.seed, lit_cfg.pushforward_after, lit_cfg.contact_noise_prob = 0, 0, 1.0
     torch.manual_seed(0)

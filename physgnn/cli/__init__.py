@@ -18,10 +18,6 @@ Before the work, torch gets as many threads as the cores other processes leave f
 (:func:`free_threads`, measured over a fifth of a second): on a busy machine a second thread
 only waits for a core, and steps ran several times slower than on one thread.
 ``OMP_NUM_THREADS``, when set, wins.
-
-A command whose arguments Hydra cannot read (``simulate``: ``scene=FILE`` names a file, where
-Hydra would see the ``scene`` config group) passes ``parse(argv) -> cfg`` instead: its
-``main(argv=None)`` parses ``sys.argv[1:]`` (or ``argv``) itself, with the same errors.
 """
 
 from __future__ import annotations
@@ -38,7 +34,6 @@ from typing import NoReturn
 
 import hydra
 import torch
-from hydra.core.global_hydra import GlobalHydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import HydraException
 from hydra.types import RunMode
@@ -47,7 +42,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
 from physgnn.cli.outputs import OWN_FOLDER, check_outputs_env
-from physgnn.cli.overrides import check_added_keys
+from physgnn.cli.overrides import check_added_keys, compose_config  # noqa: F401 (re-exported)
 from physgnn.errors import (
     ConfigError,
     Interrupted,
@@ -173,15 +168,13 @@ def command(
     name: str,
     run: Callable[[DictConfig], object],
     done: Callable[[object], str] | None = None,
-    parse: Callable[[list[str]], DictConfig] | None = None,
     before: Callable[[list[str]], None] | None = None,
-    usage: str = "",
 ) -> Callable:
     """``main`` of ``python -m physgnn.<name>`` (config ``conf/<name>.yaml``); it returns what
     ``run`` returns (a Hydra sweeper optimises it). ``main.__wrapped__(cfg)`` is the body
-    without Hydra (for tests). With ``parse`` there is no Hydra (module doc); ``--help`` then
-    prints ``usage``. ``before(argv)`` checks the command line before Hydra writes anything
-    (its error printed as one line)."""
+    without Hydra (for tests). ``before(argv)`` checks the command line before Hydra writes
+    anything (its error printed as one line; :func:`~physgnn.cli.overrides.check_composes`:
+    every key is the config's)."""
 
     def main(cfg: DictConfig):
         free_threads()
@@ -208,8 +201,6 @@ def command(
 
     # Hydra names the job (and its log file) after the module of the task function.
     main.__module__ = f"physgnn.{name}"
-    if parse is not None:
-        return _parsed(main, parse, usage)
     return _outputs_checked(
         hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main), before, name
     )
@@ -228,10 +219,17 @@ def run_dir_is_hydras(argv: list[str]) -> list[str]:
 def _outputs_checked(hydra_main: Callable, before: Callable | None = None,
                      name: str = "") -> Callable:  # fmt: skip
     """``hydra_main`` after :func:`check_outputs_env` (command ``name``) and ``before(argv)``
-    (their errors printed as one line)."""
+    (their errors printed as one line). ``main(argv)`` runs it as if ``argv`` followed the
+    command on the command line (default: ``sys.argv[1:]`` as it is)."""
 
     @functools.wraps(hydra_main)
-    def main(*args, **kwargs):
+    def main(argv: list[str] | None = None):
+        if argv is not None:
+            saved, sys.argv[1:] = sys.argv[:], [str(arg) for arg in argv]
+            try:
+                return main()
+            finally:
+                sys.argv[:] = saved
         try:
             check_outputs_env(own=OWN_FOLDER.get(name, "paths.outputs"))
             if before is not None:
@@ -239,19 +237,10 @@ def _outputs_checked(hydra_main: Callable, before: Callable | None = None,
         except USER_ERRORS as err:
             fail(err)
         sys.argv[1:] = run_dir_is_hydras(sys.argv[1:])
-        return hydra_main(*args, **kwargs)
+        return hydra_main()
 
     main.__wrapped__ = hydra_main.__wrapped__  # the body, as documented in :func:`command`
     return main
-
-
-def compose_config(name: str, overrides: list[str] | None = None) -> DictConfig:
-    """``conf/<name>.yaml`` composed with ``overrides``, inside a running Hydra app (its own
-    search path) or outside one (a fresh one)."""
-    if GlobalHydra.instance().is_initialized():
-        return hydra.compose(name, overrides=overrides or [])
-    with hydra.initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        return hydra.compose(name, overrides=overrides or [])
 
 
 def _in_sweep() -> bool:
@@ -263,23 +252,3 @@ def _report_failed_job(err: Exception) -> None:
     if not isinstance(err, USER_ERRORS):
         traceback.print_exception(err)
     print(f"error: {one_line(err)} (this job failed; the sweep goes on)", file=sys.stderr)
-
-
-def _parsed(body: Callable, parse: Callable[[list[str]], DictConfig], usage: str) -> Callable:
-    """``main(argv=None)``: ``body(parse(argv))``, a parse error printed as one line;
-    ``-h`` or ``--help`` prints ``usage`` and exits 0."""
-
-    def main(argv: list[str] | None = None):
-        argv = sys.argv[1:] if argv is None else list(argv)
-        if "-h" in argv or "--help" in argv:
-            print(usage.strip())
-            sys.exit(0)
-        try:
-            cfg = parse(argv)
-        except USER_ERRORS as err:
-            fail(err)
-        return body(cfg)
-
-    main.__wrapped__ = body
-    main.__module__ = body.__module__
-    return main

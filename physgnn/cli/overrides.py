@@ -11,16 +11,27 @@ A ``+`` key is taken only where something reads it:
 - Hydra's own settings (``hydra.*``).
 
 Anything else is refused, naming the keys of the config it most resembles.
+
+:func:`check_composes` checks, before Hydra runs, that a command line composes at all: a key
+the config lacks (``frame=3``) or an option its group lacks (``scene=x.yaml``) is then one
+line too, not Hydra's message of several.
 """
 
 from __future__ import annotations
 
 import difflib
 import inspect
+import re
+from collections.abc import Mapping
 from pathlib import Path
 
+from hydra.compose import compose
+from hydra.core.global_hydra import GlobalHydra
+from hydra.errors import HydraException, MissingConfigException
+from hydra.initialize import initialize_config_dir
 from hydra.utils import get_object
 from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
 from physgnn.errors import ConfigError
@@ -39,6 +50,47 @@ def check_added_keys(cfg: DictConfig, overrides: list[str], command: str) -> Non
         problem = _unread(cfg, key, command)
         if problem:
             raise ConfigError(f"{override}: {problem}")
+
+
+def compose_config(name: str, overrides: list[str] | None = None) -> DictConfig:
+    """``conf/<name>.yaml`` composed with ``overrides``, inside a running Hydra app (its own
+    search path) or outside one (a fresh one)."""
+    if GlobalHydra.instance().is_initialized():
+        return compose(name, overrides=overrides or [])
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        return compose(name, overrides=overrides or [])
+
+
+def check_composes(command: str, argv: list[str], missing: Mapping[str, str] | None = None):
+    """``conf/<command>.yaml`` composes with the overrides of ``argv`` (a command line with
+    Hydra's own flags, ``--help`` or ``-m``, is left to Hydra), else :class:`ConfigError`, one
+    line naming the override: a key the config lacks, with the keys most like it, or an option
+    its group lacks, with the group's options and ``missing[group]`` (what to give instead;
+    ``{option}`` stands for the option given)."""
+    if any(arg.startswith("-") for arg in argv):
+        return
+    overrides = [arg for arg in argv if not arg.lstrip("+~").startswith("hydra")]
+    try:
+        compose_config(command, overrides)
+    except (HydraException, OmegaConfBaseException) as err:
+        raise ConfigError(_not_composed(err, command, overrides, missing or {})) from None
+
+
+def _not_composed(err: Exception, command: str, overrides: list[str], missing) -> str:
+    """The one line of :func:`check_composes`."""
+    if isinstance(err, MissingConfigException) and err.missing_cfg_file and err.options:
+        group, _, option = err.missing_cfg_file.partition("/")
+        given = next((o for o in overrides if o.startswith(f"{group}=")), f"{group}={option}")
+        extra = f"; {missing[group].format(option=option)}" if group in missing else ""
+        return (f"{given}: no {option!r} in the config group {group} (options: "
+                f"{', '.join(err.options)}){extra}")  # fmt: skip
+    key = re.match(r"Could not override '([^']+)'", str(err))
+    if key:
+        given = next((o for o in overrides if o.startswith(f"{key[1]}=")), key[1])
+        like = _resembling(compose_config(command), key[1])
+        hint = f": did you mean {' or '.join(like)}?" if like else ""
+        return f"{given}: {key[1]} is not a key of the {command} config{hint}"
+    return str(err).strip().splitlines()[0]
 
 
 def _unread(cfg: DictConfig, key: str, command: str) -> str | None:
@@ -75,10 +127,25 @@ def _not_an_argument(node: DictConfig, section: str, name: str) -> str | None:
     if name in params or any(p.kind is p.VAR_KEYWORD for p in params.values()):
         return None
     known = [k for k in params if k not in ("self", "args", "kwargs")]
-    like = difflib.get_close_matches(name, known, n=2)
+    like = [f"{k}.{name}" for k in _nodes_taking(node, name)]  # model.M: model.network.M
+    like = like or difflib.get_close_matches(name, known, n=2)
     hint = f"did you mean {' or '.join(f'{section}.{k}' for k in like)}?" if like else (
         f"known: {', '.join(known)}")  # fmt: skip
     return f"{section}.{name} is not an argument of {node._target_} ({hint})"
+
+
+def _nodes_taking(node: DictConfig, name: str) -> list[str]:
+    """The keys of ``node``'s ``_target_`` nodes whose target takes the argument ``name``."""
+    found = []
+    for key in node:
+        child = node._get_node(key)
+        if isinstance(child, DictConfig) and "_target_" in child:
+            try:
+                if name in inspect.signature(get_object(child._target_)).parameters:
+                    found.append(str(key))
+            except (ImportError, ValueError, TypeError, AttributeError):
+                continue
+    return found
 
 
 def _resembling(cfg: DictConfig, key: str) -> list[str]:

@@ -1,10 +1,13 @@
-"""Simulate one YAML scene file (``python -m physgnn.simulate``; the command is thin).
+"""Simulate one scene (``python -m physgnn.simulate``, config ``conf/simulate.yaml``; the
+command is thin).
 
-Simulates the scene (:mod:`physgnn.groundtruth.scenefile`) with pybullet and, given a trained
-run, rolls the learned simulator out from the same start (its first H+1 ground-truth frames,
-as ``make eval`` does). Writes into ``out`` (default ``${paths.outputs}/simulate/<scene name>``,
-``paths.outputs`` read as every command reads it: ``paths.outputs=``, else ``PHYSGNN_OUTPUTS``,
-else ``outputs``):
+The scene is ``scene=NAME``, an entry of the ``scene`` config group (``conf/scene/``: an
+example scene file such as ``throw``, or a scene family such as ``ood_cubes``, of which one
+scene is drawn with ``seed``), or ``scene_file=PATH``, a YAML scene file
+(:mod:`physgnn.groundtruth.scenefile`). It simulates the scene with pybullet and, given a
+trained run (``run=``, a folder or ``pretrained``), rolls the learned simulator out from the
+same start (its first H+1 ground-truth frames, as ``make eval`` does). Writes into ``out``
+(default ``${paths.outputs}/simulate/<scene name>``):
 
 - ``simulate.h5``: the dataset schema (:mod:`physgnn.data.dataset`), group ``truth`` and,
   with a run, group ``prediction`` (its finite prefix if it diverged);
@@ -21,9 +24,6 @@ A folder ``out`` that holds files physgnn did not write is refused unless ``over
 (:func:`physgnn.files.claim_folder`; the folders it makes carry its marker). One simulate
 writes into an ``out`` at a time, through a staging folder: ``out`` holds one scene's files,
 whole, and an interrupted run leaves it as it was.
-
-Arguments are ``key=value`` over :data:`KEYS` (not Hydra: ``scene=`` names a file here, where
-Hydra would read the ``scene`` config group).
 """
 
 from __future__ import annotations
@@ -34,10 +34,12 @@ import sys
 import time
 from pathlib import Path
 
-from omegaconf import DictConfig, OmegaConf
+import numpy as np
+import yaml
+from omegaconf import DictConfig
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from physgnn import CONF_DIR, metrics
+from physgnn import metrics
 from physgnn.data.dataset import write_split
 from physgnn.errors import PhysgnnError
 from physgnn.evaluation import rerun_log
@@ -45,65 +47,60 @@ from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.files import claim_folder, portable, staged_outputs, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
-from physgnn.groundtruth.scenefile import load_scene, scene_file
+from physgnn.groundtruth.families import build_scene
+from physgnn.groundtruth.scenefile import load_scene, scene_file, scene_to_dict
 from physgnn.models.constrained import ConstrainedSimulator
+from physgnn.physics.scene import Scene
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
 from physgnn.training.runs import load_run, resolve_run
 
-KEYS = {
-    "scene": None,
-    "run": None,
-    "out": None,
-    "video": "true",
-    "frames": None,
-    "tol": "0",
-    "rerun": None,
-    "paths.outputs": None,
-    "overwrite": "false",
-    "constraints": "0",
-}
 # What a simulate writes into its out (replaced whole by the next one).
 SIMULATE_OUTPUTS = ("simulate.h5", "metrics.json", "video.gif", "video.mp4", "video_frame.png")
 METRIC_KEYS = ("mse", "mse20", "chamfer", "energy_gain", "rotation_error", "diverged_at")
+# What to say where ``scene=NAME`` names no entry of the scene group (a file of the user's).
+NOT_IN_GROUP = {"scene": "a YAML scene file of yours is scene_file={option}"}
 
 
 class SimulateError(PhysgnnError, ValueError):
     """Bad command line (one line naming the problem)."""
 
 
-def parse_args(argv: list[str]) -> DictConfig:
-    """``key=value`` arguments over :data:`KEYS` defaults."""
-    args = dict(KEYS)
-    for item in argv:
-        key, eq, value = item.partition("=")
-        if not eq or key not in KEYS:
-            raise SimulateError(f"bad argument '{item}'; use key=value with keys {list(KEYS)}")
-        args[key] = value
-    if not args["scene"]:
-        raise SimulateError("missing scene=FILE (a YAML scene file, or an example: scene=throw)")
-    cfg = OmegaConf.create()
-    for key, value in args.items():
-        OmegaConf.update(cfg, key, value)  # paths.outputs -> cfg.paths.outputs
-    return cfg
+def scene_of(cfg: DictConfig) -> tuple[Scene, str]:
+    """The scene ``cfg`` names (``scene=`` or ``scene_file=``, exactly one) with ``frames``
+    applied, and its scene file's text (the provenance of the truth)."""
+    group, path = cfg.get("scene"), cfg.get("scene_file")
+    if (group is None) == (path is None):
+        how = "both given: give one" if group is not None else "missing"
+        raise SimulateError(
+            f"scene: {how} (scene=NAME: an example or a scene family of conf/scene/, e.g. "
+            "scene=throw; scene_file=PATH: a YAML scene file of yours)"
+        )
+    if path is not None:
+        scene, text = load_scene(path), scene_file(path).read_text()
+    else:
+        seed = whole(cfg, "seed", 0, "the draw of a scene family")
+        scene = build_scene(group, np.random.default_rng(seed))
+        text = yaml.safe_dump(scene_to_dict(scene), sort_keys=False)  # the scene as drawn
+    if cfg.get("frames") is not None:
+        scene.n_frames = whole(cfg, "frames", 2, "the first frame is the start; e.g. frames=100")
+    return scene, text
 
 
-def outputs_root(args: DictConfig | dict) -> Path:
-    """``paths.outputs`` as every command reads it (``conf/paths/default.yaml``): the argument
-    ``paths.outputs=``, else ``$PHYSGNN_OUTPUTS``, else ``outputs``."""
-    paths = OmegaConf.load(Path(CONF_DIR) / "paths" / "default.yaml")
-    given = (args.get("paths") or {}).get("outputs")
-    if given:
-        paths.outputs = given
-    return Path(paths.outputs)
+def whole(cfg: DictConfig, key: str, least: int, what: str) -> int:
+    """The whole number ``cfg[key]``, at least ``least``; else one line naming the key."""
+    value = cfg.get(key)
+    if isinstance(value, bool) or not isinstance(value, int) or value < least:
+        raise SimulateError(f"{key} must be a whole number >= {least} ({what}), got {value!r}")
+    return value
 
 
-def flag(args: DictConfig | dict, key: str) -> bool:
-    """The argument ``key``, ``true`` or ``false`` (any case)."""
-    value = args.get(key, KEYS[key])
-    if str(value).lower() not in ("true", "false"):
-        raise SimulateError(f"{key} must be true or false, got '{value}'")
-    return str(value).lower() == "true"
+def flag(cfg: DictConfig, key: str) -> bool:
+    """The argument ``key``: true or false."""
+    value = cfg.get(key)
+    if not isinstance(value, bool):
+        raise SimulateError(f"{key} must be true or false, got {value!r}")
+    return value
 
 
 def rollout_prediction(simulator, truth: Trajectory) -> Trajectory:
@@ -134,14 +131,6 @@ def learned(run_dir: str, truth: Trajectory, constraints: int = 0) -> tuple[Traj
     return pred, source
 
 
-def iterations(args: DictConfig | dict) -> int:
-    """The argument ``constraints``: a whole number >= 0 (0: the pure learned model)."""
-    value = str(args.get("constraints", KEYS["constraints"]))
-    if not value.isdigit():
-        raise SimulateError(f"constraints must be a whole number >= 0 (iterations), got '{value}'")
-    return int(value)
-
-
 def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dict:
     """Prediction vs truth (``pred``), or the truth's own physics (``pred`` None). A diverged
     prediction has no metrics (None) but ``diverged_at``: its finite prefix would read as a
@@ -156,34 +145,34 @@ def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dic
     return {k: (None if v is None else float(v)) for k, v in out.items()}
 
 
-def simulate(args: DictConfig | dict) -> dict:
+def simulate(cfg: DictConfig) -> dict:
     """Simulate, roll out, write the files; returns what was written and the metrics. One
     simulate at a time per ``out``; its files replace the previous ones whole
     (:func:`physgnn.files.staged_outputs`): an interrupted run leaves ``out`` as it was."""
-    steps, tol = iterations(args), tolerance(args)
-    scene = load_scene(args["scene"])
-    if args["rerun"]:
+    steps = whole(cfg, "constraints", 0, "iterations; 0: the learned model alone")
+    tol, video, overwrite = tolerance(cfg), flag(cfg, "video"), flag(cfg, "overwrite")
+    scene, text = scene_of(cfg)
+    if cfg.get("rerun"):
         rerun_log.require()  # before the work, not after it
-    if args["frames"]:
-        scene.n_frames = frame_count(args["frames"])
-    out = Path(args["out"] or outputs_root(args) / "simulate" / scene.name)
-    claim_folder(out, "out", overwrite=flag(args, "overwrite"), ours=not args["out"])
+    out = Path(cfg.get("out") or Path(cfg.paths.outputs) / "simulate" / scene.name)
+    claim_folder(out, "out", overwrite=overwrite, ours=not cfg.get("out"))
     with staged_outputs(out, "out", SIMULATE_OUTPUTS) as staging:
-        return _simulate_into(args, scene, (staging, out), steps, tol)
+        return _simulate_into(cfg, (scene, text), (staging, out), (steps, tol, video))
 
 
-def _simulate_into(args, scene, folders: tuple[Path, Path], steps: int, tol: float) -> dict:
+def _simulate_into(cfg, scene_text, folders: tuple[Path, Path], how: tuple) -> dict:
     """:func:`simulate`'s work, its files written into the staging folder and named in the
-    result as they will lie in ``out`` (``folders``: staging, out)."""
-    out, final = folders
+    result as they will lie in ``out`` (``folders``: staging, out; ``how``: constraint
+    iterations, penetration tolerance, video)."""
+    (scene, text), (out, final), (steps, tol, video) = scene_text, folders, how
     start = time.perf_counter()
     truth = simulate_with_progress(scene)
     truth.attrs.update(
-        group="truth", scene=scene.name, scene_config=scene_file(args["scene"]).read_text(),
+        group="truth", scene=scene.name, scene_config=text,
         velocity="the engine's (pybullet)", ms_per_frame=1000 * (time.perf_counter() - start)
         / max(scene.n_frames - 1, 1),
     )  # fmt: skip
-    pred, source = (None, {}) if not args["run"] else learned(args["run"], truth, steps)
+    pred, source = (None, {}) if not cfg.get("run") else learned(str(cfg.run), truth, steps)
     warnings = outside(scene, source.get("cfg")) if pred is not None else []
     if warnings:
         print(f"warning: {warning_text(scene.name, warnings)}", file=sys.stderr)
@@ -197,35 +186,25 @@ def _simulate_into(args, scene, folders: tuple[Path, Path], steps: int, tol: flo
         "metrics": scene_metrics(truth, pred, tol),
         "files": {"hdf5": str(h5)},
     }  # fmt: skip
-    if flag(args, "video"):
+    if video:
         result["files"].update(write_videos(out, truth, pred, bool(source)))
     result["files"] = {k: str(final / Path(v).name) for k, v in result["files"].items()}
-    if args["rerun"]:
-        result["files"]["rerun"] = str(rerun_log.log_rerun(args["rerun"], truth, pred))
+    if cfg.get("rerun"):
+        result["files"]["rerun"] = str(rerun_log.log_rerun(cfg.rerun, truth, pred))
     write_json(out / "metrics.json", result)
     return result
 
 
-def tolerance(args: DictConfig | dict) -> float:
+def tolerance(cfg: DictConfig) -> float:
     """The argument ``tol``: a number >= 0 (a fraction of the diameter; 0: any overlap)."""
-    value = str(args.get("tol", KEYS["tol"]))
-    try:
-        tol = float(value)
-    except ValueError:
-        tol = float("nan")
-    if not math.isfinite(tol) or tol < 0:
+    value = cfg.get("tol")
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if not number or not math.isfinite(value) or value < 0:
         raise SimulateError(
             f"tol must be a number >= 0 (a fraction of the diameter; 0: any overlap counts), "
-            f"got '{value}'"
+            f"got {value!r}"
         )
-    return tol
-
-
-def frame_count(value) -> int:
-    """The argument ``frames``: a whole number >= 2 (the first frame is the start)."""
-    if not str(value).isdigit() or int(value) < 2:
-        raise SimulateError(f"frames must be a whole number >= 2, got '{value}' (e.g. frames=100)")
-    return int(value)
+    return float(value)
 
 
 # Above this many sphere-frames a simulation shows its progress (it takes more than seconds).

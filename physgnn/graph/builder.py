@@ -54,9 +54,8 @@ CONNECTIVITIES = ("approach", "epsilon", "vmax", "vi")
 _GRAVITY = EFFECT_NAMES.index("gravity")
 _SPHERE_CONTACT = EFFECT_NAMES.index("sphere_contact")
 _SURFACE_CONTACT = EFFECT_NAMES.index("surface_contact")
-# Up to this many same-scene pairs (or this many per sphere) the pp candidates are all pairs of
-# each scene, written down with no read-back; beyond it a radius search proposes them. With the
-# CPU's k-d tree, where a read-back costs nothing, the search takes over from 8 per sphere.
+# pp candidates: all pairs of each scene (no read-back) up to these limits, then a radius search;
+# with the CPU's k-d tree, where a read-back costs nothing, the search from 8 pairs per sphere.
 ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE, CPU_PAIRS_PER_SPHERE = 1 << 18, 64, 8
 
 
@@ -94,16 +93,17 @@ class GraphBuilder:
     the :func:`physgnn.graph.neighbors.radius_pairs` backend. ``clip_margin`` (metres) moves
     the clip of the ps features beyond the reach, to ``ρ_i + clip_margin``: with 0, a sphere at
     rest on the ground (height r) and one at rest high above it (height clipped at r + ε) look
-    almost alike to the network, though only the second falls.
+    almost alike to the network, though only the second falls. The defaults are the default
+    model's graph (``conf/model/baseline.yaml``, ``graph``).
     """
 
     def __init__(
         self,
-        connectivity: str = "vi",
+        connectivity: str = "approach",
         epsilon: float = 0.01,
         factor: float = 1.0,
         backend: str = "auto",
-        clip_margin: float = 0.0,
+        clip_margin: float = 1.0,
     ):
         if connectivity not in CONNECTIVITIES:
             raise ValueError(

@@ -28,6 +28,7 @@ from physgnn.groundtruth.layouts import (
     row_positions,
     spawn_without_overlap,
 )
+from physgnn.groundtruth.scenefile import scene_from_dict
 from physgnn.physics.scene import (
     STATIC,
     Effects,
@@ -269,8 +270,11 @@ BUILDERS: dict[str, Callable[[dict, np.random.Generator], Scene]] = {
 
 
 def build_scene(cfg: Mapping | DictConfig, rng: np.random.Generator) -> Scene:
-    """Build the scene family ``cfg.name`` with random draws from ``rng``."""
+    """Build the scene family ``cfg.name`` with random draws from ``rng``; a scene file's
+    content (``spheres``: ``conf/scene/throw.yaml``) is its one scene."""
     c = plain_config(cfg)
+    if "spheres" in c:
+        return scene_from_dict(c, where=f"scene '{c.get('name', 'scene')}'")
     name = c.get("name")
     if name not in BUILDERS:
         raise SceneError(f"unknown scene '{name}'; known: {', '.join(BUILDERS)}")

@@ -143,6 +143,14 @@ def check_clear_of_planes(
             )
 
 
+def check_above_ground(where: str, pos: np.ndarray, radius: np.ndarray) -> None:
+    """Raise SceneError naming the first sphere that reaches below the ground z = 0."""
+    below = pos[:, 2] - radius < -1e-9
+    if np.any(below):
+        i = int(np.argmax(below))
+        raise SceneError(f"{where}: spheres[{i}] reaches below the ground z = 0 (z - r < 0)")
+
+
 def check_no_overlap(where: str, pos: np.ndarray, radius: np.ndarray) -> None:
     """Raise SceneError naming the first two overlapping spheres (pos ``[N, 3]``, radius
     ``[N]``): a neighbour search, memory linear in N (no ``[N, N]`` distances)."""

@@ -31,7 +31,7 @@ import yaml
 
 from physgnn import SCENES_DIR
 from physgnn.files import write_text
-from physgnn.groundtruth.layouts import check_clear_of_planes, check_no_overlap
+from physgnn.groundtruth.layouts import check_above_ground, check_clear_of_planes, check_no_overlap
 from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
 from physgnn.physics.scene import (
     GRAVITY,
@@ -157,13 +157,6 @@ def _plane(where: str, d) -> tuple[np.ndarray, int]:
     return row, PLANE_KINDS.index(kind)
 
 
-def check_above_ground(where: str, pos: np.ndarray, radius: np.ndarray) -> None:
-    below = pos[:, 2] - radius < -1e-9
-    if np.any(below):
-        i = int(np.argmax(below))
-        raise SceneError(f"{where}: spheres[{i}] reaches below the ground z = 0 (z - r < 0)")
-
-
 def scene_from_dict(d, where: str = "scene") -> Scene:
     """A validated :class:`Scene` from a parsed scene file; ``where`` prefixes errors."""
     d = _keys(where, d, SCHEMA)
@@ -212,15 +205,21 @@ def scene_from_dict(d, where: str = "scene") -> Scene:
 
 def scene_file(path: str | Path) -> Path:
     """``path`` when it is a file, else the example scene of that name (``throw`` or
-    ``throw.yaml``: ``conf/scenes/throw.yaml``, which the installed package carries too)."""
+    ``throw.yaml``: ``conf/scene/throw.yaml``, which the installed package carries too)."""
     path = Path(path)
     if path.is_file():
         return path
     example = Path(SCENES_DIR) / f"{path.stem}.yaml"
-    if path.parent == Path(".") and example.is_file():
+    if path.parent == Path(".") and example in example_scenes():
         return example
-    names = ", ".join(sorted(p.stem for p in Path(SCENES_DIR).glob("*.yaml")))
+    names = ", ".join(p.stem for p in example_scenes())
     raise SceneError(f"scene file {path} does not exist; give a YAML file or an example ({names})")
+
+
+def example_scenes() -> list[Path]:
+    """The scene files of the ``scene`` config group (beside the scene families' configs)."""
+    found = sorted(Path(SCENES_DIR).glob("*.yaml"))
+    return [p for p in found if re.search(r"^spheres:", p.read_text(), re.MULTILINE)]
 
 
 def load_scene(path: str | Path) -> Scene:

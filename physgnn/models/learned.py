@@ -23,6 +23,8 @@ none): :mod:`physgnn.models.contact_inputs`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 from torch import nn
 
@@ -48,50 +50,42 @@ class LearnedSimulator(nn.Module):
     """Graph network simulator with the normalisation of its training set kept in buffers.
 
     Constructor arguments are the ``model`` config keys (``conf/model/*.yaml``); ``stats`` is
-    the dataset's ``stats.json`` dict (runtime object). ``length_scale`` divides every length
-    of the edge features (``None``: the mean sphere diameter of the training set); velocities
-    in edge features are divided by the velocity std. Node input per sphere:
+    the dataset's ``stats.json`` dict (runtime object). ``network`` makes the network from the
+    widths the simulator's inputs set (``node_in``, ``pp_in``, ``ps_in``, ``out_dim``; ``None``:
+    :class:`~physgnn.nn.epd.EncodeProcessDecode` with its defaults; the config's ``network``
+    node is a partial of it); ``graph`` is the :class:`~physgnn.graph.builder.GraphBuilder`
+    (``None``: one with its defaults). ``length_scale`` divides every length of the edge
+    features (``None``: the mean sphere diameter of the training set); velocities in edge
+    features are divided by the velocity std. Node input per sphere:
     ``[(v − μ_v)/σ_v for the H+1 latest v, (ω − μ_ω)/σ_ω likewise, radius, mass (standardised)]``
     = ``6·(H+1) + 2`` numbers, plus 4 with ``material_features``, plus 6 with
     ``boundary_features`` (:meth:`boundary_features`, ``boundary_radius`` R in metres);
     absolute position and orientation are masked. ``contact_features``, ``gravity_prior``: see
-    the module doc; ``layer_norm``: see :class:`~physgnn.nn.epd.EncodeProcessDecode`;
-    ``pad_to_buckets``: the network sees graphs padded to capacity buckets (opt-in capture
-    path, :mod:`physgnn.nn.padding`).
+    the module doc; ``pad_to_buckets``: the network sees graphs padded to capacity buckets
+    (opt-in capture path, :mod:`physgnn.nn.padding`).
     """
 
     def __init__(
         self,
         stats: dict,
         H: int = 2,
-        M: int = 5,
-        hidden: int = 128,
-        connectivity: str = "approach",
-        epsilon: float = 0.01,
-        factor: float = 1.0,
-        third_law: bool = True,
-        use_surfaces: bool = True,
-        num_materials: int = 0,
-        material_dim: int = 0,
-        neighbor_backend: str = "auto",
+        network: Callable[..., EncodeProcessDecode] | None = None,
+        graph: GraphBuilder | None = None,
         length_scale: float | None = None,
-        clip_margin: float = 1.0,
         boundary_features: bool = False,
         boundary_radius: float = 2.0,
         contact_features: bool = True,
         material_features: bool = True,
         gravity_prior: bool = True,
-        layer_norm: bool = False,
         pad_to_buckets: bool = False,
         relative_pairs: bool = True,
         mass_ratio: bool = True,
-        aggregation: str = "mean",
         rest_decision: bool = True,
         rest_speed: float = 0.01,
     ):
         super().__init__()
-        _check_sizes(H, M, boundary_radius, rest_speed)
-        self.H, self.M, self.pad_to_buckets = int(H), int(M), bool(pad_to_buckets)
+        _check_sizes(H, boundary_radius, rest_speed)
+        self.H, self.pad_to_buckets = int(H), bool(pad_to_buckets)
         self.use_boundary, self.boundary_radius = bool(boundary_features), float(boundary_radius)
         self.contact_features = bool(contact_features)
         self.material_features = bool(material_features)
@@ -99,42 +93,26 @@ class LearnedSimulator(nn.Module):
         self.relative_pairs, self.mass_ratio = bool(relative_pairs), bool(mass_ratio)
         self.rest_decision, self.rest_speed = bool(rest_decision), float(rest_speed)
         self._register_stats(stats, length_scale)
-        self.use_surfaces = bool(use_surfaces)
-        self.num_materials = int(num_materials)
-        self.graph_builder = GraphBuilder(
-            connectivity, epsilon, factor, neighbor_backend, clip_margin
-        )
-        self.network = self._network(
-            hidden, M, third_law, use_surfaces, num_materials, material_dim, layer_norm, aggregation
-        )
+        self.graph_builder = GraphBuilder() if graph is None else graph
+        self.network = self._network(EncodeProcessDecode if network is None else network)
 
-    def _network(
-        self,
-        hidden,
-        M,
-        third_law,
-        use_surfaces,
-        num_materials,
-        material_dim,
-        layer_norm,
-        aggregation,
-    ) -> EncodeProcessDecode:
-        """The network, its input and output widths from the simulator's inputs."""
+    def _network(self, network: Callable[..., EncodeProcessDecode]) -> EncodeProcessDecode:
+        """``network`` called with the input and output widths of the simulator's inputs."""
         ps_extra = contact_inputs.PS_CONTACT if self.contact_features else 0
-        return EncodeProcessDecode(
+        built = network(
             node_in=self.node_in,
             pp_in=PP_BASE + self.pair_extra,
             ps_in=PS_BASE + ps_extra,
-            hidden=hidden,
-            M=M,
             out_dim=OUTPUTS + int(self.rest_decision),
-            third_law=third_law,
-            use_surfaces=use_surfaces,
-            num_materials=num_materials,
-            material_dim=material_dim,
-            layer_norm=layer_norm,
-            aggregation=aggregation,
         )
+        if len(built.blocks) < 1:
+            raise ValueError(f"need M >= 1 message-passing blocks (got M={len(built.blocks)})")
+        return built
+
+    @property
+    def M(self) -> int:
+        """The network's number of message-passing blocks."""
+        return len(self.network.blocks)
 
     def _register_stats(self, stats: dict, length_scale: float | None) -> None:
         """:func:`~physgnn.models.normalisation.register_stats` and the effects trained on, as
@@ -228,7 +206,7 @@ class LearnedSimulator(nn.Module):
         """Network output ``[N, 6]`` (normalised Δv, Δω) and the graph it was computed on."""
         graph = self.graph_builder(state)
         pp_attr, ps_attr = self.edge_features(graph, state)
-        material = state.material if self.num_materials > 0 else None
+        material = state.material if self.network.material is not None else None
         args = (self.node_features(state), graph.pp_index, pp_attr, graph.ps_index, ps_attr)
         if self.pad_to_buckets:  # fixed shapes for a captured step (physgnn/nn/padding.py)
             padded, n = pad_graph(*args, material)
@@ -285,9 +263,9 @@ class LearnedSimulator(nn.Module):
         return (*self.to_physical(state, pred, reach), graph)
 
 
-def _check_sizes(H: int, M: int, boundary_radius: float, rest_speed: float) -> None:
-    if H < 0 or M < 1:
-        raise ValueError(f"need H >= 0 and M >= 1 (got H={H}, M={M})")
+def _check_sizes(H: int, boundary_radius: float, rest_speed: float) -> None:
+    if H < 0:
+        raise ValueError(f"need H >= 0 (got H={H})")
     if not boundary_radius > 0:
         raise ValueError(f"boundary_radius must be > 0 (got {boundary_radius})")
     if not rest_speed > 0:

@@ -104,8 +104,10 @@ class EncodeProcessDecode(nn.Module):
     - ``layer_norm``: the three encoders and every node update end in a LayerNorm (GNS does
       this on every MLP but the decoder; here the message MLPs have none, see
       :class:`ProcessorBlock`).
-    - ``aggregation``: ``"sum"`` (the report's) or ``"mean"`` (bounded in the number of
-      contacts, :class:`ProcessorBlock`).
+    - ``aggregation``: ``"mean"`` (bounded in the number of contacts, :class:`ProcessorBlock`)
+      or ``"sum"`` (the report's).
+
+    The defaults are the default model's network (``conf/model/baseline.yaml``, ``network``).
     """
 
     def __init__(
@@ -122,7 +124,7 @@ class EncodeProcessDecode(nn.Module):
         material_dim: int = 0,
         concat_trick: str = "auto",
         layer_norm: bool = False,
-        aggregation: str = "sum",
+        aggregation: str = "mean",
     ):
         super().__init__()
         if min(node_in, pp_in, ps_in, hidden, out_dim) < 1 or M < 0:

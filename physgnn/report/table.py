@@ -61,7 +61,8 @@ def read_csv(path: str | Path) -> list[dict]:
 
 
 def config_label(overrides: str) -> str:
-    """Overrides that change the model (no seed, experiment, hydra keys): ``"model.M=3"``."""
+    """Overrides that change the model (no seed, experiment, hydra keys):
+    ``"model.network.M=3"``."""
     keep = []
     for item in (overrides or "").split():
         key = item.split("=", 1)[0].lstrip("+~")

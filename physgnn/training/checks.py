@@ -17,6 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
 from physgnn.files import process_alive
+from physgnn.training.layout import dotted_model, model_of_today
 from physgnn.training.ranges import check_range
 from physgnn.training.runs import RUN_JSON, load_checkpoint, read_run_json, run_status
 
@@ -56,30 +57,38 @@ def _words(hint) -> str:
 
 
 def check_arguments(cfg: DictConfig, sections=("model", "datamodule", "lit")) -> None:
-    """Every key of each ``_target_`` section is an argument of its constructor, of the
-    annotated type (``model.M=abc``: ``model.M must be a whole number, got 'abc'``)."""
+    """Every key of each ``_target_`` section (and of the ``_target_`` nodes within it:
+    ``model.network``) is an argument of its constructor, of the annotated type
+    (``model.network.M=abc``: ``model.network.M must be a whole number, got 'abc'``)."""
     for section in sections:
         node = cfg.get(section)
-        if not isinstance(node, DictConfig) or "_target_" not in node:
+        if isinstance(node, DictConfig) and "_target_" in node:
+            _check_node(node, section)
+
+
+def _check_node(node: DictConfig, section: str) -> None:
+    target = get_class(node._target_)
+    params = inspect.signature(target).parameters
+    try:
+        hints = typing.get_type_hints(target.__init__)
+    except (NameError, TypeError):
+        hints = {}
+    for key in node:
+        if key in HYDRA_KEYS:
             continue
-        target = get_class(node._target_)
-        params = inspect.signature(target).parameters
-        try:
-            hints = typing.get_type_hints(target.__init__)
-        except (NameError, TypeError):
-            hints = {}
-        for key in node:
-            if key in HYDRA_KEYS:
-                continue
-            if key not in params:
-                known = ", ".join(k for k in params if k not in ("self", "stats", "simulator"))
-                raise ConfigError(
-                    f"{section}.{key} is not an argument of {target.__name__} (known: {known})"
-                )
-            value = OmegaConf.select(node, key)
-            if not isinstance(value, DictConfig) and not _fits(value, hints.get(key)):
-                raise ConfigError(f"{section}.{key} must be {_words(hints[key])}, got {value!r}")
-            check_range(f"{section}.{key}", value, hints.get(key))
+        if key not in params:
+            known = ", ".join(k for k in params if k not in ("self", "stats", "simulator"))
+            raise ConfigError(
+                f"{section}.{key} is not an argument of {target.__name__} (known: {known})"
+            )
+        value = OmegaConf.select(node, key)
+        if isinstance(value, DictConfig):
+            if "_target_" in value:
+                _check_node(value, f"{section}.{key}")
+            continue
+        if not _fits(value, hints.get(key)):
+            raise ConfigError(f"{section}.{key} must be {_words(hints[key])}, got {value!r}")
+        check_range(f"{section}.{key}", value, hints.get(key))
 
 
 def check_optimizer(lit_cfg: DictConfig | None) -> None:
@@ -264,16 +273,17 @@ def check_checkpoint(path: str | None, lit: torch.nn.Module, model_cfg=None) -> 
 
 
 def _model_difference(path: str, model_cfg) -> str:
-    """``"model.M is 1 there, 2 here; "``: the model keys in which the config of the
-    checkpoint's run (``<run>/.hydra/config.yaml``) and ``model_cfg`` differ."""
+    """``"model.network.M is 1 there, 2 here; "``: the model keys in which the config of the
+    checkpoint's run (``<run>/.hydra/config.yaml``, in today's layout) and ``model_cfg``
+    differ."""
     saved = Path(path).parent.parent / ".hydra" / "config.yaml"
     if model_cfg is None or not saved.is_file():
         return ""
     try:
-        then = OmegaConf.to_container(OmegaConf.load(saved).model, resolve=True)
+        then = dotted_model(model_of_today(OmegaConf.load(saved).model))
     except Exception:  # an unreadable or foreign config: no detail to give
         return ""
-    now = OmegaConf.to_container(model_cfg, resolve=True)
+    now = dotted_model(model_cfg)
     keys = sorted(set(then) | set(now))
     return "".join(
         f"model.{k} is {then.get(k)!r} there, {now.get(k)!r} here; "

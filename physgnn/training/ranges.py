@@ -10,10 +10,10 @@ from physgnn.errors import ConfigError
 # itself is allowed, most or None, what it is).
 RANGES = {
     "model.H": (0, True, None, "velocities of history"),
-    "model.M": (1, True, None, "message-passing steps"),
-    "model.hidden": (1, True, None, "units per layer"),
-    "model.num_materials": (0, True, None, "materials; 0: none"),
-    "model.material_dim": (0, True, None, "material embedding size; 0: none"),
+    "model.network.M": (1, True, None, "message-passing steps"),
+    "model.network.hidden": (1, True, None, "units per layer"),
+    "model.network.num_materials": (0, True, None, "materials; 0: none"),
+    "model.network.material_dim": (0, True, None, "material embedding size; 0: none"),
     "model.boundary_radius": (0, False, None, "m"),
     "model.rest_speed": (0, False, None, "m/s"),
     "datamodule.batch_size": (1, True, None, "pairs per step"),
@@ -36,8 +36,9 @@ RANGES = {
 
 
 def check_range(key: str, value, hint=None) -> None:
-    """``value`` of ``key`` lies in its :data:`RANGES` (``model.M=0``: ``model.M must be a
-    whole number >= 1 (message-passing steps), got 0``); NaN never does."""
+    """``value`` of ``key`` lies in its :data:`RANGES` (``model.network.M=0``:
+    ``model.network.M must be a whole number >= 1 (message-passing steps), got 0``); NaN never
+    does."""
     if key not in RANGES or not isinstance(value, int | float) or isinstance(value, bool):
         return
     least, closed, most, what = RANGES[key]

@@ -6,6 +6,7 @@ No Lightning here: evaluation loads runs without importing the trainer.
 
 from __future__ import annotations
 
+import copy
 import json
 import zipfile
 from pathlib import Path
@@ -17,6 +18,7 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn.errors import PhysgnnError, one_line
 from physgnn.files import write_json
 from physgnn.models.learned import LearnedSimulator
+from physgnn.training.layout import model_of_today
 
 RUN_JSON = "run.json"
 # The trained simulator shipped with physgnn, a run folder of weights only
@@ -25,8 +27,6 @@ PRETRAINED = "pretrained"
 PRETRAINED_DIR = Path(__file__).resolve().parents[1] / "pretrained"
 # The layout of an exported run's weights; a run of another layout is refused in one line.
 WEIGHTS_FORMAT = 1
-# Model targets of runs trained before the package was split into subpackages.
-MOVED_TARGETS = {"physgnn.simulator.LearnedSimulator": "physgnn.models.learned.LearnedSimulator"}
 
 
 class RunError(PhysgnnError, ValueError):
@@ -97,17 +97,13 @@ def _own_score(path: Path) -> float:
     return float("inf")
 
 
-# Model keys that runs of an earlier physgnn lack, with the values their model had (the
-# invariance changes: physgnn/models/learned.py); the defaults of these keys changed since.
-EARLIER_MODEL = {"relative_pairs": False, "mass_ratio": False, "aggregation": "sum",
-                 "rest_decision": False}  # fmt: skip
-
-
 def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
     """``(simulator, cfg, info)`` of a finished run (or ``pretrained``): the simulator from
-    ``.hydra/config.yaml`` and the best (else last) checkpoint, in eval mode on the CPU;
-    ``info`` is run.json (plus ``checkpoint``, the file loaded). Weights of another format or
-    that do not fit the model this physgnn builds from the config are refused in one line."""
+    ``.hydra/config.yaml`` (its model in today's layout,
+    :func:`~physgnn.training.layout.model_of_today`) and the best (else last) checkpoint, in
+    eval mode on the CPU; ``info`` is run.json (plus ``checkpoint``, the file loaded). Weights
+    of another format or that do not fit the model this physgnn builds from the config are
+    refused in one line."""
     run_dir = resolve_run(run_dir)
     config = run_dir / ".hydra" / "config.yaml"
     if not config.exists():
@@ -116,12 +112,7 @@ def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
     _check_format(run_dir, info.get("weights_format", WEIGHTS_FORMAT))
     cfg = read_run_config(config)
     cfg.run_dir = str(run_dir)
-    target = OmegaConf.select(cfg, "model._target_")
-    if target in MOVED_TARGETS:
-        cfg.model._target_ = MOVED_TARGETS[target]
-    for key, value in EARLIER_MODEL.items():  # a run of an earlier physgnn: its own model
-        if key not in cfg.model:
-            cfg.model[key] = value
+    cfg.model = model_of_today(cfg.model)  # a run of an earlier physgnn: its own model
     path = checkpoint_of(run_dir)
     way_out = f"move {path.name} away to load {{other}} instead, or train the run again"
     state = load_checkpoint(path, way_out)["state_dict"]
@@ -195,28 +186,31 @@ def whole_checkpoints(folder: Path, but: Path | None = None) -> list[Path]:
 
 # The model keys that set the shapes of the weights, tried one at a time by
 # :func:`weights_difference` (each with the values listed, besides the one the config has).
-SHAPE_KEYS = {"M": range(1, 17), "hidden": (), "H": range(0, 9), "num_materials": range(0, 9),
-              "material_dim": range(0, 33), "boundary_features": (False, True),
-              "contact_features": (False, True), "material_features": (False, True),
-              "relative_pairs": (False, True), "mass_ratio": (False, True),
-              "rest_decision": (False, True), "use_surfaces": (False, True)}  # fmt: skip
+SHAPE_KEYS = {"network.M": range(1, 17), "network.hidden": (), "H": range(0, 9),
+              "network.num_materials": range(0, 9), "network.material_dim": range(0, 33),
+              "boundary_features": (False, True), "contact_features": (False, True),
+              "material_features": (False, True), "relative_pairs": (False, True),
+              "mass_ratio": (False, True), "rest_decision": (False, True),
+              "network.use_surfaces": (False, True)}  # fmt: skip
 
 
 def weights_difference(state: dict, cfg: DictConfig) -> str:
-    """``"model.M is 1 in the weights, 2 in the config"``: the one model key (of
+    """``"model.network.M is 1 in the weights, 2 in the config"``: the one model key (of
     :data:`SHAPE_KEYS`) whose other value builds a model the weights ``state`` fit; else the
     first weight that differs."""
     shapes = {k: tuple(v.shape) for k, v in state.items()}
     stats = LearnedSimulator.stats_from_state_dict(state)
     encoder = shapes.get("network.node_encoder.lin1.weight")
     for key, values in SHAPE_KEYS.items():
-        now = cfg.model.get(key)
-        tried = [encoder[0]] if key == "hidden" and encoder else list(values)
+        now = OmegaConf.select(cfg.model, key, default=None)
+        tried = [encoder[0]] if key == "network.hidden" and encoder else list(values)
         for value in tried:
-            if value == now or key not in cfg.model:
+            if value == now or now is None:
                 continue
+            other = copy.deepcopy(cfg.model)
+            OmegaConf.update(other, key, value)
             try:
-                model = instantiate(cfg.model, stats=stats, **{key: value})
+                model = instantiate(other, stats=stats)
             except Exception:  # a value this model cannot take
                 continue
             if {k: tuple(v.shape) for k, v in model.state_dict().items()} == shapes:

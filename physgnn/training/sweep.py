@@ -79,7 +79,7 @@ DATA_KEYS = ("data", "+data", "paths", "datamodule.data_dir", "datamodule.preset
 
 def swept_keys(config: DictConfig) -> list[str]:
     """The keys a sweep varies: ``hydra.sweeper.params`` and command-line overrides with
-    several values (``model.M=1,2``, ``range(...)``, ``choice(...)``)."""
+    several values (``model.network.M=1,2``, ``range(...)``, ``choice(...)``)."""
     keys = [str(k) for k in (OmegaConf.select(config, "hydra.sweeper.params") or {})]
     for override in OmegaConf.select(config, "hydra.overrides.task") or []:
         key, _, value = str(override).partition("=")
