@@ -108,8 +108,8 @@ def three_sphere_dataset(tmp_path_factory) -> Path:
 # A tiny 2-process run: 3 epochs of 2 steps of 2 × 4 pairs, hidden size 8, the default noise
 # and contact noise, push-forward from the first step, a validation rollout every epoch; the
 # loss of process 1 is NaN at step 5, epoch 2's last batch.
-TINY_DDP = ["trainer=ddp_cpu", "trainer.devices=2", "data=tiny", "seed=5", "model.M=1",
-            "model.hidden=8", "trainer.max_epochs=3", "trainer.max_time=null",
+TINY_DDP = ["trainer=ddp_cpu", "trainer.devices=2", "data=tiny", "seed=5", "model.network.M=1",
+            "model.network.hidden=8", "trainer.max_epochs=3", "trainer.max_time=null",
             "trainer.enable_progress_bar=false", "trainer.enable_model_summary=false",
             "datamodule.batch_size=4", "datamodule.pairs_per_epoch=16", "datamodule.val_pairs=8",
             "lit.pushforward_after=0", "callbacks.rollout.every_n_epochs=1"]  # fmt: skip
