@@ -30,6 +30,8 @@ STATUSES = ("running", "finished", "truncated", "interrupted", "diverged", "fail
 # What the rollout callback logs (physgnn/training/callbacks.py)
 ROLLOUT_METRICS = ("val/rollout_score", "val/rollout_mse", "val/chamfer", "val/energy_gain",
                    "val/max_depth", "val/tunnelled", "val/rest_drift")  # fmt: skip
+# Constructor arguments that the code passes, not the config
+PASSED = ("self", "stats", "simulator", "optimizer", "length", "interval", "last_epoch")
 WORDS = {int: "a whole number", float: "a number", bool: "true or false", str: "a string"}
 
 
@@ -55,11 +57,13 @@ def _words(hint) -> str:
     return "null" if hint is type(None) else WORDS.get(hint, str(hint))
 
 
-def check_arguments(cfg: DictConfig, sections=("model", "datamodule", "lit")) -> None:
+def check_arguments(
+    cfg: DictConfig, sections=("model", "datamodule", "lit", "lit.scheduler")
+) -> None:
     """Every key of each ``_target_`` section is an argument of its constructor, of the
     annotated type (``model.M=abc``: ``model.M must be a whole number, got 'abc'``)."""
     for section in sections:
-        node = cfg.get(section)
+        node = OmegaConf.select(cfg, section)
         if not isinstance(node, DictConfig) or "_target_" not in node:
             continue
         target = get_class(node._target_)
@@ -72,7 +76,7 @@ def check_arguments(cfg: DictConfig, sections=("model", "datamodule", "lit")) ->
             if key in HYDRA_KEYS:
                 continue
             if key not in params:
-                known = ", ".join(k for k in params if k not in ("self", "stats", "simulator"))
+                known = ", ".join(k for k in params if k not in PASSED)
                 raise ConfigError(
                     f"{section}.{key} is not an argument of {target.__name__} (known: {known})"
                 )
@@ -96,16 +100,21 @@ def check_optimizer(lit_cfg: DictConfig | None) -> None:
 
 
 def check_scheduler(lit_cfg: DictConfig | None) -> None:
-    """``lit.scheduler.gamma`` (the learning rate's factor per epoch) is a number > 0: at 0 the
-    rate vanishes, below it turns negative (gradient ascent) and the run still "finishes"."""
-    gamma = OmegaConf.select(lit_cfg, "scheduler.gamma") if lit_cfg is not None else None
-    if gamma is None:
-        return
-    if not isinstance(gamma, int | float) or isinstance(gamma, bool) or not 0 < gamma < 1e3:
-        raise ConfigError(
-            f"lit.scheduler.gamma must be a number > 0 (lr x gamma^epoch; 1 keeps it, default "
-            f"0.97), got {gamma!r}"
-        )
+    """``lit.scheduler.final_lr_factor`` (the rate's factor at the end of the run) or ``gamma``
+    (an ``ExponentialLR``'s factor per epoch) is a number > 0: at 0 the rate vanishes, below it
+    turns negative (gradient ascent) and the run still "finishes"."""
+    for key, what in (
+        ("final_lr_factor", "lr x final_lr_factor at the end of the run; default 0.97^90"),
+        ("gamma", "lr x gamma^epoch"),
+    ):
+        value = OmegaConf.select(lit_cfg, f"scheduler.{key}") if lit_cfg is not None else None
+        if value is None:
+            continue
+        if not isinstance(value, int | float) or isinstance(value, bool) or not 0 < value < 1e3:
+            raise ConfigError(
+                f"lit.scheduler.{key} must be a number > 0 ({what}; 1 keeps the rate), "
+                f"got {value!r}"
+            )
 
 
 def check_budget(trainer_cfg: DictConfig) -> None:

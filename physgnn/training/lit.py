@@ -52,6 +52,7 @@ from physgnn.training.contacts import contact_penalty, perturb_contacts
 from physgnn.training.epoch_means import EpochMeans
 from physgnn.training.finite import FiniteWatch, NonFiniteLossError  # noqa: F401 (its home)
 from physgnn.training.noise import add_noise, regime_scale  # noqa: F401 (re-exported)
+from physgnn.training.schedule import lr_scheduler
 
 
 @torch.no_grad()
@@ -136,7 +137,9 @@ class LitSimulator(L.LightningModule):
     """Trains a :class:`LearnedSimulator` on one-step pairs.
 
     ``optimizer``: a partial (``_partial_: true``) taking the parameters; ``scheduler``: an
-    optional partial taking the optimizer, stepped once per epoch. ``seed`` seeds the noise and
+    optional partial taking the optimizer, stepped once per epoch, or a
+    :class:`~physgnn.training.schedule.RunLengthDecay` over the trainer's run length (the
+    default: :mod:`physgnn.training.schedule`). ``seed`` seeds the noise and
     the push-forward length of each step together with the step number.
     ``pushforward_steps`` = K (0: one-step training only) starts at step ``pushforward_after``;
     with ``pushforward_growth`` = G > 0 the longest unroll grows, 1 from ``pushforward_after``,
@@ -291,8 +294,5 @@ class LitSimulator(L.LightningModule):
         optimizer = self.optimizer_factory(self.parameters())
         if self.scheduler_factory is None:
             return optimizer
-        scheduler = self.scheduler_factory(optimizer)
-        return {
-            "optimizer": optimizer,
-            "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"},
-        }
+        scheduler = lr_scheduler(self.scheduler_factory, optimizer, self._trainer)
+        return {"optimizer": optimizer, "lr_scheduler": scheduler}

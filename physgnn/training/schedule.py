@@ -1,0 +1,100 @@
+"""The learning-rate decay, defined by the length of the run.
+
+:class:`RunLengthDecay` multiplies the rate by the same factor ``gamma`` each epoch, with
+``gamma = final_lr_factor ** (1 / epochs)``, so that every run ends at ``final_lr_factor`` × its
+initial rate, whatever its length: the default's 90 CPU epochs, ``+experiment=long``'s 900 and
+``trainer=gpu``'s 500 alike. The default ``final_lr_factor`` is ``0.97 ** 90``: on the default
+run, ``gamma`` is exactly 0.97, the rate of a per-epoch ``ExponentialLR(gamma=0.97)``.
+
+The run's length is the trainer's (:func:`run_length`): ``trainer.max_epochs`` epochs, or, where
+``trainer.max_steps`` ends the run first, that many optimiser steps with the decay stepped per
+step. A resumed run restores ``gamma`` from its checkpoint and so continues the same schedule;
+a run trained further or shorter (``ckpt_path=`` with another ``trainer.max_epochs``) goes on
+from the checkpoint's rate and reaches ``final_lr_factor`` at its own end.
+"""
+
+from __future__ import annotations
+
+import functools
+
+from torch.optim.lr_scheduler import ExponentialLR
+
+from physgnn.errors import ConfigError
+
+# The default's decay: 0.97 per epoch over its 90 epochs (÷15.5 over the run)
+FINAL_LR_FACTOR = 0.97**90
+
+
+class RunLengthDecay(ExponentialLR):
+    """Exponential decay to ``final_lr_factor`` × the initial rate over ``length`` epochs (or
+    steps, ``interval="step"``); ``length`` and ``interval`` come from the trainer
+    (:func:`lr_scheduler`), ``final_lr_factor`` from the config."""
+
+    def __init__(
+        self,
+        optimizer,
+        final_lr_factor: float = FINAL_LR_FACTOR,
+        length: int = 1,
+        interval: str = "epoch",
+        last_epoch: int = -1,
+    ):
+        if not final_lr_factor > 0:
+            raise ConfigError(
+                f"lit.scheduler.final_lr_factor must be a number > 0 (the rate's factor at the "
+                f"end of the run; 1 keeps it), got {final_lr_factor!r}"
+            )
+        self.final_lr_factor, self.length, self.interval = final_lr_factor, length, interval
+        super().__init__(optimizer, gamma=final_lr_factor ** (1 / length), last_epoch=last_epoch)
+
+    def load_state_dict(self, state_dict: dict) -> None:
+        """The checkpoint's schedule; where this run is longer or shorter than the
+        checkpoint's, a new ``gamma`` that takes the checkpoint's rate to ``final_lr_factor``
+        at this run's end."""
+        length, interval = self.length, self.interval
+        super().load_state_dict(state_dict)
+        if interval != self.interval:
+            raise ConfigError(
+                f"the checkpoint's learning-rate decay is stepped per {self.interval}, this "
+                f"run's per {interval}: bound the run by trainer.max_epochs and "
+                "trainer.max_steps as the checkpoint's run was"
+            )
+        if length != self.length:
+            done = max(self.last_epoch, 0)
+            factor = self._last_lr[0] / self.base_lrs[0]
+            self.length = length
+            self.gamma = (self.final_lr_factor / factor) ** (1 / max(length - done, 1))
+
+
+def run_length(trainer) -> tuple[str, int]:
+    """``("epoch", max_epochs)``, or ``("step", max_steps)`` where the step budget ends the run
+    first; a one-line ConfigError for a run without an end."""
+    epochs, steps = trainer.max_epochs, trainer.max_steps
+    has_epochs = epochs is not None and epochs >= 1
+    has_steps = steps is not None and steps >= 1
+    if has_epochs and has_steps:  # whichever ends the run first
+        has_steps = int(trainer.estimated_stepping_batches) >= steps
+    if has_steps:
+        return "step", int(steps)
+    if has_epochs:
+        return "epoch", int(epochs)
+    raise ConfigError(
+        "lit.scheduler (RunLengthDecay) decays over the run's length and this run has none: set "
+        "trainer.max_epochs or trainer.max_steps, or lit.scheduler=null for a constant rate"
+    )
+
+
+def _takes_run_length(factory) -> bool:
+    func = factory.func if isinstance(factory, functools.partial) else factory
+    return isinstance(func, type) and issubclass(func, RunLengthDecay)
+
+
+def lr_scheduler(factory, optimizer, trainer) -> dict:
+    """Lightning's ``lr_scheduler`` entry of ``factory(optimizer)``: a :class:`RunLengthDecay`
+    given the trainer's :func:`run_length`, any other scheduler stepped once per epoch."""
+    if not _takes_run_length(factory):
+        return {"scheduler": factory(optimizer), "interval": "epoch"}
+    if trainer is None:
+        raise ConfigError("RunLengthDecay needs the trainer's run length: call it under fit")
+    interval, length = run_length(trainer)
+    scheduler = factory(optimizer, length=length, interval=interval)
+    return {"scheduler": scheduler, "interval": interval}
