@@ -116,8 +116,13 @@ def test_a_resumed_run_keeps_its_schedule_a_longer_one_ends_at_the_final_factor(
     # trained further to 180 epochs: from the checkpoint's rate down to the final factor
     longer = advance(*resumed(epochs(max_epochs=180), saved), 150)
     assert first[-1] > longer[0] > straight[30] and longer[-1] / LR == pytest.approx(0.97**90)
-    with pytest.raises(ConfigError, match="stepped per epoch, this run's per step"):
-        resumed(SimpleNamespace(max_epochs=-1, max_steps=900), saved)
+    # resumed at step 300 (10 a epoch) with a step budget of 900: per step, down to the factor
+    by_steps = SimpleNamespace(max_epochs=-1, max_steps=900, global_step=300)
+    optimizer, scheduler = resumed(by_steps, saved)
+    assert scheduler.interval == "step" and scheduler.last_epoch == 300
+    steps = advance(optimizer, scheduler, 600)
+    assert first[-1] > steps[0] and steps[-1] / LR == pytest.approx(0.97**90)
+    assert "progress" not in scheduler.state_dict()  # a checkpoint holds no trainer
 
 
 def test_a_gamma_given_to_the_run_length_decay_is_one_line():

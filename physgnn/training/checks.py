@@ -31,7 +31,16 @@ STATUSES = ("running", "finished", "truncated", "interrupted", "diverged", "fail
 ROLLOUT_METRICS = ("val/rollout_score", "val/rollout_mse", "val/chamfer", "val/energy_gain",
                    "val/max_depth", "val/tunnelled", "val/rest_drift")  # fmt: skip
 # Constructor arguments that the code passes, not the config
-PASSED = ("self", "stats", "simulator", "optimizer", "length", "interval", "last_epoch")
+PASSED = (
+    "self",
+    "stats",
+    "simulator",
+    "optimizer",
+    "length",
+    "interval",
+    "progress",
+    "last_epoch",
+)
 WORDS = {int: "a whole number", float: "a number", bool: "true or false", str: "a string"}
 
 

@@ -9,8 +9,9 @@ run, ``gamma`` is exactly 0.97, the rate of a per-epoch ``ExponentialLR(gamma=0.
 The run's length is the trainer's (:func:`run_length`): ``trainer.max_epochs`` epochs, or, where
 ``trainer.max_steps`` ends the run first, that many optimiser steps with the decay stepped per
 step. A resumed run restores ``gamma`` from its checkpoint and so continues the same schedule;
-a run trained further or shorter (``ckpt_path=`` with another ``trainer.max_epochs``) goes on
-from the checkpoint's rate and reaches ``final_lr_factor`` at its own end.
+a run trained further or shorter (``ckpt_path=`` with another ``trainer.max_epochs`` or
+``trainer.max_steps``) goes on from the checkpoint's rate and reaches ``final_lr_factor`` at
+its own end.
 """
 
 from __future__ import annotations
@@ -27,8 +28,9 @@ FINAL_LR_FACTOR = 0.97**90
 
 class RunLengthDecay(ExponentialLR):
     """Exponential decay to ``final_lr_factor`` × the initial rate over ``length`` epochs (or
-    steps, ``interval="step"``); ``length`` and ``interval`` come from the trainer
-    (:func:`lr_scheduler`), ``final_lr_factor`` from the config."""
+    steps, ``interval="step"``); ``length``, ``interval`` and ``progress`` (the epochs or steps
+    done, read when a checkpoint is restored) come from the trainer (:func:`lr_scheduler`),
+    ``final_lr_factor`` from the config."""
 
     def __init__(
         self,
@@ -36,6 +38,7 @@ class RunLengthDecay(ExponentialLR):
         final_lr_factor: float = FINAL_LR_FACTOR,
         length: int = 1,
         interval: str = "epoch",
+        progress=None,
         last_epoch: int = -1,
     ):
         if not final_lr_factor > 0:
@@ -44,25 +47,26 @@ class RunLengthDecay(ExponentialLR):
                 f"end of the run; 1 keeps it), got {final_lr_factor!r}"
             )
         self.final_lr_factor, self.length, self.interval = final_lr_factor, length, interval
+        self.progress = progress
         super().__init__(optimizer, gamma=final_lr_factor ** (1 / length), last_epoch=last_epoch)
+
+    def state_dict(self) -> dict:
+        return {k: v for k, v in super().state_dict().items() if k != "progress"}
 
     def load_state_dict(self, state_dict: dict) -> None:
         """The checkpoint's schedule; where this run is longer or shorter than the
-        checkpoint's, a new ``gamma`` that takes the checkpoint's rate to ``final_lr_factor``
-        at this run's end."""
-        length, interval = self.length, self.interval
+        checkpoint's (or bounded by steps where it was by epochs, or the other way round), a
+        new ``gamma`` that takes the checkpoint's rate to ``final_lr_factor`` at this run's
+        end."""
+        mine = self.length, self.interval, self.progress
         super().load_state_dict(state_dict)
-        if interval != self.interval:
-            raise ConfigError(
-                f"the checkpoint's learning-rate decay is stepped per {self.interval}, this "
-                f"run's per {interval}: bound the run by trainer.max_epochs and "
-                "trainer.max_steps as the checkpoint's run was"
-            )
-        if length != self.length:
-            done = max(self.last_epoch, 0)
-            factor = self._last_lr[0] / self.base_lrs[0]
-            self.length = length
-            self.gamma = (self.final_lr_factor / factor) ** (1 / max(length - done, 1))
+        self.progress = mine[2]
+        if mine[:2] == (self.length, self.interval):
+            return
+        done = self.last_epoch if mine[1] == self.interval or not mine[2] else mine[2]()
+        factor = self._last_lr[0] / self.base_lrs[0]
+        self.length, self.interval, self.last_epoch = mine[0], mine[1], max(done, 0)
+        self.gamma = (self.final_lr_factor / factor) ** (1 / max(self.length - done, 1))
 
 
 def run_length(trainer) -> tuple[str, int]:
@@ -96,5 +100,9 @@ def lr_scheduler(factory, optimizer, trainer) -> dict:
     if trainer is None:
         raise ConfigError("RunLengthDecay needs the trainer's run length: call it under fit")
     interval, length = run_length(trainer)
-    scheduler = factory(optimizer, length=length, interval=interval)
+
+    def progress() -> int:  # read when a checkpoint is restored, after the trainer's loops
+        return trainer.global_step if interval == "step" else trainer.current_epoch
+
+    scheduler = factory(optimizer, length=length, interval=interval, progress=progress)
     return {"scheduler": scheduler, "interval": interval}
