@@ -108,24 +108,6 @@ def check_optimizer(lit_cfg: DictConfig | None) -> None:
         )
 
 
-def check_scheduler(lit_cfg: DictConfig | None) -> None:
-    """``lit.scheduler.final_lr_factor`` (the rate's factor at the end of the run) or ``gamma``
-    (an ``ExponentialLR``'s factor per epoch) is a number > 0: at 0 the rate vanishes, below it
-    turns negative (gradient ascent) and the run still "finishes"."""
-    for key, what in (
-        ("final_lr_factor", "lr x final_lr_factor at the end of the run; default 0.97^90"),
-        ("gamma", "lr x gamma^epoch"),
-    ):
-        value = OmegaConf.select(lit_cfg, f"scheduler.{key}") if lit_cfg is not None else None
-        if value is None:
-            continue
-        if not isinstance(value, int | float) or isinstance(value, bool) or not 0 < value < 1e3:
-            raise ConfigError(
-                f"lit.scheduler.{key} must be a number > 0 ({what}; 1 keeps the rate), "
-                f"got {value!r}"
-            )
-
-
 def check_budget(trainer_cfg: DictConfig) -> None:
     """``trainer.max_epochs`` and ``trainer.max_steps`` are whole numbers (Lightning asserts
     so deep inside ``fit``) that train something: >= 1, or -1 (no limit) or null."""

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 
+from omegaconf import DictConfig, OmegaConf
 from torch.optim.lr_scheduler import ExponentialLR
 
 from physgnn.errors import ConfigError
@@ -106,3 +107,21 @@ def lr_scheduler(factory, optimizer, trainer) -> dict:
 
     scheduler = factory(optimizer, length=length, interval=interval, progress=progress)
     return {"scheduler": scheduler, "interval": interval}
+
+
+def check_scheduler(lit_cfg: DictConfig | None) -> None:
+    """``lit.scheduler.final_lr_factor`` (the rate's factor at the end of the run) or ``gamma``
+    (an ``ExponentialLR``'s factor per epoch) is a number > 0: at 0 the rate vanishes, below it
+    turns negative (gradient ascent) and the run still "finishes"."""
+    for key, what in (
+        ("final_lr_factor", "lr x final_lr_factor at the end of the run; default 0.97^90"),
+        ("gamma", "lr x gamma^epoch"),
+    ):
+        value = OmegaConf.select(lit_cfg, f"scheduler.{key}") if lit_cfg is not None else None
+        if value is None:
+            continue
+        if not isinstance(value, int | float) or isinstance(value, bool) or not 0 < value < 1e3:
+            raise ConfigError(
+                f"lit.scheduler.{key} must be a number > 0 ({what}; 1 keeps the rate), "
+                f"got {value!r}"
+            )

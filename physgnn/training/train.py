@@ -35,13 +35,13 @@ from physgnn.training.checks import (
     check_monitors,
     check_optimizer,
     check_run_dir,
-    check_scheduler,
     resume_from,
 )
 from physgnn.training.lit import NonFiniteLossError
 from physgnn.training.progress import RunProgress, StopOnSignal, StopTraining, save_last
 from physgnn.training.runlog import run_log
 from physgnn.training.runs import write_run_json
+from physgnn.training.schedule import check_scheduler
 
 log = logging.getLogger(__name__)
 
