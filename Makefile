@@ -87,8 +87,11 @@ sleep-study: ## Sleeping spheres off vs on, OOD (c) and a resting pile (RUN=a ru
 docs: ## Build the documentation site into site/ (mkdocs build --strict: a broken link or a warning fails; needs the docs extra)
 	$(VENV)/bin/mkdocs build --strict
 
+torch-floor: ## The fast tests on the oldest torch pyproject.toml allows, in a throwaway venv under /tmp (TORCH=<version> for another; ARGS: pytest's)
+	TORCH=$(TORCH) scripts/check_torch_floor.sh $(ARGS)
+
 clean: ## Remove caches (keeps outputs/)
 	rm -rf .pytest_cache .ruff_cache .hypothesis site
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +
 
-.PHONY: help install test test-slow lint format data data-shards data-report train sweep study eval bench sleep-study clean ship default-table fingerprint learning-curve docs
+.PHONY: help install test test-slow lint format data data-shards data-report train sweep study eval bench sleep-study clean ship default-table fingerprint learning-curve docs torch-floor

@@ -1,6 +1,7 @@
-"""One source of truth: every literal value of conf/train.yaml's ``lit`` and ``datamodule``
-nodes equals the default of the constructor argument of that name (interpolations such as
-``${seed}`` and nested nodes such as the optimiser are the config's alone)."""
+"""One source of truth: every literal value of conf/train.yaml's ``lit``, ``lit.scheduler`` and
+``datamodule`` nodes equals the default of the constructor argument of that name
+(interpolations such as ``${seed}`` and nested nodes such as the optimiser are the config's
+alone)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from omegaconf import OmegaConf
 
 from physgnn.training.datamodule import StatePairDataModule
 from physgnn.training.lit import LitSimulator
+from physgnn.training.schedule import RunLengthDecay
 
 TRAIN = Path(__file__).resolve().parents[1] / "conf" / "train.yaml"
 
@@ -20,7 +22,7 @@ def literal_values(node) -> dict:
     """The keys of a config node whose value is a plain value, not an interpolation or node."""
     out = {}
     for key in node:
-        if key == "_target_" or OmegaConf.is_interpolation(node, key):
+        if key.startswith("_") or OmegaConf.is_interpolation(node, key):
             continue
         value = node[key]
         if not OmegaConf.is_config(value):
@@ -29,10 +31,11 @@ def literal_values(node) -> dict:
 
 
 @pytest.mark.parametrize(
-    ("node", "cls"), [("lit", LitSimulator), ("datamodule", StatePairDataModule)]
+    ("node", "cls"),
+    [("lit", LitSimulator), ("lit.scheduler", RunLengthDecay), ("datamodule", StatePairDataModule)],
 )
 def test_constructor_defaults_equal_train_yaml(node, cls):
-    cfg = OmegaConf.load(TRAIN)[node]
+    cfg = OmegaConf.select(OmegaConf.load(TRAIN), node)
     params = inspect.signature(cls).parameters
     literals = literal_values(cfg)
     assert literals, f"{node} has no literal value to compare"

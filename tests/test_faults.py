@@ -347,7 +347,10 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
     [
         ("model.network.M=abc", "model.network.M must be a whole number, got 'abc'"),
         ("datamodule.batch_size=1.5", "datamodule.batch_size must be a whole number, got 1.5"),
-        ("lit.scheduler.gamma=-1", "lit.scheduler.gamma must be a number > 0 (lr x gamma^epoch"),
+        (
+            "lit.scheduler.final_lr_factor=-1",
+            "lit.scheduler.final_lr_factor must be a number > 0 (lr x final_lr_factor at the end",
+        ),
         ("trainer.max_epochs=0", "trainer.max_epochs=0 trains nothing: give at least 1"),
         ("lit.optimizer.lr=-1", "lit.optimizer.lr must be a number > 0, got -1 (conf/train.yaml"),
         ("seed=-5", "seed must be a whole number from 0 to 4294967295, got -5 (conf/train.yaml"),

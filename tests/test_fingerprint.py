@@ -47,7 +47,7 @@ CONFIG = [
     "lit.pushforward_growth=0", "lit.lambda_energy=0.0", "lit.lambda_contact=1.0",
     "lit.contact_tol=0.02", "lit.contact_noise_depth=0.2", "lit.contact_noise_prob=0.3",
     "lit.contact_touch=0.05", "lit.noise_rest_scale=1.0", "lit.lambda_rest=0.0",
-    "lit.optimizer.lr=1.0e-3", "lit.scheduler.gamma=0.97",
+    "lit.optimizer.lr=1.0e-3", "lit.scheduler.final_lr_factor=0.0644846109465322",
     # 4 steps of 4 pairs, no callbacks, no logger
     "datamodule.batch_size=4", "datamodule.pairs_per_epoch=16", "datamodule.val_pairs=8",
     "trainer.max_epochs=1", "trainer.max_time=null", "trainer.enable_progress_bar=false",

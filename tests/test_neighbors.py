@@ -9,6 +9,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from physgnn.graph import neighbors
 from physgnn.graph.neighbors import has_torch_cluster, radius_pairs
 
 BACKENDS = ["torch", "kdtree", "auto"] + (["cluster"] if has_torch_cluster() else [])
@@ -165,3 +166,65 @@ def test_cluster_backend_absent_is_one_clear_error():
 def test_cluster_backend_never_drops_neighbours():
     pos = torch.zeros(100, 3)  # 99 neighbours each: far above PyG's default cap of 32
     assert radius_pairs(pos, 0.1, backend="cluster").shape[1] == 100 * 99 // 2
+
+
+class CappedRadiusGraph:
+    """``torch_cluster.radius_graph`` as its CUDA kernel answers, by brute force: each point
+    keeps the first ``max_num_neighbors + 1`` points of its scene (itself included, index
+    order) strictly within ``r``, then loops are dropped; ``[2, E]`` = (neighbour, point).
+    ``caps`` records the cap of every call."""
+
+    def __init__(self):
+        self.caps: list[int] = []
+
+    def __call__(self, x, r, batch=None, loop=False, max_num_neighbors=32, **_):
+        self.caps.append(max_num_neighbors)
+        assert bool((batch[1:] >= batch[:-1]).all()), "torch_cluster needs the batch sorted"
+        d = x.double()[:, None, :] - x.double()[None, :, :]
+        within = ((d * d).sum(-1) < r * r) & (batch[:, None] == batch[None, :])
+        kept = within & (within.cumsum(1) <= max_num_neighbors + (0 if loop else 1))
+        point, neighbour = kept.nonzero().T
+        edge = torch.stack([neighbour, point])
+        return edge if loop else edge[:, edge[0] != edge[1]]
+
+
+@pytest.fixture
+def capped_cluster(monkeypatch) -> CappedRadiusGraph:
+    """The ``cluster`` backend on a stand-in for torch_cluster (not installed here)."""
+    fake = CappedRadiusGraph()
+    monkeypatch.setattr(neighbors, "_load_radius_graph", lambda: fake)
+    return fake
+
+
+def test_cluster_backend_asks_a_bounded_cap_and_loses_nothing(capped_cluster):
+    gen = torch.Generator().manual_seed(5)
+    pos = torch.rand(400, 3, generator=gen) * 20
+    batch = torch.randint(0, 3, (400,), generator=gen)  # unsorted
+    found = radius_pairs(pos, 1.5, batch, backend="cluster")
+    torch.testing.assert_close(found, brute_pairs(pos, 1.5, batch))
+    torch.testing.assert_close(found, radius_pairs(pos, 1.5, batch, backend="torch"))
+    assert capped_cluster.caps == [64]  # sparse: one pass, 16·N·64 bytes, not 16·N²
+
+
+def crowded(n_pile: int, n_sparse: int, gen) -> torch.Tensor:
+    """``n_pile`` points in a unit cube beside ``n_sparse`` spread over a 60 m one."""
+    pile = torch.rand(n_pile, 3, generator=gen)
+    return torch.cat([pile, torch.rand(n_sparse, 3, generator=gen) * 60 + 5])
+
+
+@pytest.mark.parametrize(
+    ("n_pile", "n_sparse", "r", "caps"),
+    [
+        (70, 0, 1.8, [64, 69]),  # every point near every other: up to N - 1
+        (300, 0, 1.8, [64, 256, 299]),
+        (200, 1300, 0.5, [64, 256]),  # a crowded pile (up to ~100 neighbours) in a sparse scene
+    ],
+)
+def test_cluster_backend_searches_again_where_a_point_reached_the_cap(
+    capped_cluster, n_pile, n_sparse, r, caps
+):
+    pos = crowded(n_pile, n_sparse, torch.Generator().manual_seed(n_pile))
+    found = radius_pairs(pos, r, backend="cluster")
+    assert capped_cluster.caps == caps  # the first pass lost neighbours: searched again
+    torch.testing.assert_close(found, brute_pairs(pos, r))
+    torch.testing.assert_close(found, radius_pairs(pos, r, backend="torch"))

@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from signal import SIGTERM
 
 import lightning as L
 import pytest
@@ -16,8 +17,8 @@ from hydra import compose, initialize_config_dir
 from physgnn import train as train_command
 from physgnn.training.build import build
 from physgnn.training.progress import RunProgress
-from physgnn.training.runs import checkpoint_of, load_run
-from physgnn.training.train import train
+from physgnn.training.runs import checkpoint_of, load_run, read_run_json
+from physgnn.training.train import TrainingInterrupted, train
 
 CONF = str(Path(__file__).resolve().parents[1] / "conf")
 SHORT = [
@@ -62,8 +63,9 @@ def test_fast_dev_run(tiny_dataset, tmp_path):
 
 @pytest.fixture(scope="module")
 def runs(tiny_dataset, tmp_path_factory) -> dict:
-    """Five short trainings (noise on): a, b same seed; c another seed; a resumed to 2
-    epochs; a straight 2-epoch run with a's seed."""
+    """Five short trainings (noise on): a, b same seed; c another seed; a straight 2-epoch
+    run with a's seed, and the same run stopped by SIGTERM in its second epoch (after the
+    learning rate's first decay), then resumed in its folder."""
     root = tmp_path_factory.mktemp("runs")
     out = {}
     for name, extra in {
@@ -74,9 +76,17 @@ def runs(tiny_dataset, tmp_path_factory) -> dict:
     }.items():
         cfg = config(tiny_dataset, root / name, *SHORT, "seed=3", *extra)
         out[name] = train(cfg) | {"cfg": cfg}
-    last = out["a"]["checkpoints"]["last"]
-    resumed = ["seed=3", "trainer.max_epochs=2", f"ckpt_path={last}"]
-    out["resumed"] = train(config(tiny_dataset, root / "resumed", *SHORT, *resumed))
+    two_epochs, run_dir = [*SHORT, "seed=3", "trainer.max_epochs=2"], root / "resumed"
+    signal = "+callbacks.signal"
+    stop = [
+        f"{signal}._target_=test_faults.SignalAt",
+        f"{signal}.signum={SIGTERM}",
+        f"{signal}.step=3",
+    ]
+    with pytest.raises(TrainingInterrupted, match="at step 3"):
+        train(config(tiny_dataset, run_dir, *two_epochs, *stop))
+    out["stopped"] = read_run_json(run_dir)
+    out["resumed"] = train(config(tiny_dataset, run_dir, *two_epochs))
     return out
 
 
@@ -91,11 +101,12 @@ def test_same_seed_same_weights(runs):
 
 def test_resume_equals_straight_training(runs):
     assert runs["a"]["epochs"] == 1 and runs["a"]["global_step"] == 2
+    assert runs["stopped"]["status"] == "interrupted" and runs["stopped"]["global_step"] == 3
     resumed, straight = runs["resumed"], runs["straight"]
     assert resumed["epochs"] == 2 and resumed["global_step"] == 4
     assert resumed["pairs_seen"] == straight["pairs_seen"] == 16  # the whole run's count
     assert resumed["sessions"] == 2 and straight["sessions"] == 1
-    assert resumed["train_time_s"] > runs["a"]["train_time_s"]
+    assert resumed["train_time_s"] > runs["stopped"]["train_time_s"]
     wr, ws = weights(resumed["checkpoints"]["last"]), weights(straight["checkpoints"]["last"])
     assert all(torch.equal(wr[k], ws[k]) for k in ws)
     assert resumed["val_loss"] == straight["val_loss"]

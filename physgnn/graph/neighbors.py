@@ -33,6 +33,10 @@ _MARGIN = 1e-6
 # their float64 rounding error (≈ 1e9 · 2^-52) is far below _MARGIN.
 _MIN_CELL_FRACTION = 1e-9
 
+# torch_cluster's neighbour cap: the first pass's, and its growth while a point reaches it
+_CLUSTER_CAP = 64
+_CLUSTER_GROWTH = 4
+
 # The 13 cell offsets that are lexicographically positive, plus (0, 0, 0) first: each
 # unordered pair of neighbouring cells is visited exactly once.
 _HALF_OFFSETS = [(0, 0, 0)] + [
@@ -200,19 +204,39 @@ def _kdtree_candidates(pos, batch, r) -> tuple[torch.Tensor, torch.Tensor]:
 # --- torch_cluster --------------------------------------------------------------------------
 
 
-def _cluster_candidates(pos, batch, r) -> tuple[torch.Tensor, torch.Tensor]:
+def _load_radius_graph():
+    """``torch_cluster.radius_graph``, imported when first asked for (an optional extra)."""
     if not has_torch_cluster():
         raise ValueError("neighbour backend 'cluster' needs torch_cluster, which is not installed")
-    import torch_cluster
+    from torch_cluster import radius_graph
 
+    return radius_graph
+
+
+def _cluster_candidates(pos, batch, r) -> tuple[torch.Tensor, torch.Tensor]:
+    """Candidate pairs from ``torch_cluster.radius_graph`` with a bounded neighbour cap.
+
+    The CUDA kernel allocates ``16 · N · cap`` bytes whatever the answer (23 GB for cap = N at
+    38 000 points), and keeps at most ``cap`` neighbours of each point. So the search asks for
+    :data:`_CLUSTER_CAP` first; where some point reached the cap (counted on the device, one
+    read-back per pass) it may have lost neighbours, and the search is repeated with a cap
+    :data:`_CLUSTER_GROWTH` times larger, up to ``N − 1``, where nothing can be lost. The
+    answer is exact either way; only crowded scenes pay a second pass."""
+    radius_graph = _load_radius_graph()
     p = pos.to(torch.float32)
     scale = float(p.abs().max())
     reach = r * (1 + 1e-4) + 4 * float(torch.finfo(torch.float32).eps) * scale
-    # max_num_neighbors = N: nothing is ever dropped. Batch must be sorted for torch_cluster.
-    order = torch.argsort(batch, stable=True)
-    edge = torch_cluster.radius_graph(
-        p[order], reach, batch[order], loop=False, max_num_neighbors=pos.shape[0]
-    )
+    order = torch.argsort(batch, stable=True)  # torch_cluster needs the batch sorted
+    p, b, n = p[order], batch[order], pos.shape[0]
+    cap = min(_CLUSTER_CAP, n - 1)
+    while True:
+        edge = radius_graph(p, reach, b, loop=False, max_num_neighbors=cap)
+        if cap >= n - 1:
+            break
+        # edge[1] is the point whose neighbours were capped; the one read-back of the pass
+        if not bool((torch.bincount(edge[1], minlength=n) >= cap).any()):
+            break
+        cap = min(cap * _CLUSTER_GROWTH, n - 1)
     return order[edge[0]], order[edge[1]]
 
 

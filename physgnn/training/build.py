@@ -26,8 +26,8 @@ from physgnn.training.checks import (
     check_budget,
     check_monitors,
     check_optimizer,
-    check_scheduler,
 )
+from physgnn.training.schedule import check_scheduler
 
 NUMERIC_TRAINER_KEYS = ("max_epochs", "max_steps", "gradient_clip_val", "log_every_n_steps")
 FINDS_UNUSED = "_find_unused_parameters_true"

@@ -31,6 +31,17 @@ STATUSES = ("running", "finished", "truncated", "interrupted", "diverged", "fail
 # What the rollout callback logs (physgnn/training/callbacks.py)
 ROLLOUT_METRICS = ("val/rollout_score", "val/rollout_mse", "val/chamfer", "val/energy_gain",
                    "val/max_depth", "val/tunnelled", "val/rest_drift")  # fmt: skip
+# Constructor arguments that the code passes, not the config
+PASSED = (
+    "self",
+    "stats",
+    "simulator",
+    "optimizer",
+    "length",
+    "interval",
+    "progress",
+    "last_epoch",
+)
 WORDS = {int: "a whole number", float: "a number", bool: "true or false", str: "a string"}
 
 
@@ -56,12 +67,14 @@ def _words(hint) -> str:
     return "null" if hint is type(None) else WORDS.get(hint, str(hint))
 
 
-def check_arguments(cfg: DictConfig, sections=("model", "datamodule", "lit")) -> None:
+def check_arguments(
+    cfg: DictConfig, sections=("model", "datamodule", "lit", "lit.scheduler")
+) -> None:
     """Every key of each ``_target_`` section (and of the ``_target_`` nodes within it:
     ``model.network``) is an argument of its constructor, of the annotated type
     (``model.network.M=abc``: ``model.network.M must be a whole number, got 'abc'``)."""
     for section in sections:
-        node = cfg.get(section)
+        node = OmegaConf.select(cfg, section)
         if isinstance(node, DictConfig) and "_target_" in node:
             _check_node(node, section)
 
@@ -77,7 +90,7 @@ def _check_node(node: DictConfig, section: str) -> None:
         if key in HYDRA_KEYS:
             continue
         if key not in params:
-            known = ", ".join(k for k in params if k not in ("self", "stats", "simulator"))
+            known = ", ".join(k for k in params if k not in PASSED)
             raise ConfigError(
                 f"{section}.{key} is not an argument of {target.__name__} (known: {known})"
             )
@@ -101,19 +114,6 @@ def check_optimizer(lit_cfg: DictConfig | None) -> None:
         raise ConfigError(
             f"lit.optimizer.lr must be a number > 0, got {lr!r} (conf/train.yaml: "
             "lit.optimizer.lr, default 1.0e-3)"
-        )
-
-
-def check_scheduler(lit_cfg: DictConfig | None) -> None:
-    """``lit.scheduler.gamma`` (the learning rate's factor per epoch) is a number > 0: at 0 the
-    rate vanishes, below it turns negative (gradient ascent) and the run still "finishes"."""
-    gamma = OmegaConf.select(lit_cfg, "scheduler.gamma") if lit_cfg is not None else None
-    if gamma is None:
-        return
-    if not isinstance(gamma, int | float) or isinstance(gamma, bool) or not 0 < gamma < 1e3:
-        raise ConfigError(
-            f"lit.scheduler.gamma must be a number > 0 (lr x gamma^epoch; 1 keeps it, default "
-            f"0.97), got {gamma!r}"
         )
 
 

@@ -51,6 +51,7 @@ from physgnn.training.epoch_means import EpochMeans
 from physgnn.training.finite import FiniteWatch, NonFiniteLossError  # noqa: F401 (its home)
 from physgnn.training.losses import energy_increase, masked_mse, rest_loss
 from physgnn.training.noise import add_noise, noise_seed, regime_scale  # noqa: F401 (re-exported)
+from physgnn.training.schedule import lr_scheduler
 
 
 @torch.no_grad()
@@ -90,8 +91,10 @@ class LitSimulator(L.LightningModule):
     """Trains a :class:`LearnedSimulator` on one-step pairs.
 
     ``optimizer``: a partial (``_partial_: true``) taking the parameters; ``scheduler``: an
-    optional partial taking the optimizer, stepped once per epoch. ``seed`` seeds the noise (and
-    the DDP process) and the push-forward length of each step together with the step number.
+    optional partial taking the optimizer, stepped once per epoch, or a
+    :class:`~physgnn.training.schedule.RunLengthDecay` over the trainer's run length (the
+    default: :mod:`physgnn.training.schedule`). ``seed`` seeds the noise (and the DDP process)
+    and the push-forward length of each step together with the step number.
     ``pushforward_steps`` = K (0: one-step training only) starts at step ``pushforward_after``;
     with ``pushforward_growth`` = G > 0 the longest unroll grows, 1 from ``pushforward_after``,
     then one more every G steps up to K (longer unrolls once the model is good enough to make
@@ -247,8 +250,5 @@ class LitSimulator(L.LightningModule):
         optimizer = self.optimizer_factory(self.parameters())
         if self.scheduler_factory is None:
             return optimizer
-        scheduler = self.scheduler_factory(optimizer)
-        return {
-            "optimizer": optimizer,
-            "lr_scheduler": {"scheduler": scheduler, "interval": "epoch"},
-        }
+        scheduler = lr_scheduler(self.scheduler_factory, optimizer, self._trainer)
+        return {"optimizer": optimizer, "lr_scheduler": scheduler}
