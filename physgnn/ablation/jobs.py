@@ -26,8 +26,13 @@ from physgnn.training.layout import flat_layout
 BASELINE = "baseline"
 # The parts of the training config that make a configuration (the rest is where and how long).
 IDENTITY = ("model", "lit", "datamodule", "data")
+RUN_LENGTH_DECAY = "physgnn.training.schedule.RunLengthDecay"
+EXPONENTIAL_LR = "torch.optim.lr_scheduler.ExponentialLR"
 # Keys that vary with the seed or the folder, never with the configuration.
 IGNORED = {"seed", "data_dir", "dir", "preset", "name"}
+# How a run executes, not what it trains: how the network is compiled, and how much the
+# validation rollouts (which choose best.ckpt, like the callbacks) roll out.
+EXECUTION = ("lit.compile_mode", "lit.compile_shapes", "data.val_rollout.")
 
 
 class StudyError(PhysgnnError, ValueError):
@@ -135,8 +140,20 @@ def defaults_fingerprint(train_cfg: DictConfig) -> str:
     runs of an earlier default are never mistaken for the current one's. Model keys count in
     the flat layout (:func:`~physgnn.training.layout.flat_layout`): the fingerprint names the
     model, not where its config spells each key."""
-    text = json.dumps(flat_layout(_flat(train_cfg)), sort_keys=True, default=str)
+    keys = {k: v for k, v in flat_layout(_flat(train_cfg)).items() if not k.startswith(EXECUTION)}
+    text = json.dumps(_per_epoch_decay(keys, train_cfg.trainer), sort_keys=True, default=str)
     return hashlib.sha1(text.encode()).hexdigest()[:10]
+
+
+def _per_epoch_decay(keys: dict, trainer) -> dict:
+    """``keys`` with a run-length decay over epochs written as the per-epoch decay it is
+    (``ExponentialLR``, ``gamma`` to 12 digits): one schedule, one fingerprint, however its
+    config spells it."""
+    if keys.get("lit.scheduler._target_") != RUN_LENGTH_DECAY or trainer.get("max_steps", -1) > 0:
+        return keys
+    factor = keys.pop("lit.scheduler.final_lr_factor")
+    gamma = round(float(factor) ** (1 / int(trainer.max_epochs)), 12)
+    return keys | {"lit.scheduler._target_": EXPONENTIAL_LR, "lit.scheduler.gamma": gamma}
 
 
 def study_budget(cfg: DictConfig) -> dict:
