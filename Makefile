@@ -23,7 +23,7 @@ export GOMP_SPINCOUNT ?= 1000
 help: ## List the targets
 	@grep -hE '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-12s\033[0m %s\n", $$1, $$2}'
 
-install: ## Make .venv and install physgnn with its dev tools, the Hydra launchers and the docs tools (CPU torch wheel, nothing compiled)
+install: ## Make .venv and install physgnn with its dev tools, the Hydra launchers and the docs tools (torch 2.13: pip's wheel for this machine; nothing compiled)
 	test -x $(PY) || python3 -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q "$(TORCH_PIN)"
