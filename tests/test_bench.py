@@ -13,6 +13,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from torch.utils.flop_counter import FlopCounterMode
 
+from physgnn.benchmark import gpu as gpu_module
 from physgnn.benchmark import scenes as bench_scenes
 from physgnn.benchmark.gpu import gpu_section
 from physgnn.benchmark.learned import frame_states, make_simulator, time_learned
@@ -405,3 +406,14 @@ def test_the_gpu_section_runs_on_any_device():
     assert frame["n_spheres"] == 10 and frame["fps"] > 0
     assert "| bf16 |" in "\n".join(gpu_tables({"gpu": out}))
     assert torch.get_float32_matmul_precision() == "highest"  # restored after the tf32 row
+
+
+def test_a_failing_gpu_row_is_reported_not_fatal(monkeypatch):
+    cfg = quick_config(_cfg("quick=true", "gpu.device=cpu"))
+    cfg.gpu.variants = ["eager"]
+    monkeypatch.setattr(gpu_module, "training_row", lambda *a: 1 / 0)
+    rng = np.random.default_rng(0)
+    trajectories = bench_scenes.training_trajectories(cfg, rng)
+    out = gpu_section(cfg, trajectories, compute_stats(trajectories), {})
+    assert out["training"] == [{"variant": "eager", "error": "ZeroDivisionError: division by zero"}]
+    assert "| eager | failed: ZeroDivisionError" in "\n".join(gpu_tables({"gpu": out}))

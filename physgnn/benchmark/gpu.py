@@ -32,22 +32,48 @@ VARIANTS = ("eager", "tf32", "bf16", "captured")
 
 
 def gpu_section(cfg: DictConfig, trajectories: list, stats: dict, runs: dict) -> dict | None:
-    """``{"device", "training": [...], "rollout": [...]}`` (module doc) on ``cfg.gpu.device``
-    (``cuda`` by default), or None with one line when that is CUDA and torch sees none."""
+    """``{"device", "batch_size", "training": [...], "rollout": [...]}`` (module doc) on
+    ``cfg.gpu.device`` (``cuda`` by default), or None with one line when that is CUDA and torch
+    sees none. A row that fails holds its ``error`` instead of its figures."""
     c = cfg.gpu
     device = torch.device(c.device)
     if device.type == "cuda" and not torch.cuda.is_available():
         print("gpu: skipped (torch sees no CUDA device)", flush=True)
         return None
     name = torch.cuda.get_device_name(device) if device.type == "cuda" else str(device)
-    training = [training_row(cfg, trajectories, stats, device, v) for v in c.variants]
+    training = [
+        _row(training_row, {"variant": v}, cfg, trajectories, stats, device, v) for v in c.variants
+    ]
     sizes = [n for n in c.rollout_sizes if n in runs]
-    frames = [rollout_row(cfg.model, stats, runs[n]["traj"], device) for n in sizes]
-    for row in training:
-        print(f"gpu training {row['variant']}: {row['steps_per_s']:.1f} steps/s", flush=True)
-    for row in frames:
-        print(f"gpu rollout n={row['n_spheres']}: {row['fps']:.1f} FPS", flush=True)
-    return {"device": name, "training": training, "rollout": frames}
+    frames = [
+        _row(rollout_row, {"n_spheres": n}, cfg.model, stats, runs[n]["traj"], device)
+        for n in sizes
+    ]
+    return {
+        "device": name,
+        "batch_size": int(c.batch_size),
+        "training": training,
+        "rollout": frames,
+    }
+
+
+def _row(measure, names: dict, *args) -> dict:
+    """``measure(*args)``, or ``names`` with the error where it failed (one row of the GPU
+    section is never worth the whole bench, measured over minutes); printed either way."""
+    try:
+        row = measure(*args)
+    except Exception as err:  # noqa: BLE001 (reported in the row and in bench.md)
+        row = names | {"error": f"{type(err).__name__}: {err}".splitlines()[0][:300]}
+    figure = row.get("steps_per_s", row.get("fps"))
+    what = "FAILED " + row["error"] if "error" in row else f"{figure:.1f} per s"
+    print(f"gpu {' '.join(f'{k}={v}' for k, v in names.items())}: {what}", flush=True)
+    if device_is_cuda(args):
+        torch.cuda.empty_cache()
+    return row
+
+
+def device_is_cuda(args) -> bool:
+    return any(isinstance(a, torch.device) and a.type == "cuda" for a in args)
 
 
 @contextlib.contextmanager

@@ -94,15 +94,25 @@ def gpu_section(result: dict) -> list[str]:
     if not g:
         return ["## GPU", "Skipped: torch saw no CUDA device in this run."]
     mib = lambda x: "–" if x is None else f"{x:.0f}"  # noqa: E731
+    failed = lambda r, n: [f"failed: {r['error']}"] + ["–"] * (n - 1)  # noqa: E731
     train = [
-        [r["variant"], f"{r['steps_per_s']:.1f}", f"{r['nodes_per_s']:.0f}", mib(r["peak_mib"])]
+        [r["variant"]]
+        + (
+            failed(r, 3)
+            if "error" in r
+            else [f"{r['steps_per_s']:.1f}", f"{r['nodes_per_s']:.0f}", mib(r["peak_mib"])]
+        )
         for r in g["training"]
     ]
-    frames = [[f"{r['n_spheres']}", f"{r['fps']:.1f}", mib(r["peak_mib"])] for r in g["rollout"]]
+    frames = [
+        [f"{r['n_spheres']}"]
+        + (failed(r, 2) if "error" in r else [f"{r['fps']:.1f}", mib(r["peak_mib"])])
+        for r in g["rollout"]
+    ]
     return [
         f"## GPU ({g['device']})",
         "Training of the default recipe at batch "
-        f"{g['training'][0]['batch_size'] if g['training'] else '–'}: optimiser steps and "
+        f"{g['batch_size']}: optimiser steps and "
         "spheres per second, peak memory (physgnn/benchmark/gpu.py).",
         md_table(["variant", "steps/s", "spheres/s", "peak MiB"], train),
         "Rollout of the baseline (random weights) through physgnn.rollout:",
