@@ -46,7 +46,7 @@ def test_logs_every_key_with_the_oracle_mse():
     val = [trajectory(3, 10, seed=1), trajectory(2, 10, seed=2)]
     ood = [trajectory(4, 10, seed=3)]
     module = FakeModule()
-    values = callback_with(val, ood).log_rollouts(module, data_dir=None)
+    values = callback_with(val, ood, ood=True).log_rollouts(module, data_dir=None)
     assert set(module.logged) == {
         "val/rollout_mse",
         "val/energy_gain",

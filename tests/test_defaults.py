@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from omegaconf import OmegaConf
 
+from physgnn.training.callbacks import RolloutCallback
 from physgnn.training.datamodule import StatePairDataModule
 from physgnn.training.lit import LitSimulator
 from physgnn.training.schedule import RunLengthDecay
@@ -44,3 +45,15 @@ def test_constructor_defaults_equal_train_yaml(node, cls):
         assert params[key].default == value, (
             f"{node}.{key}: code {params[key].default}, YAML {value}"
         )
+
+
+def test_the_rollout_callback_defaults_equal_its_yaml_and_the_default_preset():
+    conf = TRAIN.parent
+    node = OmegaConf.load(conf / "callbacks" / "default.yaml").rollout
+    preset = OmegaConf.load(conf / "data" / "small.yaml").val_rollout
+    expected = literal_values(node) | {
+        "n_val_trajectories": preset.trajectories,
+        "max_frames": preset.frames,
+    }
+    params = inspect.signature(RolloutCallback).parameters
+    assert {key: params[key].default for key in expected} == expected

@@ -51,10 +51,10 @@ OOD_KEYS = {k: f"ood/{k}" for k in ("mse", "chamfer", "energy_gain", "depth_sphe
 class RolloutCallback(L.Callback):
     def __init__(
         self,
-        every_n_epochs: int = 5,
-        n_val_trajectories: int = 2,
-        max_frames: int | None = 100,
-        ood: bool = True,
+        every_n_epochs: int = 10,
+        n_val_trajectories: int = 10,
+        max_frames: int | None = None,
+        ood: bool = False,
         w_depth: float = 10.0,
         w_tunnel: float = 10.0,
         w_rest: float = 1.0,
