@@ -14,8 +14,12 @@ from physgnn.cli import command
 from physgnn.cli.overrides import check_composes
 from physgnn.evaluation import simulate as work
 
-main = command("simulate", work.simulate, done=work.summary,
-               before=partial(check_composes, "simulate", missing=work.NOT_IN_GROUP))  # fmt: skip
+main = command(
+    "simulate",
+    work.simulate,
+    done=work.summary,
+    before=partial(check_composes, "simulate", missing=work.NOT_IN_GROUP),
+)
 
 if __name__ == "__main__":
     main()

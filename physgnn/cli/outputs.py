@@ -16,8 +16,14 @@ OUTPUT_KEYS = ("hydra.run.dir", "hydra.sweep.dir", "run_dir")
 # The key of each command's own folder (its hydra.run.dir; under paths.outputs unless given),
 # where it is not paths.outputs itself; None: a command for which Hydra makes no folder
 # (data_report writes nothing; simulate writes its out itself, its disk errors one line).
-OWN_FOLDER = {"eval": "report_dir", "bench": "out_dir", "sleep_study": "out", "study":
-              "runs_dir", "data_report": None, "simulate": None}  # fmt: skip
+OWN_FOLDER = {
+    "eval": "report_dir",
+    "bench": "out_dir",
+    "sleep_study": "out",
+    "study": "runs_dir",
+    "data_report": None,
+    "simulate": None,
+}
 
 
 MIN_FREE = 1 << 20  # bytes: less than this free and Hydra's own first writes may fail

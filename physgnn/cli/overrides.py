@@ -82,8 +82,10 @@ def _not_composed(err: Exception, command: str, overrides: list[str], missing) -
         group, _, option = err.missing_cfg_file.partition("/")
         given = next((o for o in overrides if o.startswith(f"{group}=")), f"{group}={option}")
         extra = f"; {missing[group].format(option=option)}" if group in missing else ""
-        return (f"{given}: no {option!r} in the config group {group} (options: "
-                f"{', '.join(err.options)}){extra}")  # fmt: skip
+        return (
+            f"{given}: no {option!r} in the config group {group} (options: "
+            f"{', '.join(err.options)}){extra}"
+        )
     key = re.match(r"Could not override '([^']+)'", str(err))
     if key:
         given = next((o for o in overrides if o.startswith(f"{key[1]}=")), key[1])

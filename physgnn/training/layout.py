@@ -16,8 +16,12 @@ from omegaconf import DictConfig, OmegaConf
 MOVED_TARGETS = {"physgnn.simulator.LearnedSimulator": "physgnn.models.learned.LearnedSimulator"}
 # Model keys that runs of an earlier physgnn lack, with the values their model had (the
 # invariance changes: physgnn/models/learned.py); the defaults of these keys changed since.
-EARLIER_MODEL = {"relative_pairs": False, "mass_ratio": False, "aggregation": "sum",
-                 "rest_decision": False}  # fmt: skip
+EARLIER_MODEL = {
+    "relative_pairs": False,
+    "mass_ratio": False,
+    "aggregation": "sum",
+    "rest_decision": False,
+}
 # The nodes of today's layout, with the Hydra keys that build them.
 NODES = {
     "network": {"_target_": "physgnn.nn.epd.EncodeProcessDecode", "_partial_": True},
@@ -25,14 +29,20 @@ NODES = {
 }
 # Each flat model key of an earlier run: its node and its name there.
 FLAT_KEYS = {
-    "hidden": ("network", "hidden"), "M": ("network", "M"),
-    "third_law": ("network", "third_law"), "use_surfaces": ("network", "use_surfaces"),
-    "num_materials": ("network", "num_materials"), "material_dim": ("network", "material_dim"),
-    "layer_norm": ("network", "layer_norm"), "aggregation": ("network", "aggregation"),
-    "connectivity": ("graph", "connectivity"), "epsilon": ("graph", "epsilon"),
-    "factor": ("graph", "factor"), "neighbor_backend": ("graph", "backend"),
+    "hidden": ("network", "hidden"),
+    "M": ("network", "M"),
+    "third_law": ("network", "third_law"),
+    "use_surfaces": ("network", "use_surfaces"),
+    "num_materials": ("network", "num_materials"),
+    "material_dim": ("network", "material_dim"),
+    "layer_norm": ("network", "layer_norm"),
+    "aggregation": ("network", "aggregation"),
+    "connectivity": ("graph", "connectivity"),
+    "epsilon": ("graph", "epsilon"),
+    "factor": ("graph", "factor"),
+    "neighbor_backend": ("graph", "backend"),
     "clip_margin": ("graph", "clip_margin"),
-}  # fmt: skip
+}
 
 
 def model_of_today(model: DictConfig) -> DictConfig:

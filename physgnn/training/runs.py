@@ -186,12 +186,20 @@ def whole_checkpoints(folder: Path, but: Path | None = None) -> list[Path]:
 
 # The model keys that set the shapes of the weights, tried one at a time by
 # :func:`weights_difference` (each with the values listed, besides the one the config has).
-SHAPE_KEYS = {"network.M": range(1, 17), "network.hidden": (), "H": range(0, 9),
-              "network.num_materials": range(0, 9), "network.material_dim": range(0, 33),
-              "boundary_features": (False, True), "contact_features": (False, True),
-              "material_features": (False, True), "relative_pairs": (False, True),
-              "mass_ratio": (False, True), "rest_decision": (False, True),
-              "network.use_surfaces": (False, True)}  # fmt: skip
+SHAPE_KEYS = {
+    "network.M": range(1, 17),
+    "network.hidden": (),
+    "H": range(0, 9),
+    "network.num_materials": range(0, 9),
+    "network.material_dim": range(0, 33),
+    "boundary_features": (False, True),
+    "contact_features": (False, True),
+    "material_features": (False, True),
+    "relative_pairs": (False, True),
+    "mass_ratio": (False, True),
+    "rest_decision": (False, True),
+    "network.use_surfaces": (False, True),
+}
 
 
 def weights_difference(state: dict, cfg: DictConfig) -> str:
