@@ -251,6 +251,7 @@ def test_targets_table_met_and_not_met():
     }
     result = {
         "pybullet": [
+            {"n_spheres": 154, "substeps": 10, "fps": 150.0},
             {"n_spheres": 1000, "substeps": 10, "fps": 40.0},
             {"n_spheres": 10000, "substeps": 10, "fps": 5.0},
         ]
@@ -261,7 +262,8 @@ def test_targets_table_met_and_not_met():
     assert share[2] == "met"  # 40 % at 154 spheres is not judged: from 300 up
     assert graph[2] == "not met"  # 30 % at 1000 spheres
     assert linear[1:] == ["1.25", "met"]  # (250 ms / 10 000) / (20 ms / 1000)
-    assert pybullet[2] == "not met"  # 4 < 5 FPS at 10 000
+    assert pybullet[1] == "154: 3.00× (450.0 vs 150.0 FPS), 1000: 1.25× (50.0 vs 40.0 FPS)"
+    assert pybullet[2] == "not met"  # 1.25 < 3 at 1 000 spheres
     assert train_share[1:] == ["65% (100.0 GFLOP/s)", "met"]
     assert nodes[1:] == ["30.0 k nodes/s", "not met (needs ×1.3)"]
     # the graph share is judged from 154 spheres up: 50 % at 10 spheres does not count
