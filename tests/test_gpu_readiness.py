@@ -18,7 +18,7 @@ from physgnn.benchmark.syncs import counting
 from physgnn.data.dataset import read_split
 from physgnn.data.pairs import PairDataset
 from physgnn.graph.builder import GraphBuilder
-from physgnn.graph.candidates import compact, scene_pairs, scene_plane_pairs
+from physgnn.graph.candidates import compact, scene_counts, scene_pairs, scene_plane_pairs
 from physgnn.physics.scene import WALL
 from physgnn.rollout import rollout
 from physgnn.training.finite import FINITE_CHECK_EVERY, FiniteWatch, NonFiniteLossError
@@ -61,7 +61,7 @@ def test_the_counter_sees_each_host_to_device_copy_once():
 def test_scene_pairs_are_every_same_scene_pair_in_order():
     sizes = (3, 1, 0, 4)
     scene = torch.repeat_interleave(torch.arange(4), torch.tensor(sizes))
-    i, j = scene_pairs(sizes, scene)
+    i, j = scene_pairs(sizes, scene, scene_counts(scene, len(sizes)))
     brute = [(a, b) for a in range(8) for b in range(a + 1, 8) if scene[a] == scene[b]]
     assert list(zip(i.tolist(), j.tolist(), strict=True)) == brute
 
@@ -69,7 +69,8 @@ def test_scene_pairs_are_every_same_scene_pair_in_order():
 def test_scene_plane_pairs_pair_each_plane_with_its_scene():
     spheres, planes = (2, 3), (1, 2)
     scene = torch.tensor([0, 0, 1, 1, 1])
-    plane, sphere = scene_plane_pairs(spheres, planes, torch.tensor([0, 1, 1]), scene)
+    counts = scene_counts(scene, len(spheres))
+    plane, sphere = scene_plane_pairs(spheres, planes, torch.tensor([0, 1, 1]), counts)
     expect = [(0, 0), (0, 1), (1, 2), (1, 3), (1, 4), (2, 2), (2, 3), (2, 4)]
     assert list(zip(plane.tolist(), sphere.tolist(), strict=True)) == expect
 

@@ -33,6 +33,7 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
+from physgnn import CONF_DIR
 from physgnn.benchmark.syncs import DispatchCounter
 from physgnn.data.dataset import read_split
 from physgnn.data.pairs import PairDataset
@@ -89,9 +90,7 @@ def _models(data: Path, hidden: int):
     """``(simulator, lit)``: the default model (hidden size ``hidden``) and the default recipe
     with its longest push-forward from the first step and contact noise on every batch."""
     stats = json.loads((data / "stats.json").read_text())
-    conf = Path(__file__).resolve().parents[2] / "conf"
-    if not conf.is_dir():
-        conf = Path(__file__).resolve().parents[1] / "conf"  # an installed wheel
+    conf = Path(CONF_DIR)
     model = OmegaConf.load(conf / "model" / "baseline.yaml")
     model.pop("defaults", None)
     model.network.hidden = hidden

@@ -19,12 +19,13 @@ from __future__ import annotations
 
 import contextlib
 import time
+from functools import partial
 
 import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.data.pairs import EpochSampler, PairDataset
+from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 from physgnn.models.capture import compile_in_place
 from physgnn.rollout import rollout
 
@@ -42,11 +43,16 @@ def gpu_section(cfg: DictConfig, trajectories: list, stats: dict, runs: dict) ->
         return None
     name = torch.cuda.get_device_name(device) if device.type == "cuda" else str(device)
     training = [
-        _row(training_row, {"variant": v}, cfg, trajectories, stats, device, v) for v in c.variants
+        _row(partial(training_row, cfg, trajectories, stats, device, v), {"variant": v}, device)
+        for v in c.variants
     ]
     sizes = [n for n in c.rollout_sizes if n in runs]
     frames = [
-        _row(rollout_row, {"n_spheres": n}, cfg.model, stats, runs[n]["traj"], device)
+        _row(
+            partial(rollout_row, cfg.model, stats, runs[n]["traj"], device),
+            {"n_spheres": n},
+            device,
+        )
         for n in sizes
     ]
     return {
@@ -57,23 +63,19 @@ def gpu_section(cfg: DictConfig, trajectories: list, stats: dict, runs: dict) ->
     }
 
 
-def _row(measure, names: dict, *args) -> dict:
-    """``measure(*args)``, or ``names`` with the error where it failed (one row of the GPU
-    section is never worth the whole bench, measured over minutes); printed either way."""
+def _row(measure, names: dict, device: torch.device) -> dict:
+    """``measure()``, or ``names`` with the error where it failed (one row of the GPU section
+    is never worth the whole bench, measured over minutes); printed either way."""
     try:
-        row = measure(*args)
+        row = measure()
     except Exception as err:  # noqa: BLE001 (reported in the row and in bench.md)
         row = names | {"error": f"{type(err).__name__}: {err}".splitlines()[0][:300]}
     figure = row.get("steps_per_s", row.get("fps"))
     what = "FAILED " + row["error"] if "error" in row else f"{figure:.1f} per s"
     print(f"gpu {' '.join(f'{k}={v}' for k, v in names.items())}: {what}", flush=True)
-    if device_is_cuda(args):
+    if device.type == "cuda":
         torch.cuda.empty_cache()
     return row
-
-
-def device_is_cuda(args) -> bool:
-    return any(isinstance(a, torch.device) and a.type == "cuda" for a in args)
 
 
 @contextlib.contextmanager
@@ -109,16 +111,14 @@ def training_row(cfg, trajectories: list, stats: dict, device, variant: str) -> 
     lit = _lit(cfg, stats, device, variant)
     pairs = PairDataset(trajectories, lit.simulator.H, future=int(c.lit.pushforward_steps))
     pairs = pairs.to(device)
-    total = int(c.warmup_steps + c.steps)
-    sampler = iter(EpochSampler(len(pairs), total * int(c.batch_size), seed=0))
+    total, size = int(c.warmup_steps + c.steps), int(c.batch_size)
+    batches = pair_loader(pairs, size, EpochSampler(len(pairs), total * size, seed=0))
     nodes, start = 0, None
     with _variant(variant, device):
-        for step in range(total):
+        for step, batch in enumerate(batches):
             if step == c.warmup_steps:
                 _sync(device)
                 start, nodes = time.perf_counter(), 0
-            index = torch.tensor([next(sampler) for _ in range(int(c.batch_size))])
-            batch = pairs.batch(index)
             _optimiser_step(lit, batch, step)
             nodes += batch.num_nodes
     _sync(device)

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import torch
 
 from physgnn.data.state import host_sizes, scene_of_sphere
-from physgnn.graph.candidates import compact, scene_pairs, scene_plane_pairs
+from physgnn.graph.candidates import compact, scene_counts, scene_pairs, scene_plane_pairs
 from physgnn.graph.neighbors import BACKENDS, radius_pairs, resolve_backend
 from physgnn.physics.energy import G
 from physgnn.physics.geometry import rectangle_offset
@@ -128,11 +128,11 @@ class GraphBuilder:
     def __call__(self, state) -> Graph:
         batch = scene_of_sphere(state)
         velocity = self.rule_velocity(state)  # once per build: the rules and the clip share it
-        allowance = self.allowance(state, velocity=velocity)
-        spheres, planes = host_sizes(state)
-        src, dst = self._pair_candidates(state, batch, allowance, spheres)
+        allowance, (spheres, planes) = self.allowance(state, velocity=velocity), host_sizes(state)
+        counts = scene_counts(batch, len(spheres))  # both kinds of candidate need them
+        src, dst = self._pair_candidates(state, batch, allowance, spheres, counts)
         pp_mask = self._pp_rule(state, batch, allowance, src, dst)
-        plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), batch)
+        plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), counts)
         ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere, velocity)
         n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
         keep = compact(pp_mask, n_pp)
@@ -197,7 +197,7 @@ class GraphBuilder:
         dt = state.dt.to(torch.float64)[scene_of_sphere(state)[sphere]]
         return clearance <= self.factor * torch.relu(-along) * dt + self.epsilon
 
-    def _pair_candidates(self, state, batch, allowance, spheres) -> tuple[torch.Tensor, ...]:
+    def _pair_candidates(self, state, batch, allowance, spheres, counts) -> tuple:
         """Candidate pairs ``(i, j)``, ``i < j``, sorted: all pairs of each scene up to the
         ``ALL_PAIRS_*`` (k-d tree: ``CPU_PAIRS_PER_SPHERE``) limits, else a radius search (reads
         sizes back, :func:`~physgnn.graph.neighbors.radius_pairs`); the same edges either way."""
@@ -205,7 +205,7 @@ class GraphBuilder:
         kdtree = resolve_backend(self.backend, state.pos) == "kdtree"
         limit = CPU_PAIRS_PER_SPHERE * n if kdtree else max(ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE * n)
         if total <= limit:
-            return scene_pairs(spheres, batch)
+            return scene_pairs(spheres, batch, counts)
         radius = state.radius.to(torch.float64)
         reach = 2 * float(radius.max()) + 2 * float(allowance.max()) + self.epsilon
         pairs = radius_pairs(state.pos, reach * (1 + 1e-9), batch, self.backend)

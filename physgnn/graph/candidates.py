@@ -13,7 +13,6 @@ back; the per-scene counts on the device come from the scene of each sphere (a s
 nothing is copied from the host either. The graph rule then makes a boolean mask, and
 :func:`compact` keeps the masked candidates in order given their count: the one value a build
 must read back.
-
 """
 
 from __future__ import annotations
@@ -28,13 +27,16 @@ def scene_counts(scene: torch.Tensor, scenes: int) -> torch.Tensor:
     return counts.index_add_(0, scene, torch.ones_like(scene))
 
 
-def scene_pairs(spheres: tuple[int, ...], scene: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def scene_pairs(
+    spheres: tuple[int, ...], scene: torch.Tensor, counts: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """``(i [P], j [P])``: all same-scene pairs with ``i < j`` (module doc), for scenes of
-    ``spheres[s]`` consecutive spheres; ``scene [N]`` (long) the scene of each sphere."""
+    ``spheres[s]`` consecutive spheres; ``scene [N]`` (long) the scene of each sphere, ``counts``
+    its :func:`scene_counts`."""
     device = scene.device
     n = sum(spheres)
     total = sum(c * (c - 1) // 2 for c in spheres)
-    end = torch.cumsum(scene_counts(scene, len(spheres)), 0)[scene]  # one past its scene's last
+    end = torch.cumsum(counts, 0)[scene]  # one past the last sphere of each sphere's scene
     node = torch.arange(n, device=device)
     partners = end - 1 - node  # spheres after i in its scene
     i = torch.repeat_interleave(node, partners, output_size=total)
@@ -47,13 +49,12 @@ def scene_plane_pairs(
     spheres: tuple[int, ...],
     planes: tuple[int, ...],
     plane_scene: torch.Tensor,
-    scene: torch.Tensor,
+    counts: torch.Tensor,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """``(plane [Q], sphere [Q])``: every plane with every sphere of its scene (module doc);
     ``plane_scene [S]`` (long) is the scene of each plane, planes grouped by scene, and
-    ``scene [N]`` (long) the scene of each sphere."""
+    ``counts [B]`` the spheres per scene (:func:`scene_counts`)."""
     device = plane_scene.device
-    counts = scene_counts(scene, len(spheres))
     total = sum(p * s for p, s in zip(planes, spheres, strict=True))
     per_plane = counts[plane_scene]
     plane = torch.repeat_interleave(

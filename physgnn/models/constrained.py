@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from physgnn.data.state import host_sizes, scene_of_sphere
-from physgnn.graph.candidates import scene_plane_pairs
+from physgnn.graph.candidates import scene_counts, scene_plane_pairs
 from physgnn.physics.constraints import project_contacts
 from physgnn.physics.scene import EFFECT_NAMES
 
@@ -73,7 +73,8 @@ class ConstrainedSimulator(nn.Module):
         pairs = graph.pp_index[:, : graph.pp_index.shape[1] // 2]
         spheres, planes = host_sizes(state)
         scene = scene_of_sphere(state)
-        plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), scene)
+        counts = scene_counts(scene, len(spheres))
+        plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), counts)
         surfaces = state.effects[scene[sphere], SURFACE_CONTACT]
         x = project_contacts(
             state.pos, pos_next, state.radius, state.mass, pairs, state.planes,

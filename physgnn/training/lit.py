@@ -156,7 +156,6 @@ class LitSimulator(L.LightningModule):
         if compile:  # dynamic shapes unless padded to buckets
             dynamic = not getattr(simulator, "pad_to_buckets", False)
             compile_in_place(simulator.network, compile_mode, dynamic, compile_shapes)
-        self.pairs_seen = self.nodes_seen = 0
         self._finite, self._train_means = FiniteWatch(), EpochMeans()
 
     def losses(self, state) -> dict[str, torch.Tensor]:
@@ -228,8 +227,6 @@ class LitSimulator(L.LightningModule):
         loss = losses["loss"]
         last = self._trainer is not None and self.trainer.is_last_batch
         self._finite.update(loss, self.current_epoch, self.global_step, last)
-        self.pairs_seen += batch.num_graphs
-        self.nodes_seen += batch.num_nodes
         self._train_means.add(losses, batch.num_graphs)
         if (
             self._trainer is not None

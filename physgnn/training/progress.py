@@ -10,7 +10,6 @@ batches, so that steps need not ask every process): all DDP processes stop at th
 Ctrl-C stops at once. A signal whose handler belongs to a job scheduler is left to it (submitit
 ignores SIGTERM), and after the run is recorded :meth:`StopOnSignal.chain` hands the pre-emption
 signal on to it (submitit requeues the job).
-
 """
 
 from __future__ import annotations
