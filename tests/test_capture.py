@@ -98,6 +98,16 @@ def test_a_compiled_network_keeps_its_weights_and_warns_past_its_shapes():
     assert len(net.forward.keys) == 2
 
 
+def test_dynamic_shapes_count_as_one_shape_whatever_the_graph_sizes():
+    net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=8, M=1).eval()
+    compile_in_place(net, dynamic=True, max_shapes=2, backend="eager")
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.simplefilter("error")  # 20 sizes, one graph: never past the bound
+        for n in range(6, 26):
+            net(*random_graph(n, n, n))
+    assert len(net.forward.keys) == 1
+
+
 def test_compile_options_are_checked_in_one_line():
     net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=8, M=1)
     with pytest.raises(ValueError, match="unknown compile mode 'fast'"):

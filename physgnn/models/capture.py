@@ -46,7 +46,7 @@ class ShapeBoundCall:
             raise ValueError(f"unknown compile mode '{mode}'; choose one of {list(MODES)}")
         if int(max_shapes) < 1:
             raise ValueError(f"max_shapes must be >= 1, got {max_shapes}")
-        self.module, self.max_shapes = module, int(max_shapes)
+        self.module, self.max_shapes, self.dynamic = module, int(max_shapes), bool(dynamic)
         self.eager = module.forward  # the class's forward, bound to the module
         options = {"backend": backend, "dynamic": dynamic}
         if backend == "inductor":
@@ -57,7 +57,10 @@ class ShapeBoundCall:
         _raise_recompile_limit(self.max_shapes)
 
     def key(self, args) -> tuple:
-        shapes = tuple(tuple(a.shape) if torch.is_tensor(a) else a is None for a in args)
+        """What a compiled graph is specialised on: the argument shapes (only their ranks with
+        dynamic shapes, where one graph serves every size), grad mode and train/eval mode."""
+        size = (lambda a: a.dim()) if self.dynamic else (lambda a: tuple(a.shape))
+        shapes = tuple(size(a) if torch.is_tensor(a) else a is None for a in args)
         return shapes, torch.is_grad_enabled(), self.module.training
 
     def __call__(self, *args):
