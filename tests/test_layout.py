@@ -77,9 +77,11 @@ def test_a_flat_model_lacking_the_later_keys_gets_its_own_models_values():
     today = model_of_today(old)
     assert today._target_ == "physgnn.models.learned.LearnedSimulator"
     assert today.network == NODES["network"] | {"M": 3, "aggregation": "sum"}
-    assert today.graph == NODES["graph"] | {"connectivity": "vi", "backend": "torch"}
-    assert {k: today[k] for k in EARLIER_MODEL if k != "aggregation"} == {
-        k: v for k, v in EARLIER_MODEL.items() if k != "aggregation"
+    graph = {"connectivity": "vi", "backend": "torch", "fixed_capacity": False}
+    assert today.graph == NODES["graph"] | graph
+    nested = ("aggregation", "fixed_capacity")  # keys of the nodes
+    assert {k: today[k] for k in EARLIER_MODEL if k not in nested} == {
+        k: v for k, v in EARLIER_MODEL.items() if k not in nested
     }
     assert model_of_today(today) == today  # today's layout comes back as it is
 

@@ -33,18 +33,30 @@ same at 10, 100 or 1 000 m (so gravity does not grow with altitude).
 
 Effects (``state.effects``): no pp edges without ``sphere_contact``; no wall/static edges
 without ``surface_contact``; the ground edge exists when ``gravity`` or ``surface_contact``.
+
+**Counted or fixed capacity.** By default a build keeps the candidates the rules accept,
+given their count: one read-back per build (:func:`~physgnn.graph.candidates.compact`), edges
+of exactly the graph's size. With ``fixed_capacity=True`` it reads nothing back: the graph
+holds every candidate of the batch's layout (a size the host knows) with masks of the edges
+the rules accept (``pp_mask``, ``ps_mask``), and every consumer weighs an edge by its mask;
+the network sees the masked edges as ghost edges
+(:meth:`~physgnn.graph.edges.Graph.network_inputs`), padded to capacity buckets
+(:mod:`physgnn.nn.padding`), so its shapes follow the layout's bucket only, as a captured step
+needs. It costs more arithmetic (every same-scene pair, where the counted graph has the few
+in reach), so it is meant for batches of small scenes on a GPU. A batch whose candidates pass
+the ``ALL_PAIRS_*`` limits (a radius search reads sizes back anyway) is built counted.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import torch
 
 from physgnn.data.state import host_sizes, scene_of_sphere
 from physgnn.graph.candidates import compact, scene_counts, scene_pairs, scene_plane_pairs
+from physgnn.graph.edges import Graph
 from physgnn.graph.neighbors import BACKENDS, radius_pairs, resolve_backend
 from physgnn.physics.energy import G
 from physgnn.physics.geometry import rectangle_offset
@@ -57,33 +69,6 @@ _SURFACE_CONTACT = EFFECT_NAMES.index("surface_contact")
 # pp candidates: all pairs of each scene (no read-back) up to these limits, then a radius search;
 # with the CPU's k-d tree, where a read-back costs nothing, the search from 8 pairs per sphere.
 ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE, CPU_PAIRS_PER_SPHERE = 1 << 18, 64, 8
-
-
-@dataclass
-class Graph:
-    """Edges of a batch of scenes (E pp edges, F ps edges; PyG flow source → target).
-
-    - ``pp_index [2, E]``: row 0 source j, row 1 target i, *paired layout*: columns
-      ``[0, E/2)`` hold each unordered pair once (source < target, sorted), columns
-      ``[E/2, E)`` the same pairs reversed, so the reverse of edge e is edge ``e + E/2``.
-    - ``pp_attr [E, 4]``: ``[p_i − p_j, |p_i − p_j|]`` (i the target).
-    - ``ps_index [2, F]``: row 0 plane index into ``state.planes``, row 1 sphere index,
-      sorted by (plane, sphere).
-    - ``ps_attr [F, 10]``: ``[v_i, n_s, clip(δ_is), clip(h_is)]``: ``δ_is`` the offset from the
-      closest point of plane s to sphere i, ``h_is = δ_is·n_s`` (signed), clipped at ``ρ_i``.
-    - ``allowance [N]`` (float64): the motion allowance ``a_i`` the edges were chosen with.
-    """
-
-    pp_index: torch.Tensor
-    pp_attr: torch.Tensor
-    ps_index: torch.Tensor
-    ps_attr: torch.Tensor
-    allowance: torch.Tensor
-
-    @property
-    def num_pairs(self) -> int:
-        """Number of unordered sphere pairs (``E / 2``)."""
-        return self.pp_index.shape[1] // 2
 
 
 class GraphBuilder:
@@ -104,6 +89,7 @@ class GraphBuilder:
         factor: float = 1.0,
         backend: str = "auto",
         clip_margin: float = 1.0,
+        fixed_capacity: bool = False,
     ):
         if connectivity not in CONNECTIVITIES:
             raise ValueError(
@@ -124,6 +110,7 @@ class GraphBuilder:
         self.factor = float(factor)
         self.clip_margin = float(clip_margin)
         self.backend = backend
+        self.fixed_capacity = bool(fixed_capacity)
 
     def __call__(self, state) -> Graph:
         batch = scene_of_sphere(state)
@@ -131,19 +118,34 @@ class GraphBuilder:
         allowance, (spheres, planes) = self.allowance(state, velocity=velocity), host_sizes(state)
         counts = scene_counts(batch, len(spheres))  # both kinds of candidate need them
         src, dst = self._pair_candidates(state, batch, allowance, spheres, counts)
-        pp_mask = self._pp_rule(state, batch, allowance, src, dst)
+        fixed = self.fixed_capacity and self.layout_candidates(state, spheres)
         plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), counts)
+        pp_mask = self._pp_rule(state, batch, allowance, src, dst)
         ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere, velocity)
-        n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
-        keep = compact(pp_mask, n_pp)
-        pp_index, pp_attr = _paired(state.pos, src[keep], dst[keep])
-        keep = compact(ps_mask, n_ps)
+        pp_keep = keep = slice(None)  # fixed capacity: every candidate, with its mask
+        masks = (pp_mask.repeat(2), ps_mask)  # the paired layout: the same mask on both halves
+        if not fixed:
+            n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
+            pp_keep, keep, masks = compact(pp_mask, n_pp), compact(ps_mask, n_ps), (None, None)
+        pp_index, pp_attr = _paired(state.pos, src[pp_keep], dst[pp_keep])
         ps_index = torch.stack([plane[keep], sphere[keep]])
         if checks_on():
             _check_ground(state, batch)
         clip = self.reach(state, allowance) + self.clip_margin
         ps_attr = _ps_attr(state, ps_index, offset[keep], clip)
-        return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance)
+        return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance, *masks)
+
+    def layout_candidates(self, state, spheres: tuple[int, ...]) -> bool:
+        """True when the pp candidates are every same-scene pair of the layout (module doc),
+        not a radius search's."""
+        total = sum(c * (c - 1) // 2 for c in spheres)
+        return total <= self._all_pairs_limit(state)
+
+    def _all_pairs_limit(self, state) -> int:
+        n = state.pos.shape[0]
+        if resolve_backend(self.backend, state.pos) == "kdtree" and not self.fixed_capacity:
+            return CPU_PAIRS_PER_SPHERE * n
+        return max(ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE * n)
 
     def rule_velocity(self, state) -> torch.Tensor:
         """``[N, 3]``: what the rules move spheres with: ``v_t + g·dt`` (approach), else ``v_t``."""
@@ -201,10 +203,7 @@ class GraphBuilder:
         """Candidate pairs ``(i, j)``, ``i < j``, sorted: all pairs of each scene up to the
         ``ALL_PAIRS_*`` (k-d tree: ``CPU_PAIRS_PER_SPHERE``) limits, else a radius search (reads
         sizes back, :func:`~physgnn.graph.neighbors.radius_pairs`); the same edges either way."""
-        n, total = state.pos.shape[0], sum(c * (c - 1) // 2 for c in spheres)
-        kdtree = resolve_backend(self.backend, state.pos) == "kdtree"
-        limit = CPU_PAIRS_PER_SPHERE * n if kdtree else max(ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE * n)
-        if total <= limit:
+        if self.layout_candidates(state, spheres):
             return scene_pairs(spheres, batch, counts)
         radius = state.radius.to(torch.float64)
         reach = 2 * float(radius.max()) + 2 * float(allowance.max()) + self.epsilon

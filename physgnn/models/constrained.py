@@ -70,6 +70,7 @@ class ConstrainedSimulator(nn.Module):
         """``[N, 3]``: ``vel`` after the constraint stage on ``graph``."""
         dt = state.scene_dt[:, None].to(vel.dtype)
         pos_next = state.pos + dt * vel
+        graph = graph.compacted()  # the rules' own pairs (a fixed-capacity graph reads back)
         pairs = graph.pp_index[:, : graph.pp_index.shape[1] // 2]
         spheres, planes = host_sizes(state)
         scene = scene_of_sphere(state)

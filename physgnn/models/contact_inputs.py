@@ -127,7 +127,10 @@ def in_reach(state, graph, builder) -> torch.Tensor:
     the :class:`~physgnn.graph.builder.GraphBuilder` that built ``graph`` (its ε)."""
     n = state.pos.shape[0]
     touched = state.pos.new_zeros(n)
-    touched.index_add_(0, graph.pp_index[1], state.pos.new_ones(graph.pp_index.shape[1]))
+    pp_weight = graph.pp_weight(touched)
+    if pp_weight is None:
+        pp_weight = state.pos.new_ones(graph.pp_index.shape[1])
+    touched.index_add_(0, graph.pp_index[1], pp_weight)
     plane, sphere = graph.ps_index
     bounded = state.plane_kind[plane] != GROUND
     # the edge features' heights are clipped: the clearance from the geometry itself
@@ -141,6 +144,8 @@ def in_reach(state, graph, builder) -> torch.Tensor:
         dt = state.scene_dt[sphere]
         near = -depth <= graph.allowance[sphere] + builder.epsilon + G * dt * dt
     near = bounded | near
+    if graph.ps_mask is not None:  # a fixed-capacity graph's candidates outside the rules
+        near = near & graph.ps_mask
     touched.index_add_(0, sphere, near.to(touched.dtype))
     return (touched > 0) | recent_contact(state)
 

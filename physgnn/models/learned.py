@@ -205,13 +205,15 @@ class LearnedSimulator(nn.Module):
     def normalized_prediction(self, state):
         """Network output ``[N, 6]`` (normalised Δv, Δω) and the graph it was computed on."""
         graph = self.graph_builder(state)
-        pp_attr, ps_attr = self.edge_features(graph, state)
+        x = self.node_features(state)
+        edges = graph.network_inputs(x.shape[0], *self.edge_features(graph, state))
         material = state.material if self.network.material is not None else None
-        args = (self.node_features(state), graph.pp_index, pp_attr, graph.ps_index, ps_attr)
-        if self.pad_to_buckets:  # fixed shapes for a captured step (physgnn/nn/padding.py)
-            padded, n = pad_graph(*args, material)
+        # fixed shapes for a captured step (physgnn/nn/padding.py); a fixed-capacity graph's
+        # masked edges need padding's ghost node
+        if self.pad_to_buckets or graph.masked:
+            padded, n = pad_graph(x, *edges, material)
             return self.network(*padded)[:n], graph
-        return self.network(*args, material), graph
+        return self.network(x, *edges, material), graph
 
     def normalized_target(self, state) -> torch.Tensor:
         """``[N, 6]``: the normalised change from the state's (possibly noisy) ``v_t, ω_t`` to

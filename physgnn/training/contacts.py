@@ -44,6 +44,9 @@ def contact_penalty(state, vel_next: torch.Tensor, graph, tol: float, speed_scal
     excess = torch.cat(
         [torch.relu(pp - tol) / dt[pairs[1]], torch.relu(ps - tol) / dt[graph.ps_index[1]]]
     )
+    if graph.masked:  # a fixed-capacity graph: only the edges its rules accept count
+        half = pairs.shape[1]
+        excess = excess * torch.cat([graph.pp_weight(excess)[:half], graph.ps_weight(excess)])
     return (excess / speed_scale).square().sum() / n
 
 
@@ -64,12 +67,16 @@ def perturb_contacts(state, graph, depth, touch, prob: float, generator=None):
     rel = pos[dst] - pos[src]
     dist = torch.linalg.vector_norm(rel, dim=-1, keepdim=True)
     push = draw(src.shape[0]) * (dist[:, 0] - radius[src] - radius[dst] < touch)
+    if graph.masked:  # a fixed-capacity graph: only the edges its rules accept are contacts
+        push = push * graph.pp_weight(push)[: src.shape[0]]
     along = 0.5 * push[:, None] * rel / dist.clamp_min(1e-12)
     shift.index_add_(0, dst, -along).index_add_(0, src, along)
     plane, sphere = graph.ps_index
     normal = state.planes[plane, 3:6]
     depth_now = edge_plane_depth(pos, radius, state.planes, state.plane_kind, graph.ps_index)
     push = draw(sphere.shape[0]) * (-depth_now < touch)
+    if graph.masked:
+        push = push * graph.ps_weight(push)
     shift.index_add_(0, sphere, -push[:, None] * normal)
     out = state.clone()
     out.pos = pos + shift

@@ -21,6 +21,7 @@ EARLIER_MODEL = {
     "mass_ratio": False,
     "aggregation": "sum",
     "rest_decision": False,
+    "fixed_capacity": False,
 }
 # The nodes of today's layout, with the Hydra keys that build them.
 NODES = {
@@ -42,6 +43,7 @@ FLAT_KEYS = {
     "factor": ("graph", "factor"),
     "neighbor_backend": ("graph", "backend"),
     "clip_margin": ("graph", "clip_margin"),
+    "fixed_capacity": ("graph", "fixed_capacity"),
 }
 
 
