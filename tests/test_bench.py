@@ -48,7 +48,8 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
     data = json.loads((out / "bench.json").read_text())
     assert data == json.loads(json.dumps(result))
     assert set(data) == {"machine", "learned", "pybullet", "training", "gpu_readiness", "gpu"}
-    assert set(data["gpu_readiness"]) == {"train_step", "rollout_frame"}
+    parts = {"train_step", "rollout_frame"}
+    assert set(data["gpu_readiness"]) == parts | {f"{p}_fixed_capacity" for p in parts}
     for counts in data["gpu_readiness"].values():
         assert set(counts) == {"syncs", "kernels", "copies", "host_ms"}
     if not torch.cuda.is_available():

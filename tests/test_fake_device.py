@@ -38,7 +38,9 @@ def test_a_training_step_and_a_rollout_frame_run_on_a_fake_accelerator(tiny_data
     result = json.loads(done.stdout.strip().splitlines()[-1])
     step, frame = result["train_step"], result["rollout_frame"]
     assert 0 < step["reads"] <= TRAIN_STEP_SYNCS and 0 < frame["reads"] <= ROLLOUT_FRAME_SYNCS
-    for counts in (step, frame):
+    fixed = result["train_step_fixed_capacity"], result["rollout_frame_fixed_capacity"]
+    assert fixed[0]["reads"] == 0 and fixed[1]["reads"] == 1  # the divergence test only
+    for counts in (step, frame, *fixed):
         assert counts["copies"] == 0 and counts["other_syncs"] == 0, result
 
 

@@ -86,14 +86,15 @@ def register() -> torch.device:
     return torch.device(NAME, 0)
 
 
-def _models(data: Path, hidden: int):
-    """``(simulator, lit)``: the default model (hidden size ``hidden``) and the default recipe
-    with its longest push-forward from the first step and contact noise on every batch."""
+def _models(data: Path, hidden: int, fixed_capacity: bool = False):
+    """``(simulator, lit)``: the default model (hidden size ``hidden``, graphs of fixed
+    capacity if asked) and the default recipe with its longest push-forward from the first step
+    and contact noise on every batch."""
     stats = json.loads((data / "stats.json").read_text())
     conf = Path(CONF_DIR)
     model = OmegaConf.load(conf / "model" / "baseline.yaml")
     model.pop("defaults", None)
-    model.network.hidden = hidden
+    model.network.hidden, model.graph.fixed_capacity = hidden, fixed_capacity
     lit_cfg = OmegaConf.load(conf / "train.yaml").lit
     lit_cfg.seed, lit_cfg.pushforward_after, lit_cfg.contact_noise_prob = 0, 0, 1.0
     torch.manual_seed(0)
@@ -112,17 +113,19 @@ def _moved(module, batch, convert):
     return moved
 
 
-def training_step(data: Path, hidden: int = 8, batch_size: int = 12) -> dict:
+def training_step(
+    data: Path, hidden: int = 8, batch_size: int = 12, fixed_capacity: bool = False
+) -> dict:
     """``{"reads", "copies"}`` of a training step and its backward on the fake device."""
     from torch._subclasses.fake_tensor import FakeTensor, FakeTensorMode
 
     device = register()
-    _, lit = _models(data, hidden)
+    _, lit = _models(data, hidden, fixed_capacity)
     pairs = PairDataset(read_split(data / "train.h5"), lit.simulator.H, future=2)
     batch = pairs.batch(torch.arange(min(batch_size, len(pairs))))
     with torch.no_grad(), replayed_reads(None) as reads:
         lit.training_step(batch, 0)
-    _, lit = _models(data, hidden)  # a fresh one: the step keeps running sums
+    _, lit = _models(data, hidden, fixed_capacity)  # a fresh one: the step keeps running sums
     mode = FakeTensorMode(allow_non_fake_inputs=False)
     fake = _moved(lit, batch, lambda t: FakeTensor(mode, t.to("meta"), device))
     with mode, replayed_reads(reads), DispatchCounter() as counter:
@@ -133,12 +136,14 @@ def training_step(data: Path, hidden: int = 8, batch_size: int = 12) -> dict:
     return {"reads": len(reads), "copies": counter.copies, "other_syncs": counter.syncs}
 
 
-def rollout_frame(data: Path, hidden: int = 8, scenes: int = 2) -> dict:
+def rollout_frame(
+    data: Path, hidden: int = 8, scenes: int = 2, fixed_capacity: bool = False
+) -> dict:
     """``{"reads", "copies"}`` of one rollout frame of ``scenes`` test scenes batched."""
     from torch._subclasses.fake_tensor import FakeTensor, FakeTensorMode
 
     device = register()
-    simulator, _ = _models(data, hidden)
+    simulator, _ = _models(data, hidden, fixed_capacity)
     simulator.eval()
     frames = [TrajectoryFrames(t) for t in read_split(data / "test.h5")[:scenes]]
     bound = torch.full((len(frames),), 100.0, dtype=torch.float64)  # m/s: none diverges
@@ -165,7 +170,10 @@ def rollout_frame(data: Path, hidden: int = 8, scenes: int = 2) -> dict:
 
 def main(argv: list[str] | None = None) -> None:
     data = Path((argv if argv is not None else sys.argv[1:])[0])
-    result = {"train_step": training_step(data), "rollout_frame": rollout_frame(data)}
+    result = {}
+    for suffix, fixed in (("", False), ("_fixed_capacity", True)):
+        result[f"train_step{suffix}"] = training_step(data, fixed_capacity=fixed)
+        result[f"rollout_frame{suffix}"] = rollout_frame(data, fixed_capacity=fixed)
     print(json.dumps(result))
 
 

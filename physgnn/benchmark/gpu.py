@@ -6,8 +6,9 @@ Run by ``make bench`` when torch sees a CUDA device (otherwise one line says it 
   (input noise, contact noise, push-forward of U{0..K} steps, the loss, backward, clipping,
   Adam) at the default batch, for each ``variant``: ``eager``; ``tf32`` (fp32 matrix products
   as TF32, ``matmul_precision=high``); ``bf16`` (autocast to bfloat16, as
-  ``trainer.precision=bf16-mixed``); ``captured`` (graphs padded to buckets and the network
-  compiled with ``mode="reduce-overhead"``: CUDA graphs);
+  ``trainer.precision=bf16-mixed``); ``captured`` (graphs of fixed capacity, nothing read back
+  while they are built, padded to buckets, and the network compiled with
+  ``mode="reduce-overhead"``: CUDA graphs);
 - **rollout**: frames per second of the baseline through :func:`physgnn.rollout.rollout` on
   the bench scenes of ``rollout_sizes``;
 - the peak memory of each row (``torch.cuda.max_memory_allocated``).
@@ -94,7 +95,10 @@ def _variant(variant: str, device: torch.device):
 
 
 def _lit(cfg: DictConfig, stats: dict, device: torch.device, variant: str):
-    model = OmegaConf.merge(cfg.model, {"pad_to_buckets": variant == "captured"})
+    captured = variant == "captured"  # graphs of fixed capacity and shapes: nothing read back
+    model = OmegaConf.merge(
+        cfg.model, {"pad_to_buckets": captured, "graph": {"fixed_capacity": captured}}
+    )
     simulator = instantiate(model, stats=stats)
     lit = instantiate(cfg.gpu.lit, simulator=simulator).to(device)
     if variant == "captured":

@@ -111,20 +111,26 @@ def rollout_frame_counts(model_cfg: DictConfig, stats: dict, trajectory, frames:
 
 
 def gpu_readiness(cfg: DictConfig, trajectories: list, stats: dict, start) -> dict:
-    """``{"train_step": {...}, "rollout_frame": {...}}`` of the module doc (bench.json's
-    ``gpu_readiness``; ``where`` of each goes to bench_extra.json); ``start``: a bench scene
+    """``{"train_step", "rollout_frame", "train_step_fixed_capacity",
+    "rollout_frame_fixed_capacity"}``, each ``{"syncs", "kernels", "copies", "host_ms",
+    "where"}`` (bench.json's ``gpu_readiness``; ``where`` of each goes to bench_extra.json): the
+    module doc's counts with counted graphs, then with graphs of fixed capacity
+    (``model.graph.fixed_capacity=true``, what a captured step uses); ``start``: a bench scene
     in motion, the rollout's first frames."""
-    c = cfg.gpu_readiness
-    model = OmegaConf.merge(cfg.model, c.model)
-    train = training_step_counts(model, c.lit, trajectories, stats, c)
-    frame = rollout_frame_counts(model, stats, start, int(c.rollout_frames))
-    print(
-        f"gpu readiness: training step {train['syncs']} syncs, {train['kernels']} kernels, "
-        f"{train['host_ms']:.1f} ms; rollout frame {frame['syncs']:.1f} syncs, "
-        f"{frame['kernels']:.0f} kernels, {frame['host_ms']:.1f} ms",
-        flush=True,
-    )
-    return {"train_step": train, "rollout_frame": frame}
+    c, out = cfg.gpu_readiness, {}
+    for suffix, fixed in (("", False), ("_fixed_capacity", True)):
+        model = OmegaConf.merge(cfg.model, c.model, {"graph": {"fixed_capacity": fixed}})
+        train = training_step_counts(model, c.lit, trajectories, stats, c)
+        frame = rollout_frame_counts(model, stats, start, int(c.rollout_frames))
+        print(
+            f"gpu readiness{suffix.replace('_', ' ')}: training step {train['syncs']} syncs, "
+            f"{train['kernels']} kernels, {train['host_ms']:.1f} ms; rollout frame "
+            f"{frame['syncs']:.1f} syncs, {frame['kernels']:.0f} kernels, "
+            f"{frame['host_ms']:.1f} ms",
+            flush=True,
+        )
+        out |= {f"train_step{suffix}": train, f"rollout_frame{suffix}": frame}
+    return out
 
 
 def summary(counted: list[dict], timed: list[dict], where: Counter, per: int) -> dict:

@@ -110,6 +110,12 @@ class LearnedSimulator(nn.Module):
         return built
 
     @property
+    def padded(self) -> bool:
+        """True when the network sees graphs padded to buckets: ``pad_to_buckets``, or a
+        fixed-capacity graph builder (its masked edges need padding's ghost node)."""
+        return self.pad_to_buckets or bool(getattr(self.graph_builder, "fixed_capacity", False))
+
+    @property
     def M(self) -> int:
         """The network's number of message-passing blocks."""
         return len(self.network.blocks)
@@ -210,7 +216,7 @@ class LearnedSimulator(nn.Module):
         material = state.material if self.network.material is not None else None
         # fixed shapes for a captured step (physgnn/nn/padding.py); a fixed-capacity graph's
         # masked edges need padding's ghost node
-        if self.pad_to_buckets or graph.masked:
+        if self.padded or graph.masked:
             padded, n = pad_graph(x, *edges, material)
             return self.network(*padded)[:n], graph
         return self.network(x, *edges, material), graph

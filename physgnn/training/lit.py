@@ -154,7 +154,7 @@ class LitSimulator(L.LightningModule):
         self.contact_tol, self.contact_noise_prob = float(contact_tol), float(contact_noise_prob)
         self.contact_noise = (float(contact_noise_depth), float(contact_touch))
         if compile:  # dynamic shapes unless padded to buckets
-            dynamic = not getattr(simulator, "pad_to_buckets", False)
+            dynamic = not getattr(simulator, "padded", False)
             compile_in_place(simulator.network, compile_mode, dynamic, compile_shapes)
         self._finite, self._train_means = FiniteWatch(), EpochMeans()
 
