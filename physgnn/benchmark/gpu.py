@@ -95,10 +95,8 @@ def _variant(variant: str, device: torch.device):
 
 
 def _lit(cfg: DictConfig, stats: dict, device: torch.device, variant: str):
-    captured = variant == "captured"  # graphs of fixed capacity and shapes: nothing read back
-    model = OmegaConf.merge(
-        cfg.model, {"pad_to_buckets": captured, "graph": {"fixed_capacity": captured}}
-    )
+    # captured: graphs of fixed capacity, padded to buckets (LearnedSimulator.padded)
+    model = OmegaConf.merge(cfg.model, {"graph": {"fixed_capacity": variant == "captured"}})
     simulator = instantiate(model, stats=stats)
     lit = instantiate(cfg.gpu.lit, simulator=simulator).to(device)
     if variant == "captured":

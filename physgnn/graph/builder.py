@@ -117,14 +117,16 @@ class GraphBuilder:
         velocity = self.rule_velocity(state)  # once per build: the rules and the clip share it
         allowance, (spheres, planes) = self.allowance(state, velocity=velocity), host_sizes(state)
         counts = scene_counts(batch, len(spheres))  # both kinds of candidate need them
-        src, dst = self._pair_candidates(state, batch, allowance, spheres, counts)
-        fixed = self.fixed_capacity and self.layout_candidates(state, spheres)
+        layout = self.layout_candidates(state, spheres)
+        src, dst = self._pair_candidates(state, batch, allowance, spheres, counts, layout)
+        fixed = self.fixed_capacity and layout
         plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), counts)
         pp_mask = self._pp_rule(state, batch, allowance, src, dst)
         ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere, velocity)
-        pp_keep = keep = slice(None)  # fixed capacity: every candidate, with its mask
-        masks = (pp_mask.repeat(2), ps_mask)  # the paired layout: the same mask on both halves
-        if not fixed:
+        if fixed:  # every candidate, with its mask (the same on both halves of the layout)
+            pp_keep = keep = slice(None)
+            masks = (pp_mask.repeat(2), ps_mask)
+        else:
             n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
             pp_keep, keep, masks = compact(pp_mask, n_pp), compact(ps_mask, n_ps), (None, None)
         pp_index, pp_attr = _paired(state.pos, src[pp_keep], dst[pp_keep])
@@ -199,11 +201,12 @@ class GraphBuilder:
         dt = state.dt.to(torch.float64)[scene_of_sphere(state)[sphere]]
         return clearance <= self.factor * torch.relu(-along) * dt + self.epsilon
 
-    def _pair_candidates(self, state, batch, allowance, spheres, counts) -> tuple:
+    def _pair_candidates(self, state, batch, allowance, spheres, counts, layout) -> tuple:
         """Candidate pairs ``(i, j)``, ``i < j``, sorted: all pairs of each scene up to the
         ``ALL_PAIRS_*`` (k-d tree: ``CPU_PAIRS_PER_SPHERE``) limits, else a radius search (reads
-        sizes back, :func:`~physgnn.graph.neighbors.radius_pairs`); the same edges either way."""
-        if self.layout_candidates(state, spheres):
+        sizes back, :func:`~physgnn.graph.neighbors.radius_pairs`); the same edges either way.
+        ``layout``: :meth:`layout_candidates` of this build."""
+        if layout:
             return scene_pairs(spheres, batch, counts)
         radius = state.radius.to(torch.float64)
         reach = 2 * float(radius.max()) + 2 * float(allowance.max()) + self.epsilon

@@ -215,8 +215,8 @@ class LearnedSimulator(nn.Module):
         edges = graph.network_inputs(x.shape[0], *self.edge_features(graph, state))
         material = state.material if self.network.material is not None else None
         # fixed shapes for a captured step (physgnn/nn/padding.py); a fixed-capacity graph's
-        # masked edges need padding's ghost node
-        if self.padded or graph.masked:
+        # masked edges need padding's ghost node (self.padded says so)
+        if self.padded:
             padded, n = pad_graph(x, *edges, material)
             return self.network(*padded)[:n], graph
         return self.network(x, *edges, material), graph
