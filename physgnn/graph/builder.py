@@ -124,8 +124,7 @@ class GraphBuilder:
         pp_mask = self._pp_rule(state, batch, allowance, src, dst)
         ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere, velocity)
         if fixed:  # every candidate, with its mask (the same on both halves of the layout)
-            pp_keep = keep = slice(None)
-            masks = (pp_mask.repeat(2), ps_mask)
+            pp_keep, keep, masks = slice(None), slice(None), (pp_mask.repeat(2), ps_mask)
         else:
             n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
             pp_keep, keep, masks = compact(pp_mask, n_pp), compact(ps_mask, n_ps), (None, None)
@@ -202,10 +201,9 @@ class GraphBuilder:
         return clearance <= self.factor * torch.relu(-along) * dt + self.epsilon
 
     def _pair_candidates(self, state, batch, allowance, spheres, counts, layout) -> tuple:
-        """Candidate pairs ``(i, j)``, ``i < j``, sorted: all pairs of each scene up to the
-        ``ALL_PAIRS_*`` (k-d tree: ``CPU_PAIRS_PER_SPHERE``) limits, else a radius search (reads
-        sizes back, :func:`~physgnn.graph.neighbors.radius_pairs`); the same edges either way.
-        ``layout``: :meth:`layout_candidates` of this build."""
+        """Candidate pairs ``(i, j)``, ``i < j``, sorted: all pairs of each scene when ``layout``
+        (:meth:`layout_candidates`), else a radius search (reads sizes back,
+        :func:`~physgnn.graph.neighbors.radius_pairs`); the same edges either way."""
         if layout:
             return scene_pairs(spheres, batch, counts)
         radius = state.radius.to(torch.float64)
