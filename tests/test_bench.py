@@ -49,9 +49,15 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
     assert data == json.loads(json.dumps(result))
     assert set(data) == {"machine", "learned", "pybullet", "training", "gpu_readiness", "gpu"}
     parts = {"train_step", "rollout_frame"}
-    assert set(data["gpu_readiness"]) == parts | {f"{p}_fixed_capacity" for p in parts}
-    for counts in data["gpu_readiness"].values():
+    kinds = ("", "_fixed_capacity", "_compiled")
+    assert set(data["gpu_readiness"]) == {f"{p}{kind}" for p in parts for kind in kinds}
+    for part, counts in data["gpu_readiness"].items():
         assert set(counts) == {"syncs", "kernels", "copies", "host_ms"}
+        # compiled: only the ops outside the compiled regions are counted, and fewer of them
+        assert (counts["syncs"] is None) == part.endswith("_compiled")
+    readiness = data["gpu_readiness"]
+    for part in parts:
+        assert 0 < readiness[f"{part}_compiled"]["kernels"] < readiness[part]["kernels"]
     if not torch.cuda.is_available():
         assert data["gpu"] is None
         assert "Skipped: torch saw no CUDA device" in (out / "bench.md").read_text()

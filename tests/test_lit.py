@@ -101,8 +101,8 @@ def test_noise_only_in_training_shaped_like_a_rollout_with_correcting_targets():
     still = trajectory(40, seed=4, effects=Effects(rotation=False))
     state = batch([trajectory(40, seed=3), still])
     seen = []
-    original = lit.simulator.normalized_prediction
-    lit.simulator.normalized_prediction = lambda s: seen.append(s) or original(s)
+    original = lit.simulator.network_prediction
+    lit.simulator.network_prediction = lambda s, g: seen.append(s) or original(s, g)
     lit.log = lambda *args, **kwargs: None
     lit.validation_step(state, 0)
     lit.training_step(state, 0)
@@ -209,18 +209,27 @@ def test_noise_is_reproducible_from_a_seeded_generator():
 
 
 def test_compile_keeps_the_weights_and_checkpoint_keys():
-    """``compile=True`` compiles the network in place (lazily, on its first call): same
-    parameters, same state_dict keys, so checkpoints load either way."""
+    """``compile=True`` compiles in place (lazily, on the first call) the graph rules, the
+    simulator's step after the graph build and the losses after theirs, or with graphs padded
+    to buckets the network alone: same parameters, same state_dict keys, so checkpoints load
+    either way."""
     eager, compiled = make_lit(), make_lit(compile=True)
-    assert isinstance(compiled.simulator.network.forward, ShapeBoundCall)
-    assert not isinstance(eager.simulator.network.forward, ShapeBoundCall)
+    sim = compiled.simulator
+    assert isinstance(sim.head, ShapeBoundCall) and isinstance(
+        compiled.graph_losses, ShapeBoundCall
+    )
+    assert isinstance(sim.graph_builder.rules, ShapeBoundCall)
+    assert not isinstance(eager.simulator.head, ShapeBoundCall)
+    padded = make_lit({"pad_to_buckets": True}, compile=True)
+    assert isinstance(padded.simulator.network.forward, ShapeBoundCall)
+    assert not isinstance(padded.simulator.head, ShapeBoundCall)
     assert list(compiled.state_dict()) == list(eager.state_dict())
     for a, b in zip(eager.state_dict().values(), compiled.state_dict().values(), strict=True):
         assert torch.equal(a, b)
 
 
 @pytest.mark.slow
-def test_compiled_network_gives_the_eager_losses_and_gradients():
+def test_compiled_regions_give_the_eager_losses_and_gradients():
     state = batch([trajectory(3, seed=0), trajectory(4, seed=1)])
     results = []
     for lit in (make_lit(), make_lit(compile=True)):

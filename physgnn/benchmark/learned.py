@@ -13,7 +13,7 @@ from omegaconf import DictConfig, OmegaConf
 from torch_geometric.data import Batch
 
 from physgnn.data.state import TrajectoryFrames
-from physgnn.models.capture import compile_in_place
+from physgnn.models.capture import compile_simulator
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.models.profiling import StepTimer
 from physgnn.physics import integrator
@@ -125,8 +125,8 @@ def learned_rows(cfg: DictConfig, runs: dict, stats: dict, matmul_gflops: float)
     sims, sizes = {}, {}
     for name, c in cfg.learned.configs.items():
         sims[name] = make_simulator(cfg.model, OmegaConf.to_container(c.overrides), stats)
-        if c.get("compile"):  # dynamic shapes: each frame's edge counts differ
-            compile_in_place(sims[name].network, dynamic=True)
+        if c.get("compile"):  # as lit.compile=true: two regions, dynamic shapes
+            compile_simulator(sims[name])
         if c.get("constraints"):  # the learned step followed by the constraint stage
             sims[name] = ConstrainedSimulator(sims[name], int(c.constraints))
         sizes[name] = list(cfg.sizes) if c.sizes is None else list(c.sizes)

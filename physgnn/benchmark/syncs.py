@@ -144,3 +144,39 @@ def counting(record_where: bool = False):
     finally:
         for name, method in originals.items():
             setattr(torch.Tensor, name, method)
+
+
+# profiler ranges of code that runs as one compiled region (its ops are not dispatched one by one)
+_REGIONS = ("Torch-Compiled Region", "CompiledFunction", "## Call CompiledFxGraph")
+
+
+class OpsOutsideRegions:
+    """``kernels``: the top-level aten ops (not called by another aten op) that ran outside
+    compiled regions, read from a ``torch.profiler`` trace: what compiled code still
+    dispatches one by one. The dispatch counter cannot see this (dynamo runs eager under a
+    dispatch mode)."""
+
+    def __init__(self):
+        self.kernels = 0
+
+    def add(self, events) -> None:
+        for event in events:
+            if event.name.startswith("aten::") and not _inside_op_or_region(event.cpu_parent):
+                self.kernels += 1
+
+
+def _inside_op_or_region(event) -> bool:
+    while event is not None:
+        if event.name.startswith("aten::") or event.name.startswith(_REGIONS):
+            return True
+        event = event.cpu_parent
+    return False
+
+
+@contextmanager
+def profiling_ops():
+    """``with profiling_ops() as ops:`` counts :class:`OpsOutsideRegions` of the code inside."""
+    ops = OpsOutsideRegions()
+    with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU]) as trace:
+        yield ops
+    ops.add(trace.events())

@@ -71,9 +71,10 @@ def gpu_readiness_section(result: dict) -> list[str]:
     g = result.get("gpu_readiness")
     if not g:
         return []
+    show = lambda x, f=".1f": "–" if x is None else f"{x:{f}}"  # noqa: E731 (not counted)
     body = [
-        [part.replace("_", " "), f"{c['syncs']:.1f}", f"{c.get('copies', 0):.1f}"]
-        + [f"{c['kernels']:.0f}", f"{c['host_ms']:.1f}"]
+        [part.replace("_", " "), show(c["syncs"]), show(c.get("copies", 0))]
+        + [show(c["kernels"], ".0f"), show(c["host_ms"])]
         for part, c in g.items()
     ]
     return [
@@ -83,7 +84,8 @@ def gpu_readiness_section(result: dict) -> list[str]:
         "wait for (syncs, of which host-to-device copies), aten ops (about one kernel each) "
         "and host ms with a network of "
         "hidden size 4, torch neighbour backend (physgnn/benchmark/gpu_readiness.py; the "
-        "source lines of the syncs are in bench_extra.json).",
+        "source lines of the syncs are in bench_extra.json). Compiled: the aten ops dispatched "
+        "outside the compiled regions of lit.compile=true (syncs and time not counted there).",
         md_table(["", "syncs", "copies", "kernels", "host ms"], body),
     ]
 

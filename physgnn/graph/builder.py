@@ -95,12 +95,9 @@ class GraphBuilder:
             raise ValueError(
                 f"unknown connectivity '{connectivity}'; choose one of {list(CONNECTIVITIES)}"
             )
-        if not 0 <= float(epsilon) < float("inf"):
-            raise ValueError(f"epsilon must be finite and >= 0, got {epsilon}")
-        if not 0 <= float(factor) < float("inf"):
-            raise ValueError(f"factor must be finite and >= 0, got {factor}")
-        if not 0 <= float(clip_margin) < float("inf"):
-            raise ValueError(f"clip_margin must be finite and >= 0, got {clip_margin}")
+        for name, value in (("epsilon", epsilon), ("factor", factor), ("clip_margin", clip_margin)):
+            if not 0 <= float(value) < float("inf"):
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
         if backend not in BACKENDS:
             raise ValueError(
                 f"unknown neighbour backend '{backend}'; choose one of {list(BACKENDS)}"
@@ -113,17 +110,13 @@ class GraphBuilder:
         self.fixed_capacity = bool(fixed_capacity)
 
     def __call__(self, state) -> Graph:
-        batch = scene_of_sphere(state)
-        velocity = self.rule_velocity(state)  # once per build: the rules and the clip share it
-        allowance, (spheres, planes) = self.allowance(state, velocity=velocity), host_sizes(state)
+        batch, (spheres, planes) = scene_of_sphere(state), host_sizes(state)
         counts = scene_counts(batch, len(spheres))  # both kinds of candidate need them
         layout = self.layout_candidates(state, spheres)
-        src, dst = self._pair_candidates(state, batch, allowance, spheres, counts, layout)
-        fixed = self.fixed_capacity and layout
+        src, dst = self._pair_candidates(state, batch, spheres, counts, layout)
         plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), counts)
-        pp_mask = self._pp_rule(state, batch, allowance, src, dst)
-        ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere, velocity)
-        if fixed:  # every candidate, with its mask (the same on both halves of the layout)
+        pp_mask, ps_mask, offset, allowance = self.rules(state, src, dst, plane, sphere)
+        if self.fixed_capacity and layout:  # every candidate, its mask on both halves
             pp_keep, keep, masks = slice(None), slice(None), (pp_mask.repeat(2), ps_mask)
         else:
             n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
@@ -135,6 +128,18 @@ class GraphBuilder:
         clip = self.reach(state, allowance) + self.clip_margin
         ps_attr = _ps_attr(state, ps_index, offset[keep], clip)
         return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance, *masks)
+
+    def rules(self, state, src, dst, plane, sphere) -> tuple[torch.Tensor, ...]:
+        """``(pp mask [P], ps mask [Q], offsets [Q, 3], allowance [N])`` (float64 but the
+        masks) of the candidates ``(src, dst)`` and ``(plane, sphere)``: the module doc's rules.
+        Reads nothing back: a compiled simulator compiles it (:mod:`physgnn.models.capture`)."""
+        batch = scene_of_sphere(state)
+        velocity = self.rule_velocity(state)  # once: the rules and the clip share it
+        allowance = self.allowance(state, velocity=velocity)
+        on = state.effects[batch[src], _SPHERE_CONTACT]  # scenes with sphere contact
+        pp_mask = on & self.pair_within_reach(state, src, dst, allowance)
+        ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere, velocity)
+        return pp_mask, ps_mask, offset, allowance
 
     def layout_candidates(self, state, spheres: tuple[int, ...]) -> bool:
         """True when the pp candidates are every same-scene pair of the layout (module doc),
@@ -200,21 +205,16 @@ class GraphBuilder:
         dt = state.dt.to(torch.float64)[scene_of_sphere(state)[sphere]]
         return clearance <= self.factor * torch.relu(-along) * dt + self.epsilon
 
-    def _pair_candidates(self, state, batch, allowance, spheres, counts, layout) -> tuple:
+    def _pair_candidates(self, state, batch, spheres, counts, layout) -> tuple:
         """Candidate pairs ``(i, j)``, ``i < j``, sorted: all pairs of each scene when ``layout``
         (:meth:`layout_candidates`), else a radius search (reads sizes back,
         :func:`~physgnn.graph.neighbors.radius_pairs`); the same edges either way."""
         if layout:
             return scene_pairs(spheres, batch, counts)
-        radius = state.radius.to(torch.float64)
+        radius, allowance = state.radius.to(torch.float64), self.allowance(state)
         reach = 2 * float(radius.max()) + 2 * float(allowance.max()) + self.epsilon
         pairs = radius_pairs(state.pos, reach * (1 + 1e-9), batch, self.backend)
         return pairs[0], pairs[1]
-
-    def _pp_rule(self, state, batch, allowance, src, dst) -> torch.Tensor:
-        """``[P]`` bool: pairs of scenes with sphere contact that satisfy the pp rule."""
-        on = state.effects[batch[src], _SPHERE_CONTACT]
-        return on & self.pair_within_reach(state, src, dst, allowance)
 
     def reach(self, state, allowance: torch.Tensor) -> torch.Tensor:
         """``ρ_i = r_i + a_i + ε``, float64 ``[N]``: the farthest plane a sphere may touch."""

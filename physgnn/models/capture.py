@@ -1,15 +1,20 @@
-"""A compiled network with a bounded set of input shapes, and a warning when it is exceeded.
+"""A compiled region with a bounded set of input shapes, and a warning when it is exceeded.
 
 ``torch.compile`` specialises on the shapes it sees: without dynamic shapes (what CUDA graphs,
 ``mode="reduce-overhead"``, need) every new (nodes, pp edges, ps edges) shape, grad mode and
 train/eval mode compiles anew, and past dynamo's recompile limit it falls back to eager
-silently. :func:`compile_in_place` makes a module's ``forward`` a :class:`ShapeBoundCall`,
-which keeps count instead: the first ``max_shapes`` keys
-(argument shapes, grad mode, training flag) run the compiled network, and a later new key runs
-eager with one warning naming the fix (pad graphs to buckets, ``model.pad_to_buckets=true``,
-so that few shapes occur; or raise the bound). Dynamo's own limit is raised to the bound, so
-the compiled keys are never evicted. Parameters stay the module's: its ``state_dict`` is not
-changed by compiling.
+silently. :func:`compile_in_place` makes a module's ``forward`` (or another of its methods) a
+:class:`ShapeBoundCall`, which keeps count instead: the first ``max_shapes`` keys (argument
+shapes, grad mode, training flag) run the compiled code, and a later new key runs eager with
+one warning naming the fix (pad graphs to buckets, ``model.pad_to_buckets=true``, so that few
+shapes occur; or raise the bound). Dynamo's own limit is raised to the bound, so the compiled
+keys are never evicted. Parameters stay the module's: its ``state_dict`` is not changed by
+compiling.
+
+What a region may hold: with dynamic shapes, any code of tensors whose shapes follow the data
+but whose *values* are never read by the host, such as a simulator's whole step after its
+graph build (:meth:`~physgnn.models.learned.LearnedSimulator.head`); a graph build itself reads
+its edge counts back (or, with fixed capacity, its layout from host ints) and stays outside.
 """
 
 from __future__ import annotations
@@ -17,40 +22,51 @@ from __future__ import annotations
 import warnings
 
 import torch
-from torch import nn
 
 MODES = ("default", "reduce-overhead", "max-autotune", "max-autotune-no-cudagraphs")
 
 
-def compile_in_place(module: nn.Module, *args, **options) -> None:
-    """``module``'s ``forward`` compiled from now on, within a bound of shapes
+def compile_in_place(module, *args, method: str = "forward", **options) -> None:
+    """``module``'s ``method`` compiled from now on, within a bound of shapes
     (:class:`ShapeBoundCall` of ``module, *args, **options``); parameters and ``state_dict``
     unchanged."""
-    if not isinstance(module.forward, ShapeBoundCall):
-        module.forward = ShapeBoundCall(module, *args, **options)
+    if not isinstance(getattr(module, method), ShapeBoundCall):
+        setattr(module, method, ShapeBoundCall(module, *args, method=method, **options))
+
+
+def compile_simulator(simulator, mode: str = "default", max_shapes: int = 16, **options) -> None:
+    """A :class:`~physgnn.models.learned.LearnedSimulator`'s step compiled as two regions with
+    dynamic shapes: its graph rules (``graph_builder.rules``) and everything after the graph
+    build (``head``); the candidates, the edge-count read-back and the compaction between
+    them stay eager. ``options``: :class:`ShapeBoundCall`'s (``backend``)."""
+    compile_in_place(simulator, mode, True, max_shapes, method="head", **options)
+    compile_in_place(simulator.graph_builder, mode, True, max_shapes, method="rules", **options)
 
 
 class ShapeBoundCall:
-    """``call(*args)``: ``module.forward(*args)`` through ``torch.compile(forward, mode=mode,
+    """``call(*args)``: ``module.<method>(*args)`` through ``torch.compile(method, mode=mode,
     dynamic=dynamic, backend=backend)`` for at most ``max_shapes`` keys (module doc)."""
 
     def __init__(
         self,
-        module: nn.Module,
+        module,
         mode: str = "default",
         dynamic: bool = False,
         max_shapes: int = 16,
         backend: str = "inductor",
+        method: str = "forward",
     ):
         if mode not in MODES:
             raise ValueError(f"unknown compile mode '{mode}'; choose one of {list(MODES)}")
         if int(max_shapes) < 1:
             raise ValueError(f"max_shapes must be >= 1, got {max_shapes}")
         self.module, self.max_shapes, self.dynamic = module, int(max_shapes), bool(dynamic)
-        self.eager = module.forward  # the class's forward, bound to the module
+        self.eager = getattr(module, method)  # the class's method, bound to the module
         options = {"backend": backend, "dynamic": dynamic}
         if backend == "inductor":
             options["mode"] = mode
+        if dynamic:  # sizes that happen to be equal (ps edges = spheres) are no guard
+            _no_duck_shapes()
         self.compiled = torch.compile(self.eager, **options)
         self.keys: set = set()
         self.warned = False
@@ -58,10 +74,11 @@ class ShapeBoundCall:
 
     def key(self, args) -> tuple:
         """What a compiled graph is specialised on: the argument shapes (only their ranks with
-        dynamic shapes, where one graph serves every size), grad mode and train/eval mode."""
+        dynamic shapes, where one graph serves every size; other arguments by whether they are
+        None), grad mode and train/eval mode."""
         size = (lambda a: a.dim()) if self.dynamic else (lambda a: tuple(a.shape))
         shapes = tuple(size(a) if torch.is_tensor(a) else a is None for a in args)
-        return shapes, torch.is_grad_enabled(), self.module.training
+        return shapes, torch.is_grad_enabled(), getattr(self.module, "training", False)
 
     def __call__(self, *args):
         key = self.key(args)
@@ -71,7 +88,7 @@ class ShapeBoundCall:
         if not self.warned:
             self.warned = True
             warnings.warn(
-                f"the compiled network met more than {self.max_shapes} input shapes; new ones "
+                f"the compiled code met more than {self.max_shapes} input shapes; new ones "
                 "run eager. Pad graphs to buckets (model.pad_to_buckets=true) or raise "
                 "lit.compile_shapes",
                 stacklevel=2,
@@ -85,3 +102,13 @@ def _raise_recompile_limit(limit: int) -> None:
     config = torch._dynamo.config
     name = "recompile_limit" if hasattr(config, "recompile_limit") else "cache_size_limit"
     setattr(config, name, max(getattr(config, name), limit))
+
+
+def _no_duck_shapes() -> None:
+    """Dynamic shapes without "duck sizing": by default two sizes that are equal when traced
+    share one symbol, and a later batch where they differ compiles anew (a batch with only
+    ground edges has as many ps edges as spheres). Process-wide, as torch keeps it."""
+    from torch.fx.experimental import _config as config
+
+    if hasattr(config, "use_duck_shape"):
+        config.use_duck_shape = False

@@ -211,6 +211,10 @@ class LearnedSimulator(nn.Module):
     def normalized_prediction(self, state):
         """Network output ``[N, 6]`` (normalised Δv, Δω) and the graph it was computed on."""
         graph = self.graph_builder(state)
+        return self.network_prediction(state, graph), graph
+
+    def network_prediction(self, state, graph) -> torch.Tensor:
+        """Network output ``[N, 6]`` (normalised Δv, Δω) on ``graph``, built from ``state``."""
         x = self.node_features(state)
         edges = graph.network_inputs(x.shape[0], *self.edge_features(graph, state))
         material = state.material if self.network.material is not None else None
@@ -218,8 +222,8 @@ class LearnedSimulator(nn.Module):
         # masked edges need padding's ghost node (self.padded says so)
         if self.padded:
             padded, n = pad_graph(x, *edges, material)
-            return self.network(*padded)[:n], graph
-        return self.network(x, *edges, material), graph
+            return self.network(*padded)[:n]
+        return self.network(x, *edges, material)
 
     def normalized_target(self, state) -> torch.Tensor:
         """``[N, 6]``: the normalised change from the state's (possibly noisy) ``v_t, ω_t`` to
@@ -266,9 +270,16 @@ class LearnedSimulator(nn.Module):
     def predict(self, state):
         """``(vel_next [N, 3], angvel_next [N, 3], graph)``: :meth:`forward` and the graph it
         was computed on (for a constraint stage, :mod:`physgnn.models.constrained`)."""
-        pred, graph = self.normalized_prediction(state)
+        graph = self.graph_builder(state)
+        return (*self.head(state, graph), graph)
+
+    def head(self, state, graph) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(vel_next [N, 3], angvel_next [N, 3])`` on ``graph``: everything of a step after
+        the graph build (features, network, reach, physical units), the region a compiled
+        simulator compiles as one (:mod:`physgnn.models.capture`)."""
+        pred = self.network_prediction(state, graph)
         reach = self.in_reach(state, graph) if self.gravity_prior else None
-        return (*self.to_physical(state, pred, reach), graph)
+        return self.to_physical(state, pred, reach)
 
 
 def _check_sizes(H: int, boundary_radius: float, rest_speed: float) -> None:

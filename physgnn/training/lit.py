@@ -43,7 +43,7 @@ import random
 import lightning as L
 import torch
 
-from physgnn.models.capture import compile_in_place
+from physgnn.models.capture import compile_in_place, compile_simulator
 from physgnn.models.learned import OUTPUTS, LearnedSimulator
 from physgnn.physics.integrator import step
 from physgnn.training.contacts import contact_penalty, perturb_contacts
@@ -153,17 +153,32 @@ class LitSimulator(L.LightningModule):
         self.noise_rest_scale, self.lambda_rest = float(noise_rest_scale), float(lambda_rest)
         self.contact_tol, self.contact_noise_prob = float(contact_tol), float(contact_noise_prob)
         self.contact_noise = (float(contact_noise_depth), float(contact_touch))
-        if compile:  # dynamic shapes unless padded to buckets
-            dynamic = not getattr(simulator, "padded", False)
-            compile_in_place(simulator.network, compile_mode, dynamic, compile_shapes)
+        if compile:
+            self.compile_regions(compile_mode, compile_shapes)
         self._finite, self._train_means = FiniteWatch(), EpochMeans()
+
+    def compile_regions(self, mode: str = "default", shapes: int = 16, **options) -> None:
+        """What ``compile=True`` compiles (``options``: ``backend``, as
+        :func:`~physgnn.models.capture.compile_in_place`). Graphs padded to buckets (fixed
+        shapes, what CUDA graphs replay): the network alone, static. Otherwise regions with
+        dynamic shapes: the simulator's graph rules and its step after the graph build
+        (:func:`compile_simulator`: push-forward, rollouts) and the losses after theirs."""
+        if getattr(self.simulator, "padded", False):
+            compile_in_place(self.simulator.network, mode, False, shapes, **options)
+            return
+        compile_simulator(self.simulator, mode, shapes, **options)
+        compile_in_place(self, mode, True, shapes, method="graph_losses", **options)
 
     def losses(self, state) -> dict[str, torch.Tensor]:
         """``{"loss", "loss_mse", "loss_energy", "energy_share", "loss_contact"}`` of a batch
         (no noise added here); ``energy_share`` = ``λ·energy / loss``, the part of the loss the
         energy term is (logged, so that a λ sweep shows whether the term mattered at all)."""
+        return self.graph_losses(state, self.simulator.graph_builder(state))
+
+    def graph_losses(self, state, graph) -> dict[str, torch.Tensor]:
+        """:meth:`losses` on ``graph``, built from ``state``."""
         sim = self.simulator
-        pred, graph = sim.normalized_prediction(state)
+        pred = sim.network_prediction(state, graph)
         target = sim.normalized_target(state)
         reach = sim.in_reach(state, graph) if sim.gravity_prior else None
         mse = masked_mse(pred[:, :OUTPUTS], target, sim.rotating(state), reach)
