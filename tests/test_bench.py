@@ -271,6 +271,14 @@ def test_targets_table_met_and_not_met():
     assert linear[1:] == ["1.25", "met"]  # (250 ms / 10 000) / (20 ms / 1000)
     assert pybullet[1] == "154: 3.00× (450.0 vs 150.0 FPS), 1000: 1.25× (50.0 vs 40.0 FPS)"
     assert pybullet[2] == "not met"  # 1.25 < 3 at 1 000 spheres
+    # the compiled baseline counts too
+    compiled = [_learned(154, 450.0, 0.2, 1.0, 0.5), _learned(1000, 130.0, 0.2, 1.0, 0.5)]
+    compiled = [row | {"config": "compiled"} for row in compiled]
+    pybullet = targets(result, {**extra, "learned": extra["learned"] + compiled})[5]
+    assert pybullet[1].endswith(
+        "; compiled: 154: 3.00× (450.0 vs 150.0 FPS), 1000: 3.25× (130.0 vs 40.0 FPS)"
+    )
+    assert pybullet[2] == "met"
     assert train_share[1:] == ["65% (100.0 GFLOP/s)", "met"]
     assert nodes[1:] == ["30.0 k nodes/s", "not met (needs ×1.3)"]
     # the graph share is judged from 154 spheres up: 50 % at 10 spheres does not count
