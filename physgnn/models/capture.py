@@ -15,6 +15,10 @@ What a region may hold: with dynamic shapes, any code of tensors whose shapes fo
 but whose *values* are never read by the host, such as a simulator's whole step after its
 graph build (:meth:`~physgnn.models.learned.LearnedSimulator.head`); a graph build itself reads
 its edge counts back (or, with fixed capacity, its layout from host ints) and stays outside.
+With dynamic shapes the keys are few (argument ranks only); what dynamo still compiles anew
+within a key (a size of 0 or 1, an argument that is None or strided differently) counts
+against its recompile limit, raised to the bound as well, past which dynamo logs its own
+warning.
 """
 
 from __future__ import annotations
