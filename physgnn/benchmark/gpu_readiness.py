@@ -165,7 +165,7 @@ def gpu_readiness(cfg: DictConfig, trajectories: list, stats: dict, start) -> di
         show = lambda x, f: "–" if x is None else f"{x:{f}}"  # noqa: E731
         print(
             f"gpu readiness{suffix.replace('_', ' ')}: training step "
-            f"{show(train['syncs'], '')} syncs, {train['kernels']} kernels, "
+            f"{show(train['syncs'], '')} syncs, {show(train['kernels'], '')} kernels, "
             f"{show(train['host_ms'], '.1f')} ms; rollout frame {show(frame['syncs'], '.1f')} "
             f"syncs, {frame['kernels']:.0f} kernels, {show(frame['host_ms'], '.1f')} ms",
             flush=True,
@@ -175,11 +175,12 @@ def gpu_readiness(cfg: DictConfig, trajectories: list, stats: dict, start) -> di
 
 
 def summary(counted: list[dict], timed: list[dict], where: Counter, per: int) -> dict:
-    """Maxima of the counts (None where not counted), mean host ms of the timed steps (None
-    without any) and the sync lines per step (or frame)."""
-    maximum = lambda key: None if counted[0][key] is None else max(s[key] for s in counted)  # noqa: E731
+    """Maxima of the counts (None where not counted, or no step was: every step compiled),
+    mean host ms of the timed steps (None without any) and the sync lines per step (or
+    frame)."""
+    values = {key: [s[key] for s in counted if s[key] is not None] for key in _COUNTS}
     return {
-        **{key: maximum(key) for key in _COUNTS},
+        **{key: max(v) if v else None for key, v in values.items()},
         "host_ms": sum(s["host_ms"] for s in timed) / len(timed) if timed else None,
         "where": {k: v / per for k, v in where.most_common()},
     }
