@@ -420,9 +420,24 @@ def test_the_gpu_section_runs_on_any_device():
         assert row["steps_per_s"] > 0 and row["nodes_per_s"] > row["steps_per_s"]
         assert row["batch_size"] == 4 and row["peak_mib"] is None  # no CUDA memory here
     [frame] = out["rollout"]
-    assert frame["n_spheres"] == 10 and frame["fps"] > 0
+    assert frame["n_spheres"] == 10 and frame["variant"] == "eager" and frame["fps"] > 0
     assert "| bf16 |" in "\n".join(gpu_tables({"gpu": out}))
     assert torch.get_float32_matmul_precision() == "highest"  # restored after the tf32 row
+
+
+@pytest.mark.slow
+def test_the_gpu_sections_compiled_rows_run_on_any_device():
+    """The compiled training and rollout rows (inductor, as on a GPU) run, here on the CPU."""
+    cfg = quick_config(_cfg("quick=true", "gpu.device=cpu"))
+    cfg.gpu.variants, cfg.gpu.rollout_variants = ["compiled"], ["compiled"]
+    rng = np.random.default_rng(0)
+    trajectories = bench_scenes.training_trajectories(cfg, rng)
+    runs = {10: {"traj": bench_scenes.bench_run(cfg, 10, rng)}}
+    out = gpu_section(cfg, trajectories, compute_stats(trajectories), runs)
+    [row], [frame] = out["training"], out["rollout"]
+    assert row["variant"] == "compiled" and row["steps_per_s"] > 0, row
+    assert frame["variant"] == "compiled" and frame["fps"] > 0, frame
+    assert "| 10 | compiled |" in "\n".join(gpu_tables({"gpu": out}))
 
 
 def test_a_failing_gpu_row_is_reported_not_fatal(monkeypatch):

@@ -6,11 +6,13 @@ Run by ``make bench`` when torch sees a CUDA device (otherwise one line says it 
   (input noise, contact noise, push-forward of U{0..K} steps, the loss, backward, clipping,
   Adam) at the default batch, for each ``variant``: ``eager``; ``tf32`` (fp32 matrix products
   as TF32, ``matmul_precision=high``); ``bf16`` (autocast to bfloat16, as
-  ``trainer.precision=bf16-mixed``); ``captured`` (graphs of fixed capacity, nothing read back
-  while they are built, padded to buckets, and the network compiled with
-  ``mode="reduce-overhead"``: CUDA graphs);
+  ``trainer.precision=bf16-mixed``); ``compiled`` (``lit.compile=true``'s regions, dynamic
+  shapes, :meth:`~physgnn.training.lit.LitSimulator.compile_regions`); ``captured`` (graphs
+  of fixed capacity, nothing read back while they are built, padded to buckets, and the
+  network compiled with ``mode="reduce-overhead"``: CUDA graphs);
 - **rollout**: frames per second of the baseline through :func:`physgnn.rollout.rollout` on
-  the bench scenes of ``rollout_sizes``;
+  the bench scenes of ``rollout_sizes``, for each of ``rollout_variants``: ``eager``, or
+  ``compiled`` (:func:`~physgnn.models.capture.compile_simulator`);
 - the peak memory of each row (``torch.cuda.max_memory_allocated``).
 
 The same functions run on any device (the tests run them on the CPU with tiny settings).
@@ -27,10 +29,11 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
-from physgnn.models.capture import compile_in_place
+from physgnn.models.capture import compile_simulator
 from physgnn.rollout import rollout
 
-VARIANTS = ("eager", "tf32", "bf16", "captured")
+VARIANTS = ("eager", "tf32", "bf16", "compiled", "captured")
+ROLLOUT_VARIANTS = ("eager", "compiled")
 
 
 def gpu_section(cfg: DictConfig, trajectories: list, stats: dict, runs: dict) -> dict | None:
@@ -50,11 +53,12 @@ def gpu_section(cfg: DictConfig, trajectories: list, stats: dict, runs: dict) ->
     sizes = [n for n in c.rollout_sizes if n in runs]
     frames = [
         _row(
-            partial(rollout_row, cfg.model, stats, runs[n]["traj"], device),
-            {"n_spheres": n},
+            partial(rollout_row, cfg.model, stats, runs[n]["traj"], device, v),
+            {"n_spheres": n, "variant": v},
             device,
         )
         for n in sizes
+        for v in c.rollout_variants
     ]
     return {
         "device": name,
@@ -99,8 +103,10 @@ def _lit(cfg: DictConfig, stats: dict, device: torch.device, variant: str):
     model = OmegaConf.merge(cfg.model, {"graph": {"fixed_capacity": variant == "captured"}})
     simulator = instantiate(model, stats=stats)
     lit = instantiate(cfg.gpu.lit, simulator=simulator).to(device)
-    if variant == "captured":
-        compile_in_place(simulator.network, mode="reduce-overhead", max_shapes=64)
+    if variant == "captured":  # padded graphs: the network alone, fixed shapes
+        lit.compile_regions("reduce-overhead", 64)
+    elif variant == "compiled":
+        lit.compile_regions()
     lit.optimizer = lit.optimizer_factory(lit.parameters())
     return lit
 
@@ -143,13 +149,21 @@ def _optimiser_step(lit, batch, step: int) -> None:
     lit.optimizer.step()
 
 
-def rollout_row(model_cfg: DictConfig, stats: dict, traj, device) -> dict:
-    """Frames per second and peak memory of the baseline rolled out over ``traj``."""
+def rollout_row(model_cfg: DictConfig, stats: dict, traj, device, variant: str = "eager") -> dict:
+    """Frames per second and peak memory of the baseline rolled out over ``traj``, eager or
+    ``compiled`` (module doc)."""
+    if variant not in ROLLOUT_VARIANTS:
+        raise ValueError(
+            f"unknown gpu.rollout_variants entry '{variant}'; choose from {list(ROLLOUT_VARIANTS)}"
+        )
     _reset_peak(device)
     simulator = instantiate(model_cfg, stats=stats).to(device).eval()
-    rollout(simulator, [traj], n_frames=simulator.H + 3)  # warm-up
+    if variant == "compiled":
+        compile_simulator(simulator)
+    rollout(simulator, [traj], n_frames=simulator.H + 3)  # warm-up (and compiles)
     [result] = rollout(simulator, [traj], n_frames=traj.n_frames)
-    return {"n_spheres": traj.n_spheres, "fps": result.fps, "peak_mib": _peak_mib(device)}
+    fps, peak = result.fps, _peak_mib(device)
+    return {"n_spheres": traj.n_spheres, "variant": variant, "fps": fps, "peak_mib": peak}
 
 
 def _sync(device: torch.device) -> None:

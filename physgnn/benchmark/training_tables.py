@@ -107,7 +107,7 @@ def gpu_section(result: dict) -> list[str]:
         for r in g["training"]
     ]
     frames = [
-        [f"{r['n_spheres']}"]
+        [f"{r['n_spheres']}", r.get("variant", "eager")]
         + (failed(r, 2) if "error" in r else [f"{r['fps']:.1f}", mib(r["peak_mib"])])
         for r in g["rollout"]
     ]
@@ -118,5 +118,5 @@ def gpu_section(result: dict) -> list[str]:
         "spheres per second, peak memory (physgnn/benchmark/gpu.py).",
         md_table(["variant", "steps/s", "spheres/s", "peak MiB"], train),
         "Rollout of the baseline (random weights) through physgnn.rollout:",
-        md_table(["spheres", "FPS", "peak MiB"], frames),
+        md_table(["spheres", "variant", "FPS", "peak MiB"], frames),
     ]
