@@ -103,9 +103,9 @@ class LitSimulator(L.LightningModule):
     pushes contacts within ``contact_touch`` in by up to ``contact_noise_depth`` with
     probability ``contact_noise_prob`` (0: off); all three lengths in units of the simulator's
     ``length_scale`` (:mod:`physgnn.training.contacts`).
-    ``compile``: the network is compiled for every call (``compile_mode``; at most
-    ``compile_shapes`` shapes: :mod:`physgnn.models.capture`); weights and checkpoints are the
-    same as without (docs/PERFORMANCE.md has what it gains and costs).
+    ``compile``: the regions of :meth:`compile_regions` are compiled (``compile_mode``; at
+    most ``compile_shapes`` shapes: :mod:`physgnn.models.capture`); weights and checkpoints are
+    the same as without (docs/PERFORMANCE.md has what it gains and costs).
     """
 
     def __init__(
