@@ -111,11 +111,13 @@ class GraphBuilder:
 
     def __call__(self, state) -> Graph:
         batch, (spheres, planes) = scene_of_sphere(state), host_sizes(state)
+        velocity = self.rule_velocity(state)  # once per build: the rules and the clip share it
+        allowance = self.allowance(state, velocity=velocity)
         counts = scene_counts(batch, len(spheres))  # both kinds of candidate need them
         layout = self.layout_candidates(state, spheres)
-        src, dst = self._pair_candidates(state, batch, spheres, counts, layout)
+        src, dst = self._pair_candidates(state, batch, allowance, spheres, counts, layout)
         plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), counts)
-        pp_mask, ps_mask, offset, allowance = self.rules(state, src, dst, plane, sphere)
+        pp_mask, ps_mask, offset = self.rules(state, velocity, allowance, src, dst, plane, sphere)
         if self.fixed_capacity and layout:  # every candidate, its mask on both halves
             pp_keep, keep, masks = slice(None), slice(None), (pp_mask.repeat(2), ps_mask)
         else:
@@ -129,17 +131,15 @@ class GraphBuilder:
         ps_attr = _ps_attr(state, ps_index, offset[keep], clip)
         return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance, *masks)
 
-    def rules(self, state, src, dst, plane, sphere) -> tuple[torch.Tensor, ...]:
-        """``(pp mask [P], ps mask [Q], offsets [Q, 3], allowance [N])`` (float64 but the
-        masks) of the candidates ``(src, dst)`` and ``(plane, sphere)``: the module doc's rules.
-        Reads nothing back: a compiled simulator compiles it (:mod:`physgnn.models.capture`)."""
+    def rules(self, state, velocity, allowance, src, dst, plane, sphere) -> tuple:
+        """``(pp mask [P], ps mask [Q], offsets [Q, 3] float64)`` of the candidates: the module
+        doc's rules, given :meth:`rule_velocity` and :meth:`allowance`. Reads nothing back: a
+        compiled simulator compiles it (:mod:`physgnn.models.capture`)."""
         batch = scene_of_sphere(state)
-        velocity = self.rule_velocity(state)  # once: the rules and the clip share it
-        allowance = self.allowance(state, velocity=velocity)
         on = state.effects[batch[src], _SPHERE_CONTACT]  # scenes with sphere contact
         pp_mask = on & self.pair_within_reach(state, src, dst, allowance)
         ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere, velocity)
-        return pp_mask, ps_mask, offset, allowance
+        return pp_mask, ps_mask, offset
 
     def layout_candidates(self, state, spheres: tuple[int, ...]) -> bool:
         """True when the pp candidates are every same-scene pair of the layout (module doc),
@@ -205,13 +205,13 @@ class GraphBuilder:
         dt = state.dt.to(torch.float64)[scene_of_sphere(state)[sphere]]
         return clearance <= self.factor * torch.relu(-along) * dt + self.epsilon
 
-    def _pair_candidates(self, state, batch, spheres, counts, layout) -> tuple:
+    def _pair_candidates(self, state, batch, allowance, spheres, counts, layout) -> tuple:
         """Candidate pairs ``(i, j)``, ``i < j``, sorted: all pairs of each scene when ``layout``
         (:meth:`layout_candidates`), else a radius search (reads sizes back,
         :func:`~physgnn.graph.neighbors.radius_pairs`); the same edges either way."""
         if layout:
             return scene_pairs(spheres, batch, counts)
-        radius, allowance = state.radius.to(torch.float64), self.allowance(state)
+        radius = state.radius.to(torch.float64)
         reach = 2 * float(radius.max()) + 2 * float(allowance.max()) + self.epsilon
         pairs = radius_pairs(state.pos, reach * (1 + 1e-9), batch, self.backend)
         return pairs[0], pairs[1]

@@ -144,7 +144,7 @@ def in_reach(state, graph, builder) -> torch.Tensor:
         dt = state.scene_dt[sphere]
         near = -depth <= graph.allowance[sphere] + builder.epsilon + G * dt * dt
     near = bounded | near
-    if graph.ps_mask is not None:  # a fixed-capacity graph's candidates outside the rules
+    if graph.masked:  # a fixed-capacity graph's candidates outside the rules
         near = near & graph.ps_mask
     touched.index_add_(0, sphere, near.to(touched.dtype))
     return (touched > 0) | recent_contact(state)
