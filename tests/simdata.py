@@ -43,6 +43,9 @@ REPORT_MODEL = {
     "mass_ratio": False,
     "aggregation": "sum",
     "rest_decision": False,
+    "contact_passes": 0,
+    "pair_impulses": False,
+    "plane_materials": False,
 }
 
 

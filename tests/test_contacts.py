@@ -11,6 +11,7 @@ from torch.testing import assert_close
 from torch_geometric.data import Batch
 
 from physgnn.data.state import TrajectoryFrames
+from physgnn.graph.builder import ballistic_velocity
 from physgnn.models.learned import LearnedSimulator
 from physgnn.nn.mlp import MLP
 from physgnn.physics.geometry import edge_plane_depth, plane_depth
@@ -102,8 +103,10 @@ def test_ps_contact_features_state_clearance_normal_and_tangential_speed():
     graph = sim.graph_builder(state)
     _, ps = sim.edge_features(graph, state)
     sigma = float(torch.tensor([1.0, 2.0, 4.0]).square().mean().sqrt())
-    assert ps.shape == (1, 13)
-    assert_close(ps[0, 10:], torch.tensor([0.3 / 2.0, -2.0 / sigma, 5.0 / sigma]))
+    assert ps.shape == (1, 15)
+    assert_close(ps[0, 10:13], torch.tensor([0.3 / 2.0, -2.0 / sigma, 5.0 / sigma]))
+    # then the sphere–plane contact's restitution and friction: the sphere's own values
+    assert_close(ps[0, 13:], state.material_params[0, :2])
 
 
 @pytest.mark.parametrize("mass_ratio", [False, True])
@@ -221,8 +224,8 @@ def test_each_switch_alone_builds_and_predicts(key, value):
     assert torch.isfinite(vel).all() and torch.isfinite(angvel).all()
 
 
-def test_a_sphere_that_bounced_in_the_last_frame_is_left_to_the_network():
-    sim = make(gravity_prior=True)
+def test_with_the_latch_a_sphere_that_bounced_in_the_last_frame_is_left_to_the_network():
+    sim = make(gravity_prior=True, recent_contact=True)
     # 0.6 m above the ground moving up at 2 m/s after moving down at 13 m/s: the frame before
     # held an impact, though the ground is now out of reach
     state = scene([[0, 0, 1.1], [5, 0, 5.0]], [[0, 0, 2.0], [0, 0, 2.0]], [0.5, 0.5])
@@ -230,3 +233,12 @@ def test_a_sphere_that_bounced_in_the_last_frame_is_left_to_the_network():
     state.vel[1, 1:] = torch.tensor([0.0, 0.0, 2.0 + 9.81 * DT])  # ballistic: free
     pred, graph = sim.normalized_prediction(state)
     assert sim.in_reach(state, graph).tolist() == [True, False]
+
+
+def test_without_the_latch_a_sphere_that_bounced_in_the_last_frame_flies_ballistically():
+    sim = make(gravity_prior=True)  # the default: no latch
+    state = scene([[0, 0, 1.1]], [[0, 0, 2.0]], [0.5])
+    state.vel[0, 1:] = torch.tensor([0.0, 0.0, -13.0])  # the frame before held an impact
+    vel, angvel = sim(state)
+    assert torch.equal(vel, ballistic_velocity(state))
+    assert torch.equal(angvel, state.angvel[:, 0])

@@ -26,7 +26,7 @@ RUNS = {
     "ablation_connectivity": 12,
     "ablation_lambda": 12,
     "ablation_components": 24,
-    "ablation_contacts": 27,
+    "ablation_contacts": 42,
 }
 
 

@@ -24,8 +24,12 @@ from physgnn.rollout import rollout
 from physgnn.training.finite import FINITE_CHECK_EVERY, FiniteWatch, NonFiniteLossError
 from tests.test_graph import WALL_ROW, make_state
 
-TRAIN_STEP_SYNCS = 5  # the budget of a training step (graph builds, finiteness, k on the host)
-ROLLOUT_FRAME_SYNCS = 2  # one graph build and the divergence test
+# the budget of a training step: graph builds (contact noise, the push-forward's passes, the
+# loss), finiteness; k is drawn on the host
+TRAIN_STEP_SYNCS = 7
+# the graph builds of a frame (one, plus a rebuild per pass that adds edges, at most
+# model.contact_passes) and the divergence test
+ROLLOUT_FRAME_SYNCS = 4
 
 
 def test_the_counter_sees_each_kind_of_read_back():

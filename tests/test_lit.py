@@ -102,7 +102,7 @@ def test_noise_only_in_training_shaped_like_a_rollout_with_correcting_targets():
     state = batch([trajectory(40, seed=3), still])
     seen = []
     original = lit.simulator.network_prediction
-    lit.simulator.network_prediction = lambda s, g: seen.append(s) or original(s, g)
+    lit.simulator.network_prediction = lambda s, g, *a: seen.append(s) or original(s, g, *a)
     lit.log = lambda *args, **kwargs: None
     lit.validation_step(state, 0)
     lit.training_step(state, 0)

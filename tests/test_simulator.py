@@ -40,8 +40,8 @@ def defaults_of(cls) -> dict:
 
 # The nodes of the model config, the constructor each is built with and that constructor's
 # arguments the config leaves to the code (the widths the simulator sets; an evaluation detail).
-NODES = {"network": (EncodeProcessDecode, {"pp_in", "ps_in", "out_dim", "concat_trick"}),
-         "graph": (GraphBuilder, set())}  # fmt: skip
+LEFT_TO_CODE = {"pp_in", "ps_in", "out_dim", "concat_trick", "pair_out"}
+NODES = {"network": (EncodeProcessDecode, LEFT_TO_CODE), "graph": (GraphBuilder, set())}
 
 
 def test_constructor_defaults_are_the_default_model_and_report_model_is_the_reports():
@@ -77,7 +77,9 @@ def test_default_and_report_widths():
     # pp: [p_i − p_j, |p_i − p_j|], gap, normal and tangential relative speed, 3 relative
     # velocities, 2 radii, the mass ratio, 2 pair materials; the report's: the first 4
     assert (default.network.pp_in, old.network.pp_in) == (4 + 5 + 9 + 1 + 2, 4)
-    assert (default.network.ps_in, old.network.ps_in) == (13, 10)
+    # ps: [v, n, δ, h], clearance, normal and tangential speed, the sphere's restitution and
+    # friction; the report's: the first 10
+    assert (default.network.ps_in, old.network.ps_in) == (15, 10)
     outputs = [m.network.decoder.lin2.out_features for m in (default, old)]
     assert outputs == [7, 6]  # Δv, Δω (and the rest logit)
     assert [m.network.aggregation for m in (default, old)] == ["mean", "sum"]

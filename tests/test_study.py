@@ -45,7 +45,10 @@ def test_the_default_study_adds_the_contact_switches_to_the_reports_sweeps(tmp_p
     sweeps = list(study_cfg(tmp_path).sweeps)
     assert sweeps == [*SWEEPS, "ablation_contacts"]
     extra = [c.key for c in study_configs(sweeps)][18:]
-    assert extra == ["model.contact_features=False", "model.material_features=False",
+    assert extra == ["model.contact_passes=0", "model.pair_impulses=False",
+                     "model.recent_contact=True", "lit.truth_contacts=False",
+                     "model.plane_materials=False",
+                     "model.contact_features=False", "model.material_features=False",
                      "model.gravity_prior=False", "lit.lambda_contact=0",
                      "lit.contact_noise_depth=0", "model.network.layer_norm=True",
                      "lit.pushforward_steps=0",
@@ -71,10 +74,12 @@ def test_the_five_sweeps_are_18_configurations_the_baseline_shared():
     assert by_key["model.graph.connectivity=vi"].points == {"ablation_connectivity": "vi"}
     gns = [k for k in keys if "use_surfaces=False" in k]
     assert gns == [
-        "model.boundary_features=True model.contact_features=False model.graph.connectivity=vi "
-        "model.gravity_prior=False model.mass_ratio=False model.material_features=False "
-        "model.network.aggregation=sum model.network.third_law=False "
-        "model.network.use_surfaces=False model.relative_pairs=False model.rest_decision=False"
+        "model.boundary_features=True model.contact_features=False model.contact_passes=0 "
+        "model.graph.connectivity=vi model.gravity_prior=False model.mass_ratio=False "
+        "model.material_features=False model.network.aggregation=sum "
+        "model.network.third_law=False model.network.use_surfaces=False "
+        "model.pair_impulses=False model.plane_materials=False model.relative_pairs=False "
+        "model.rest_decision=False"
     ]  # the GNS-style model is the report's (tests/simdata.py, REPORT_MODEL)
     jobs = study_jobs(configs, [0, 1, 2])
     assert len(jobs) == 54

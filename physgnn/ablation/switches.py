@@ -20,6 +20,11 @@ from physgnn.report.format import fmt, md_table
 
 SWEEP = "ablation_contacts"
 LABELS = {
+    "no_contact_passes": "one pass (no rebuild within the frame)",
+    "no_pair_impulses": "without the pair impulses",
+    "latch": "with the previous latch",
+    "no_truth_contacts": "loss graph without the truth's contacts",
+    "no_plane_materials": "without the materials on plane edges",
     "no_contact_features": "without the contact inputs",
     "no_material_features": "without the material inputs",
     "no_gravity_prior": "without the gravity prior",

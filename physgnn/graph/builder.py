@@ -8,7 +8,8 @@ Connectivity, with ``gap_ij = |p_i − p_j| − r_i − r_j`` and a per-sphere m
   linked). Spheres moving as one (``v_i = v_j``) are never linked unless they touch: a block in
   free flight has no pp edge. Superset property: with constant relative velocity ``w`` over
   the frame, ``|d + wτ| ≥ (d + wτ)·n̂ = |d| − τ·(−w·n̂)``, so no pair can touch by ``dt`` that
-  the rule leaves out (factor ≥ 1); gravity cancels in ``w``. A bounded plane is linked when
+  the rule leaves out (factor ≥ 1); gravity cancels in ``w`` when both spheres fly (not when
+  one is supported: "Contacts within the frame" below). A bounded plane is linked when
   its rectangle's clearance ``|δ| − r_i ≤ factor · max(0, −v̂_i·δ̂) · dt + ε``, with the
   ballistic next velocity ``v̂_i = v_i + g·dt`` (a plane is static, so gravity does close the
   gap) and ``δ̂`` the unit offset from the rectangle's closest point (a supporting half-space
@@ -31,6 +32,17 @@ the sphere's centre, and the signed height ``h = δ·n_s``, both clipped at the 
 plane before the next frame, and the clipped ground edge of a sphere in free flight is the
 same at 10, 100 or 1 000 m (so gravity does not grow with altitude).
 
+**Contacts within the frame.** The superset property above holds under the rule's own
+assumption, each sphere moving with its ballistic velocity for the whole frame. It fails when a
+sphere's motion changes within the frame: a neighbour stopped by the ground (a block's bottom
+layer lands, a ball hits a resting row) or a sphere that rests while a falling one comes down on
+it (gravity does not cancel in that pair). So a build also takes the provisional next
+velocities of earlier passes of a simulator (``provisional``): a candidate is kept when the rules
+accept it under the ballistic motion *or* under any provisional one (the union, so a graph only
+grows from pass to pass), and the allowance is the largest of them. Under each velocity the
+superset property holds as above (tested against brute force); a simulator passes again while
+a rebuild adds edges (:class:`~physgnn.models.learned.LearnedSimulator`, ``contact_passes``).
+
 Effects (``state.effects``): no pp edges without ``sphere_contact``; no wall/static edges
 without ``surface_contact``; the ground edge exists when ``gravity`` or ``surface_contact``.
 
@@ -50,13 +62,13 @@ the ``ALL_PAIRS_*`` limits (a radius search reads sizes back anyway) is built co
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import torch
 
 from physgnn.data.state import host_sizes, scene_of_sphere
 from physgnn.graph.candidates import compact, scene_counts, scene_pairs, scene_plane_pairs
-from physgnn.graph.edges import Graph
+from physgnn.graph.edges import Graph, paired_edges, ps_features
 from physgnn.graph.neighbors import BACKENDS, radius_pairs, resolve_backend
 from physgnn.physics.energy import G
 from physgnn.physics.geometry import rectangle_offset
@@ -109,35 +121,47 @@ class GraphBuilder:
         self.backend = backend
         self.fixed_capacity = bool(fixed_capacity)
 
-    def __call__(self, state) -> Graph:
+    def __call__(self, state, provisional: Sequence[torch.Tensor] = ()) -> Graph:
+        """The graph of ``state``; ``provisional``: next velocities ``[N, 3]`` of earlier
+        passes (module doc, "Contacts within the frame"): a candidate is kept when the rules
+        accept it under the state's own motion or under any of them."""
         batch, (spheres, planes) = scene_of_sphere(state), host_sizes(state)
         velocity = self.rule_velocity(state)  # once per build: the rules and the clip share it
         allowance = self.allowance(state, velocity=velocity)
+        for vel in provisional:
+            allowance = torch.maximum(allowance, self.allowance(state, velocity=vel))
         counts = scene_counts(batch, len(spheres))  # both kinds of candidate need them
         layout = self.layout_candidates(state, spheres)
         src, dst = self._pair_candidates(state, batch, allowance, spheres, counts, layout)
         plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), counts)
         pp_mask, ps_mask, offset = self.rules(state, velocity, allowance, src, dst, plane, sphere)
+        for vel in provisional:
+            more = self.rules(state, vel, allowance, src, dst, plane, sphere, vel)
+            pp_mask, ps_mask = pp_mask | more[0], ps_mask | more[1]
         if self.fixed_capacity and layout:  # every candidate, its mask on both halves
             pp_keep, keep, masks = slice(None), slice(None), (pp_mask.repeat(2), ps_mask)
         else:
             n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
             pp_keep, keep, masks = compact(pp_mask, n_pp), compact(ps_mask, n_ps), (None, None)
-        pp_index, pp_attr = _paired(state.pos, src[pp_keep], dst[pp_keep])
+        pp_index, pp_attr = paired_edges(state.pos, src[pp_keep], dst[pp_keep])
         ps_index = torch.stack([plane[keep], sphere[keep]])
         if checks_on():
             _check_ground(state, batch)
         clip = self.reach(state, allowance) + self.clip_margin
-        ps_attr = _ps_attr(state, ps_index, offset[keep], clip)
+        ps_attr = ps_features(state, ps_index, offset[keep], clip)
         return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance, *masks)
 
-    def rules(self, state, velocity, allowance, src, dst, plane, sphere) -> tuple:
+    def rules(
+        self, state, velocity, allowance, src, dst, plane, sphere, pair_velocity=None
+    ) -> tuple:
         """``(pp mask [P], ps mask [Q], offsets [Q, 3] float64)`` of the candidates: the module
-        doc's rules, given :meth:`rule_velocity` and :meth:`allowance`. Reads nothing back: a
-        compiled simulator compiles it (:mod:`physgnn.models.capture`)."""
+        doc's rules, given :meth:`rule_velocity` (or a pass's provisional velocity) and
+        :meth:`allowance`; ``pair_velocity [N, 3]``: what the pp rule moves spheres with
+        (None: ``v_t``). Reads nothing back: a compiled simulator compiles it
+        (:mod:`physgnn.models.capture`)."""
         batch = scene_of_sphere(state)
         on = state.effects[batch[src], _SPHERE_CONTACT]  # scenes with sphere contact
-        pp_mask = on & self.pair_within_reach(state, src, dst, allowance)
+        pp_mask = on & self.pair_within_reach(state, src, dst, allowance, pair_velocity)
         ps_mask, offset = self._ps_rule(state, batch, allowance, plane, sphere, velocity)
         return pp_mask, ps_mask, offset
 
@@ -173,16 +197,17 @@ class GraphBuilder:
             speed = vmax[batch]
         return self.factor * speed * state.dt.to(torch.float64)[batch]
 
-    def pair_within_reach(self, state, i, j, allowance: torch.Tensor) -> torch.Tensor:
+    def pair_within_reach(self, state, i, j, allowance: torch.Tensor, velocity=None):
         """``[P]`` bool: the pp rule (module doc; ``gap_ij ≤ a_i + a_j + ε`` but for
-        ``approach``) of same-scene pairs ``(i, j)``, float64."""
+        ``approach``) of same-scene pairs ``(i, j)``, float64; ``approach`` moves the spheres
+        with ``velocity [N, 3]`` (None: ``v_t``; a common gravity cancels in the pair)."""
         batch = scene_of_sphere(state)
         p, r = state.pos.to(torch.float64), state.radius.to(torch.float64)
         rel = p[i] - p[j]
         dist = rel.norm(dim=-1)
         gap = dist - r[i] - r[j]
         if self.connectivity == "approach":
-            vel = _velocity(state).to(torch.float64)
+            vel = (_velocity(state) if velocity is None else velocity).to(torch.float64)
             along = ((vel[i] - vel[j]) * rel).sum(-1) / dist.clamp_min(1e-300)
             limit = self.factor * torch.relu(-along) * state.dt.to(torch.float64)[batch[i]]
         else:
@@ -259,15 +284,6 @@ def _velocity(state) -> torch.Tensor:
     return state.vel[:, 0] if state.vel.dim() == 3 else state.vel
 
 
-def _paired(pos, src, dst) -> tuple[torch.Tensor, torch.Tensor]:
-    """pp index ``[2, E]`` in the paired layout and its features ``[E, 4]`` (class Graph)."""
-    rel = pos[dst] - pos[src]
-    attr = torch.cat([rel, torch.linalg.vector_norm(rel, dim=-1, keepdim=True)], dim=-1)
-    index = torch.cat([torch.stack([src, dst]), torch.stack([dst, src])], dim=1)
-    rev = torch.cat([-attr[:, :3], attr[:, 3:]], dim=-1)
-    return index, torch.cat([attr, rev], dim=0)
-
-
 def checks_on() -> bool:
     """Checks that read values back to the host (``PHYSGNN_CHECKS=1``; off by default, so
     that a GPU step never waits for them)."""
@@ -285,16 +301,3 @@ def _check_ground(state, batch) -> None:
     bad = (needed & (per_scene != 1)).nonzero().flatten().tolist()
     if bad:
         raise ValueError(f"scene {bad[0]} of the batch must have exactly one ground plane (kind 0)")
-
-
-def _ps_attr(state, index: torch.Tensor, offset: torch.Tensor, reach: torch.Tensor) -> torch.Tensor:
-    """``[v_i, n_s, clip(δ_is), clip(h_is)]`` of ps edges, ``[F, 10]`` (see the module doc);
-    ``offset [F, 3]`` (float64) is δ before the clip, ``reach [N]`` float64 is ``ρ_i``."""
-    planes = state.planes[index[0]].to(torch.float64)
-    dist = offset.norm(dim=-1, keepdim=True)
-    rho = reach[index[1], None]
-    offset = offset * torch.where(dist > rho, rho / dist, torch.ones_like(dist))
-    height = (offset * planes[:, 3:6]).sum(-1, keepdim=True)
-    dtype = state.pos.dtype
-    v = _velocity(state)[index[1]]
-    return torch.cat([v, planes[:, 3:6].to(dtype), offset.to(dtype), height.to(dtype)], dim=-1)

@@ -45,6 +45,16 @@ class Graph:
         """True for a fixed-capacity graph (its edges are weighed by ``pp_mask``, ``ps_mask``)."""
         return self.pp_mask is not None
 
+    def grew(self, earlier: Graph) -> bool:
+        """True when this graph, built with more provisional velocities than ``earlier`` (so
+        a superset of its edges), has edges ``earlier`` lacks: compared by size, which a
+        counted graph knows on the host (nothing read back). A fixed-capacity graph keeps its
+        size and may always have grown (True)."""
+        if self.masked:
+            return True
+        sizes = (self.pp_index.shape[1], self.ps_index.shape[1])
+        return sizes != (earlier.pp_index.shape[1], earlier.ps_index.shape[1])
+
     def pp_weight(self, like: torch.Tensor) -> torch.Tensor | None:
         """``[E]`` 1 for an accepted pp edge, 0 for the rest, in ``like``'s dtype; ``None``
         when every edge counts."""
@@ -80,3 +90,28 @@ class Graph:
         ps = self.ps_mask.nonzero().flatten()
         pp_index, pp_attr = self.pp_index[:, pp], self.pp_attr[pp]
         return Graph(pp_index, pp_attr, self.ps_index[:, ps], self.ps_attr[ps], self.allowance)
+
+
+def paired_edges(pos, src, dst) -> tuple[torch.Tensor, torch.Tensor]:
+    """pp index ``[2, E]`` in the paired layout and its features ``[E, 4]`` (class Graph)."""
+    rel = pos[dst] - pos[src]
+    attr = torch.cat([rel, torch.linalg.vector_norm(rel, dim=-1, keepdim=True)], dim=-1)
+    index = torch.cat([torch.stack([src, dst]), torch.stack([dst, src])], dim=1)
+    rev = torch.cat([-attr[:, :3], attr[:, 3:]], dim=-1)
+    return index, torch.cat([attr, rev], dim=0)
+
+
+def ps_features(
+    state, index: torch.Tensor, offset: torch.Tensor, reach: torch.Tensor
+) -> torch.Tensor:
+    """``[v_i, n_s, clip(δ_is), clip(h_is)]`` of ps edges, ``[F, 10]``
+    (:mod:`physgnn.graph.builder`); ``offset [F, 3]`` (float64) is δ before the clip,
+    ``reach [N]`` float64 is ``ρ_i``."""
+    planes = state.planes[index[0]].to(torch.float64)
+    dist = offset.norm(dim=-1, keepdim=True)
+    rho = reach[index[1], None]
+    offset = offset * torch.where(dist > rho, rho / dist, torch.ones_like(dist))
+    height = (offset * planes[:, 3:6]).sum(-1, keepdim=True)
+    dtype = state.pos.dtype
+    v = (state.vel[:, 0] if state.vel.dim() == 3 else state.vel)[index[1]]
+    return torch.cat([v, planes[:, 3:6].to(dtype), offset.to(dtype), height.to(dtype)], dim=-1)

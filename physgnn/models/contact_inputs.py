@@ -22,31 +22,18 @@ material no training scene had still means something.
 **Gravity prior** (``gravity_prior=True``): a sphere that cannot touch anything before the
 next frame moves ballistically, ``v_{t+1} = v_t + g·dt`` and ``ω_{t+1} = ω_t`` exactly,
 whatever its mass or size; the network's output is used only for spheres *in reach* of a
-contact: with a pp edge, an edge to a wall or static plane (the graph's own reach rule), a
-ground clearance within the graph's plane rule (for ``vi``, ``vmax``, ``epsilon``:
-``h − r ≤ a_i + ε + g·dt²``, the rule plus the fall that gravity adds within the frame;
-``approach`` counts the fall itself), or a contact during the last frame, seen in the velocity
-history as ``|v_t − v_{t−1} − g·dt| > RECENT_TOL`` (needs H ≥ 1). The last one matters: a
-sphere that bounced inside the last frame interval has a finite-difference velocity that is not its
-physical one (the mean over a frame that held the impact), and only the network can tell
-what comes next. The network so learns contacts only, and free flight is exact.
+contact (:mod:`physgnn.models.reach`). The network so learns contacts only, and free flight is
+exact.
 """
 
 from __future__ import annotations
 
 import torch
 
-from physgnn.data.state import scene_of_sphere
 from physgnn.graph.builder import ballistic_velocity
-from physgnn.physics.energy import G
-from physgnn.physics.geometry import edge_plane_depth
-from physgnn.physics.scene import EFFECT_NAMES, GROUND
 
-GRAVITY = EFFECT_NAMES.index("gravity")
 PP_CONTACT, PS_CONTACT = 2, 3  # features the contact inputs add per pp / ps edge
-# m/s: a velocity change this far from g·dt within one frame was a contact (ballistic frames
-# of the data and of rollouts agree with g·dt to float rounding, about 1e-4 m/s)
-RECENT_TOL = 0.01
+PS_MATERIAL = 2  # per ps edge with plane_materials: the sphere's restitution and friction
 # Scale of the material parameters (restitution, lateral, rolling, spinning friction) as node
 # inputs: rolling and spinning coefficients are ~0.01, the others ~0.5.
 MATERIAL_SCALE = (1.0, 1.0, 100.0, 100.0)
@@ -113,52 +100,18 @@ def ps_contact(graph, state, length_scale, speed_scale) -> torch.Tensor:
     return torch.cat([clearance / length_scale, along / speed_scale, across / speed_scale], 1)
 
 
+def ps_material(graph, state) -> torch.Tensor:
+    """``[F, 2]``: restitution and lateral friction of each ps edge's sphere. Planes have
+    restitution and friction 1 in the ground truth (:mod:`physgnn.groundtruth.engine`), and
+    Bullet combines both by product, so these are the sphere–plane contact's own values."""
+    return state.material_params[graph.ps_index[1], :2]
+
+
 def material_features(state) -> torch.Tensor:
     """``[N, 4]``: the material rows scaled by :data:`MATERIAL_SCALE`, by a Python scalar (a
     tensor of the scales would be a host-to-device copy per call)."""
     params = state.material_params
     return torch.stack([params[:, k] * s for k, s in enumerate(MATERIAL_SCALE)], dim=-1)
-
-
-def in_reach(state, graph, builder) -> torch.Tensor:
-    """``[N]`` bool: spheres that may touch something before the next frame or touched
-    something during the last one (module doc): a pp edge, a wall / static ps edge, the ground
-    within ``a_i + ε + g·dt²``, or :func:`recent_contact`. ``builder`` is
-    the :class:`~physgnn.graph.builder.GraphBuilder` that built ``graph`` (its ε)."""
-    n = state.pos.shape[0]
-    touched = state.pos.new_zeros(n)
-    pp_weight = graph.pp_weight(touched)
-    if pp_weight is None:
-        pp_weight = state.pos.new_ones(graph.pp_index.shape[1])
-    touched.index_add_(0, graph.pp_index[1], pp_weight)
-    plane, sphere = graph.ps_index
-    bounded = state.plane_kind[plane] != GROUND
-    # the edge features' heights are clipped: the clearance from the geometry itself
-    depth = edge_plane_depth(
-        state.pos, state.radius, state.planes, state.plane_kind, graph.ps_index
-    )
-    if builder.connectivity == "approach":  # the rule itself counts the fall (v + g·dt)
-        normal = state.planes[plane, 3:6]
-        near = builder.plane_within_reach(state, sphere, normal, -depth, graph.allowance)
-    else:
-        dt = state.scene_dt[sphere]
-        near = -depth <= graph.allowance[sphere] + builder.epsilon + G * dt * dt
-    near = bounded | near
-    if graph.masked:  # a fixed-capacity graph's candidates outside the rules
-        near = near & graph.ps_mask
-    touched.index_add_(0, sphere, near.to(touched.dtype))
-    return (touched > 0) | recent_contact(state)
-
-
-def recent_contact(state) -> torch.Tensor:
-    """``[N]`` bool: spheres whose last frame was not ballistic,
-    ``|v_t − v_{t−1} − g·dt| > RECENT_TOL`` (all False without a velocity history)."""
-    if state.vel.dim() < 3 or state.vel.shape[1] < 2:
-        return torch.zeros(state.pos.shape[0], dtype=torch.bool, device=state.pos.device)
-    gravity = state.effects[scene_of_sphere(state), GRAVITY].to(state.pos.dtype)
-    change = state.vel[:, 0] - state.vel[:, 1]
-    change[:, 2] = change[:, 2] + G * state.scene_dt * gravity
-    return torch.linalg.vector_norm(change, dim=1) > RECENT_TOL
 
 
 def free_flight(state) -> tuple[torch.Tensor, torch.Tensor]:

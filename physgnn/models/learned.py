@@ -17,20 +17,36 @@ learns to undo the noise.
 ``material_features``, ``gravity_prior``; the default model has all three, ``model=report``
 none): :mod:`physgnn.models.contact_inputs`.
 
+**Contacts within the frame** (``contact_passes`` = K > 0): after a pass, the graph is built
+again with the pass's provisional next velocities (spheres in reach take the network's, the
+others their ballistic one; :class:`~physgnn.graph.builder.GraphBuilder`, "Contacts within the
+frame") and the network passes again, while a rebuild adds edges, at most K times. A counted
+graph knows its size on the host after its build, so stopping reads nothing more back; a
+fixed-capacity graph always makes K passes.
+
+**Pair impulses** (``pair_impulses=True``): sphere–sphere interactions are decoded as
+antisymmetric pair impulses applied at the contact point (:mod:`physgnn.models.impulses`);
+only a sphere near a plane takes a change of its own from the node decoder (planes and gravity
+are external), so linear and angular momentum are conserved exactly for any weights. Without it
+(the previous default, ``model=report``) every sphere decodes its own Δv.
+
+**Reach, the latch and support**: :mod:`physgnn.models.reach` (``recent_contact`` turns the
+previous default's latch back on).
+
 **Boundary features** (``boundary_features=True``, the GNS-style baseline):
 :mod:`physgnn.models.boundary`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import torch
 from torch import nn
 
 from physgnn.data.state import scene_of_sphere
 from physgnn.graph.builder import GraphBuilder
-from physgnn.models import boundary, contact_inputs, rest
+from physgnn.models import boundary, contact_inputs, impulses, reach, rest
 from physgnn.models.normalisation import (  # noqa: F401 (StatsError: re-exported)
     StatsError,
     register_stats,
@@ -42,8 +58,9 @@ from physgnn.physics.scene import EFFECT_NAMES
 
 ROTATION = EFFECT_NAMES.index("rotation")
 # Input widths before the optional columns: pp [p_i − p_j, |p_i − p_j|], ps [v, n, δ, h];
-# outputs: normalised Δv and Δω (then the rest logit with rest_decision).
-PP_BASE, PS_BASE, OUTPUTS = 4, 10, 6
+# outputs: normalised Δv and Δω (then the rest logit with rest_decision); per pair with
+# pair_impulses: an impulse and a couple (3 + 3).
+PP_BASE, PS_BASE, OUTPUTS, PAIR_OUTPUTS = 4, 10, 6, 6
 
 
 class LearnedSimulator(nn.Module):
@@ -62,7 +79,10 @@ class LearnedSimulator(nn.Module):
     ``boundary_features`` (:meth:`boundary_features`, ``boundary_radius`` R in metres);
     absolute position and orientation are masked. ``contact_features``, ``gravity_prior``: see
     the module doc; ``pad_to_buckets``: the network sees graphs padded to capacity buckets
-    (opt-in capture path, :mod:`physgnn.nn.padding`).
+    (opt-in capture path, :mod:`physgnn.nn.padding`). ``contact_passes``, ``pair_impulses``,
+    ``recent_contact``: the module doc; ``plane_materials``: ps edges also carry the sphere's
+    restitution and lateral friction (planes have restitution and friction 1 in the ground
+    truth, so these are the sphere–plane contact's; needs ``material_features``).
     """
 
     def __init__(
@@ -82,9 +102,13 @@ class LearnedSimulator(nn.Module):
         mass_ratio: bool = True,
         rest_decision: bool = True,
         rest_speed: float = 0.01,
+        contact_passes: int = 2,
+        pair_impulses: bool = True,
+        recent_contact: bool = False,
+        plane_materials: bool = True,
     ):
         super().__init__()
-        _check_sizes(H, boundary_radius, rest_speed)
+        _check_sizes(H, boundary_radius, rest_speed, contact_passes)
         self.H, self.pad_to_buckets = int(H), bool(pad_to_buckets)
         self.use_boundary, self.boundary_radius = bool(boundary_features), float(boundary_radius)
         self.contact_features = bool(contact_features)
@@ -92,6 +116,9 @@ class LearnedSimulator(nn.Module):
         self.gravity_prior = bool(gravity_prior)
         self.relative_pairs, self.mass_ratio = bool(relative_pairs), bool(mass_ratio)
         self.rest_decision, self.rest_speed = bool(rest_decision), float(rest_speed)
+        self.contact_passes, self.pair_impulses = int(contact_passes), bool(pair_impulses)
+        self.latch = bool(recent_contact)
+        self.plane_materials = bool(plane_materials) and self.material_features
         self._register_stats(stats, length_scale)
         self.graph_builder = GraphBuilder() if graph is None else graph
         self.network = self._network(EncodeProcessDecode if network is None else network)
@@ -99,11 +126,14 @@ class LearnedSimulator(nn.Module):
     def _network(self, network: Callable[..., EncodeProcessDecode]) -> EncodeProcessDecode:
         """``network`` called with the input and output widths of the simulator's inputs."""
         ps_extra = contact_inputs.PS_CONTACT if self.contact_features else 0
+        ps_extra += contact_inputs.PS_MATERIAL if self.plane_materials else 0
+        pairs = {"pair_out": PAIR_OUTPUTS} if self.pair_impulses else {}
         built = network(
             node_in=self.node_in,
             pp_in=PP_BASE + self.pair_extra,
             ps_in=PS_BASE + ps_extra,
             out_dim=OUTPUTS + int(self.rest_decision),
+            **pairs,
         )
         if len(built.blocks) < 1:
             raise ValueError(f"need M >= 1 message-passing blocks (got M={len(built.blocks)})")
@@ -142,6 +172,11 @@ class LearnedSimulator(nn.Module):
     def speed_scale(self) -> torch.Tensor:
         """σ_v of the contact features: the RMS of the three velocity stds (m/s)."""
         return self.vel_std.square().mean().sqrt()
+
+    @property
+    def delta_spin_scale(self) -> torch.Tensor:
+        """σ_Δω of the pair couples: the RMS of the three angular-velocity-change stds."""
+        return self.delta_angvel_std.square().mean().sqrt()
 
     @property
     def delta_speed_scale(self) -> torch.Tensor:
@@ -196,12 +231,20 @@ class LearnedSimulator(nn.Module):
             pp_attr = torch.cat([pp_attr, contact_inputs.pp_contact(graph, state, *scales)], 1)
         if self.contact_features:
             ps_attr = torch.cat([ps_attr, contact_inputs.ps_contact(graph, state, *scales)], 1)
+        if self.plane_materials:
+            ps_attr = torch.cat([ps_attr, contact_inputs.ps_material(graph, state)], 1)
         return pp_attr, ps_attr
 
     def in_reach(self, state, graph) -> torch.Tensor:
         """``[N]`` bool: spheres that may touch something before the next frame
-        (:func:`~physgnn.models.contact_inputs.in_reach`)."""
-        return contact_inputs.in_reach(state, graph, self.graph_builder)
+        (:func:`~physgnn.models.reach.contact_reach`)."""
+        return self.reach(state, graph).spheres
+
+    def reach(self, state, graph, provisional: Sequence = ()) -> reach.Reach:
+        """:func:`~physgnn.models.reach.contact_reach` of ``graph`` (built with
+        ``provisional``)."""
+        builder = self.graph_builder
+        return reach.contact_reach(state, graph, builder, provisional, self.latch)
 
     def rotating(self, state) -> torch.Tensor:
         """``[N]`` bool: spheres whose scene has the rotation effect on."""
@@ -213,17 +256,28 @@ class LearnedSimulator(nn.Module):
         graph = self.graph_builder(state)
         return self.network_prediction(state, graph), graph
 
-    def network_prediction(self, state, graph) -> torch.Tensor:
-        """Network output ``[N, 6]`` (normalised Δv, Δω) on ``graph``, built from ``state``."""
+    def network_prediction(self, state, graph, on_plane=None) -> torch.Tensor:
+        """Network output ``[N, 6]`` (normalised Δv, Δω; then the rest logit) on ``graph``,
+        built from ``state``. With ``pair_impulses`` the Δv and Δω are the pair impulses' and,
+        for spheres ``on_plane [N]`` (None: :meth:`reach`'s), the node decoder's own, plus
+        gravity, in the same normalised units."""
         x = self.node_features(state)
         edges = graph.network_inputs(x.shape[0], *self.edge_features(graph, state))
         material = state.material if self.network.material is not None else None
+        run = self.network.forward_pairs if self.pair_impulses else self.network
         # fixed shapes for a captured step (physgnn/nn/padding.py); a fixed-capacity graph's
         # masked edges need padding's ghost node (self.padded says so)
         if self.padded:
             padded, n = pad_graph(x, *edges, material)
-            return self.network(*padded)[:n]
-        return self.network(x, *edges, material)
+            out = run(*padded)
+            out = (out[0][:n], out[1]) if self.pair_impulses else out[:n]
+        else:
+            out = run(x, *edges, material)
+        if not self.pair_impulses:
+            return out
+        if on_plane is None:
+            on_plane = self.reach(state, graph).planes
+        return impulses.normalised_changes(self, state, graph, *out, on_plane)
 
     def normalized_target(self, state) -> torch.Tensor:
         """``[N, 6]``: the normalised change from the state's (possibly noisy) ``v_t, ω_t`` to
@@ -242,11 +296,12 @@ class LearnedSimulator(nn.Module):
         return rest.rest_target(state, self.rest_speed)
 
     def to_physical(
-        self, state, pred: torch.Tensor, reach: torch.Tensor | None = None
+        self, state, pred: torch.Tensor, reach: torch.Tensor | None = None, supported=None
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Normalised output ``[N, 6]`` → ``(v_{t+1} [N, 3], ω_{t+1} [N, 3])``; spheres of a
         scene without rotation keep ``ω_t``. With ``gravity_prior``, spheres outside
-        ``reach [N]`` (:meth:`in_reach` of the prediction's graph) fly ballistically."""
+        ``reach [N]`` (:meth:`in_reach` of the prediction's graph) fly ballistically. The rest
+        decision stops spheres that are ``supported [N]`` (None: those in ``reach``)."""
         vel_next = state.vel[:, 0] + pred[:, :3] * self.delta_vel_std + self.delta_vel_mean
         angvel_next = (
             state.angvel[:, 0] + pred[:, 3:6] * self.delta_angvel_std + self.delta_angvel_mean
@@ -258,7 +313,8 @@ class LearnedSimulator(nn.Module):
             vel_next = torch.where(reach[:, None], vel_next, vel_free)
             angvel_next = torch.where(reach[:, None], angvel_next, angvel_free)
         if self.rest_decision:  # output 7 is the logit of "at rest next frame"
-            vel_next, angvel_next = rest.apply_rest(pred[:, OUTPUTS], vel_next, angvel_next, reach)
+            still = reach if supported is None else supported
+            vel_next, angvel_next = rest.apply_rest(pred[:, OUTPUTS], vel_next, angvel_next, still)
         angvel_next = torch.where(self.rotating(state)[:, None], angvel_next, state.angvel[:, 0])
         return vel_next, angvel_next
 
@@ -269,23 +325,40 @@ class LearnedSimulator(nn.Module):
 
     def predict(self, state):
         """``(vel_next [N, 3], angvel_next [N, 3], graph)``: :meth:`forward` and the graph it
-        was computed on (for a constraint stage, :mod:`physgnn.models.constrained`)."""
+        was computed on (for a constraint stage, :mod:`physgnn.models.constrained`): passes
+        while a rebuild on the provisional velocities adds edges, at most ``contact_passes``
+        rebuilds (module doc)."""
         graph = self.graph_builder(state)
-        return (*self.head(state, graph), graph)
+        vel, angvel = self.head(state, graph)
+        provisional = []
+        for _ in range(self.contact_passes):
+            provisional.append(vel)
+            wider = self.graph_builder(state, provisional)
+            if not wider.grew(graph):
+                break
+            graph = wider
+            vel, angvel = self.head(state, graph, tuple(provisional))
+        return vel, angvel, graph
 
-    def head(self, state, graph) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(vel_next [N, 3], angvel_next [N, 3])`` on ``graph``: everything of a step after
-        the graph build (features, network, reach, physical units), the region a compiled
-        simulator compiles as one (:mod:`physgnn.models.capture`)."""
-        pred = self.network_prediction(state, graph)
-        reach = self.in_reach(state, graph) if self.gravity_prior else None
-        return self.to_physical(state, pred, reach)
+    def head(self, state, graph, provisional: Sequence = ()) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(vel_next [N, 3], angvel_next [N, 3])`` on ``graph`` (built with
+        ``provisional``): everything of a step after the graph build (reach, features, network,
+        physical units), the region a compiled simulator compiles as one
+        (:mod:`physgnn.models.capture`)."""
+        if not self.gravity_prior:
+            pred = self.network_prediction(state, graph)
+            return self.to_physical(state, pred)
+        where = self.reach(state, graph, provisional)
+        pred = self.network_prediction(state, graph, where.planes)
+        return self.to_physical(state, pred, where.spheres, where.supported)
 
 
-def _check_sizes(H: int, boundary_radius: float, rest_speed: float) -> None:
+def _check_sizes(H: int, boundary_radius: float, rest_speed: float, passes: int) -> None:
     if H < 0:
         raise ValueError(f"need H >= 0 (got H={H})")
     if not boundary_radius > 0:
         raise ValueError(f"boundary_radius must be > 0 (got {boundary_radius})")
     if not rest_speed > 0:
         raise ValueError(f"rest_speed must be > 0 (got {rest_speed})")
+    if passes < 0:
+        raise ValueError(f"contact_passes must be >= 0 (got {passes})")

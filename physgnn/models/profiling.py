@@ -30,9 +30,9 @@ class _WatchedBuilder:
             raise AttributeError(name)
         return getattr(self.builder, name)
 
-    def __call__(self, state):
+    def __call__(self, state, provisional=()):
         t0 = self.timer.clock(state.pos.device)
-        graph = self.builder(state)
+        graph = self.builder(state, provisional)
         self.timer.graph += self.timer.clock(state.pos.device) - t0
         self.timer.sizes.append(
             (state.pos.shape[0], graph.pp_index.shape[1], graph.ps_index.shape[1])

@@ -10,6 +10,7 @@ from torch import Tensor, nn
 from physgnn.nn.aggregation import inverse_degree
 from physgnn.nn.interaction import InteractionBlock
 from physgnn.nn.mlp import MLP
+from physgnn.nn.pair_decoder import PairDecoder
 from physgnn.nn.surface import SurfaceBlock
 
 AGGREGATIONS = ("sum", "mean")
@@ -106,6 +107,9 @@ class EncodeProcessDecode(nn.Module):
       :class:`ProcessorBlock`).
     - ``aggregation``: ``"mean"`` (bounded in the number of contacts, :class:`ProcessorBlock`)
       or ``"sum"`` (the report's).
+    - ``pair_out`` > 0: a :class:`~physgnn.nn.pair_decoder.PairDecoder` to ``pair_out``
+      antisymmetric numbers per pp pair (:meth:`forward_pairs`; the default model's pair
+      impulses).
 
     The defaults are the default model's network (``conf/model/baseline.yaml``, ``network``).
     """
@@ -125,6 +129,7 @@ class EncodeProcessDecode(nn.Module):
         concat_trick: str = "auto",
         layer_norm: bool = False,
         aggregation: str = "mean",
+        pair_out: int = 0,
     ):
         super().__init__()
         if min(node_in, pp_in, ps_in, hidden, out_dim) < 1 or M < 0:
@@ -145,6 +150,7 @@ class EncodeProcessDecode(nn.Module):
             ProcessorBlock(hidden, third_law, use_surfaces, concat_trick, **norm) for _ in range(M)
         )
         self.decoder = MLP(hidden, hidden, out_dim)
+        self.pair_decoder = PairDecoder(hidden, pair_out) if pair_out > 0 else None
 
     def reset_parameters(self) -> None:
         for module in self.children():
@@ -162,6 +168,21 @@ class EncodeProcessDecode(nn.Module):
         ps_attr: Tensor,
         material: Tensor | None = None,
     ) -> Tensor:
+        """``[N, out_dim]`` (class doc)."""
+        return self.decoder(self.process(x, pp_index, pp_attr, ps_index, ps_attr, material)[0])
+
+    def forward_pairs(self, x, pp_index, pp_attr, ps_index, ps_attr, material=None):
+        """``([N, out_dim], [E/2, pair_out])``: :meth:`forward` and the pair decoder's
+        antisymmetric outputs (needs ``pair_out > 0``)."""
+        if self.pair_decoder is None:
+            raise ValueError("forward_pairs needs a network built with pair_out > 0")
+        v, e_pp = self.process(x, pp_index, pp_attr, ps_index, ps_attr, material)
+        if pp_index.shape[1] == 0:
+            return self.decoder(v), v.new_zeros(0, self.pair_decoder.mlp.out_dim)
+        return self.decoder(v), self.pair_decoder(v, pp_index, e_pp)
+
+    def process(self, x, pp_index, pp_attr, ps_index, ps_attr, material=None):
+        """``(v [N, hidden], e_pp [E, hidden])``: the latents after the M blocks."""
         self._check(x, pp_index, pp_attr, ps_index, ps_attr, material)
         v = self.node_encoder(self._node_input(x, material))
         has_pp = pp_index.shape[1] > 0
@@ -174,7 +195,7 @@ class EncodeProcessDecode(nn.Module):
             inv_ps = inverse_degree(ps_index[1], v.shape[0], v) if has_ps else None
         for block in self.blocks:
             v, e_pp = block(v, pp_index, e_pp, ps_index, e_ps, inv_pp, inv_ps)
-        return self.decoder(v)
+        return v, e_pp
 
     def flops_per_step(self, num_nodes: int, num_pp_edges: int, num_ps_edges: int) -> int:
         """2 × multiply-adds of every dense layer one ``forward`` runs on a graph of this size
@@ -183,6 +204,7 @@ class EncodeProcessDecode(nn.Module):
         f = num_ps_edges if self.ps_encoder is not None else 0
         total = self.node_encoder.flops(n) + self.decoder.flops(n)
         total += self.pp_encoder.flops(e) + (self.ps_encoder.flops(f) if f else 0)
+        total += self.pair_decoder.flops(n, e) if self.pair_decoder is not None and e else 0
         return total + sum(block.flops(n, e, f) for block in self.blocks)
 
     def _node_input(self, x: Tensor, material: Tensor | None) -> Tensor:

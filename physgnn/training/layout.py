@@ -23,6 +23,16 @@ EARLIER_MODEL = {
     "rest_decision": False,
     "fixed_capacity": False,
 }
+# Model keys that runs before the contact changes lack, with the values their model had
+# (physgnn/models/learned.py: contacts within the frame, pair impulses, the latch, plane
+# materials).
+PREVIOUS_MODEL = {
+    "contact_passes": 0,
+    "pair_impulses": False,
+    "recent_contact": True,
+    "plane_materials": False,
+}
+LEARNED = "physgnn.models.learned.LearnedSimulator"
 # The nodes of today's layout, with the Hydra keys that build them.
 NODES = {
     "network": {"_target_": "physgnn.nn.epd.EncodeProcessDecode", "_partial_": True},
@@ -49,9 +59,10 @@ FLAT_KEYS = {
 
 def model_of_today(model: DictConfig) -> DictConfig:
     """``model`` (a run's ``model`` node) in today's layout: a moved target renamed; a flat
-    model (no ``network`` node: an earlier physgnn's) with the keys it lacks at its own model's
-    values (:data:`EARLIER_MODEL`) and its network and graph keys moved into their nodes
-    (:data:`FLAT_KEYS`). A model of today's layout comes back as it is."""
+        model (no ``network`` node: an earlier physgnn's) with the keys it lacks at its own model's
+        values (:data:`EARLIER_MODEL`) and its network and graph keys moved into their nodes
+        (:data:`FLAT_KEYS`); a learned simulator without the keys of the contact changes with its
+    own model's values (:data:`PREVIOUS_MODEL`). A model of today's layout comes back as it is."""
     flat = OmegaConf.to_container(model, resolve=False)
     if flat.get("_target_") in MOVED_TARGETS:
         flat["_target_"] = MOVED_TARGETS[flat["_target_"]]
@@ -63,6 +74,8 @@ def model_of_today(model: DictConfig) -> DictConfig:
             if key in flat:
                 nested[node][name] = flat[key]
         flat = nested
+    if flat.get("_target_") == LEARNED:
+        flat = PREVIOUS_MODEL | flat
     return OmegaConf.create(flat)
 
 

@@ -13,7 +13,8 @@ Loss of a batch of state pairs:
 - MSE over the 6 normalised outputs of every sphere (:mod:`physgnn.models.learned` explains the
   target); the 3 angular outputs of spheres whose scene has rotation off are left out, and
   with the simulator's gravity prior so is every sphere out of reach of a contact (its next
-  velocity is ballistic, not the network's).
+  velocity is ballistic, not the network's). The loss's graph is also built on the target
+  velocities (``truth_contacts``): a sphere that touches something in the truth is in reach.
 - The contact penalty and the contact noise: :mod:`physgnn.training.contacts` (lengths in
   units of the simulator's ``length_scale``, the mean sphere diameter).
 - ``E`` = kinetic + potential energy of a scene (:mod:`physgnn.physics.energy`, potential
@@ -103,6 +104,11 @@ class LitSimulator(L.LightningModule):
     pushes contacts within ``contact_touch`` in by up to ``contact_noise_depth`` with
     probability ``contact_noise_prob`` (0: off); all three lengths in units of the simulator's
     ``length_scale`` (:mod:`physgnn.training.contacts`).
+    ``truth_contacts``: the loss's graph is built on the state's motion and on its target
+    velocities (:meth:`losses`), so every contact of the truth has its edges and its spheres
+    count in the loss (a sphere the truth moves into another is never left out as out of
+    reach); the rebuild passes of a rollout find these edges from the model's own provisional
+    velocities (:class:`~physgnn.models.learned.LearnedSimulator`, ``contact_passes``).
     ``compile``: the regions of :meth:`compile_regions` are compiled (``compile_mode``; at
     most ``compile_shapes`` shapes: :mod:`physgnn.models.capture`); weights and checkpoints are
     the same as without (docs/PERFORMANCE.md has what it gains and costs).
@@ -129,6 +135,7 @@ class LitSimulator(L.LightningModule):
         compile: bool = False,
         compile_mode: str = "default",
         compile_shapes: int = 16,
+        truth_contacts: bool = True,
     ):
         super().__init__()
         values = dict(
@@ -153,6 +160,7 @@ class LitSimulator(L.LightningModule):
         self.noise_rest_scale, self.lambda_rest = float(noise_rest_scale), float(lambda_rest)
         self.contact_tol, self.contact_noise_prob = float(contact_tol), float(contact_noise_prob)
         self.contact_noise = (float(contact_noise_depth), float(contact_touch))
+        self.truth_contacts = bool(truth_contacts)
         if compile:
             self.compile_regions(compile_mode, compile_shapes)
         self._finite, self._train_means = FiniteWatch(), EpochMeans()
@@ -170,19 +178,24 @@ class LitSimulator(L.LightningModule):
         compile_in_place(self, mode, True, shapes, method="graph_losses", **options)
 
     def losses(self, state) -> dict[str, torch.Tensor]:
-        """``{"loss", "loss_mse", "loss_energy", "energy_share", "loss_contact"}`` of a batch
-        (no noise added here); ``energy_share`` = ``λ·energy / loss``, the part of the loss the
-        energy term is (logged, so that a λ sweep shows whether the term mattered at all)."""
-        return self.graph_losses(state, self.simulator.graph_builder(state))
+        """``{"loss", "loss_mse", "loss_energy", "energy_share", "loss_contact", "loss_rest"}``
+        of a batch (no noise added here); ``energy_share`` = ``λ·energy / loss``, the part of
+        the loss the energy term is (logged, so that a λ sweep shows whether the term mattered
+        at all). With ``truth_contacts`` the graph is also built on the target velocities."""
+        provisional = (state.target_vel,) if self.truth_contacts else ()
+        graph = self.simulator.graph_builder(state, provisional)
+        return self.graph_losses(state, graph, provisional)
 
-    def graph_losses(self, state, graph) -> dict[str, torch.Tensor]:
-        """:meth:`losses` on ``graph``, built from ``state``."""
+    def graph_losses(self, state, graph, provisional=()) -> dict[str, torch.Tensor]:
+        """:meth:`losses` on ``graph``, built from ``state`` with ``provisional`` velocities."""
         sim = self.simulator
-        pred = sim.network_prediction(state, graph)
+        where = sim.reach(state, graph, provisional) if sim.gravity_prior else None
+        reach = None if where is None else where.spheres
+        pred = sim.network_prediction(state, graph, None if where is None else where.planes)
         target = sim.normalized_target(state)
-        reach = sim.in_reach(state, graph) if sim.gravity_prior else None
         mse = masked_mse(pred[:, :OUTPUTS], target, sim.rotating(state), reach)
-        vel_next, _ = sim.to_physical(state, pred, reach)
+        supported = None if where is None else where.supported
+        vel_next, _ = sim.to_physical(state, pred, reach, supported)
         energy = energy_increase(state, vel_next).mean()
         weighted = self.lambda_energy * energy
         tol = self.contact_tol * sim.length_scale

@@ -1,0 +1,81 @@
+"""Pair impulses: sphere–sphere interactions decoded as equal and opposite impulses, so that
+linear and angular momentum are conserved exactly, for any network weights.
+
+For a pp pair (i target, j source, ``n = p_i − p_j``, ``s = r_i + r_j``) the network's
+antisymmetric pair output ``f_ij = −f_ji`` (:class:`~physgnn.nn.pair_decoder.PairDecoder`,
+6 numbers, normalised) becomes
+
+- the impulse on i, ``P_ij = μ_ij · σ_v · f_ij[:3]`` with the reduced mass
+  ``μ_ij = m_i m_j / (m_i + m_j)`` (kg·m/s), and ``−P_ij`` on j;
+- applied at the contact point ``c_ij = p_i − (r_i/s)·n`` (where the surfaces meet for
+  touching spheres), i.e. the torques ``(c − p_i) × P = −(r_i/s)·n × P`` on i and
+  ``(c − p_j) × (−P) = −(r_j/s)·n × P`` on j;
+- and a couple ``C_ij = μ^I_ij · σ_ω · f_ij[3:]`` on i, ``−C_ij`` on j (rolling and spinning
+  friction), ``μ^I`` the reduced moment of inertia, ``I = 2/5 · m r²`` (solid spheres, as
+  pybullet's).
+
+So ``Δv_i = Σ_j P_ij / m_i`` and ``Δω_i = Σ_j ((c_ij − p_i) × P_ij + C_ij) / I_i``, and over
+the pair ``m_i Δv_i + m_j Δv_j = 0`` and
+``p_i × m_i Δv_i + I_i Δω_i + p_j × m_j Δv_j + I_j Δω_j = n × P − (r_i + r_j)/s · n × P = 0``.
+A sphere's change depends on masses only through ``m_j / (m_i + m_j)`` (mass-scale invariant).
+σ_v, σ_ω are the simulator's velocity-change scales (m/s, rad/s).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from physgnn.graph.builder import ballistic_velocity
+
+INERTIA_FACTOR = 0.4  # I = 2/5 m r² of a solid sphere
+
+
+def sphere_inertia(mass: torch.Tensor, radius: torch.Tensor) -> torch.Tensor:
+    """``[N]``: ``2/5 · m r²`` (kg·m²)."""
+    return INERTIA_FACTOR * mass * radius.square()
+
+
+def pair_changes(state, pp_index, pair_out, speed_scale, spin_scale, weight=None):
+    """``(Δv [N, 3], Δω [N, 3])`` of every sphere from the pair outputs (module doc).
+
+    ``pp_index [2, E]`` in the paired layout; ``pair_out [E/2, 6]``, row e the output for
+    target ``pp_index[1, e]``; ``weight [E/2]`` (or None) multiplies each pair (0 for the
+    masked candidates of a fixed-capacity graph); ``speed_scale``, ``spin_scale``: σ_v, σ_ω."""
+    half = pp_index.shape[1] // 2
+    src, dst = pp_index[:, :half]
+    mass, radius, pos = state.mass, state.radius, state.pos
+    f = pair_out if weight is None else pair_out * weight[:, None]
+    m_i, m_j = mass[dst], mass[src]
+    impulse = (m_i * m_j / (m_i + m_j))[:, None] * speed_scale * f[:, :3]
+    inertia = sphere_inertia(mass, radius)
+    i_i, i_j = inertia[dst], inertia[src]
+    couple = (i_i * i_j / (i_i + i_j))[:, None] * spin_scale * f[:, 3:6]
+    centre = pos[dst] - pos[src]
+    share = (radius[dst] / (radius[dst] + radius[src]))[:, None]
+    lever = torch.linalg.cross(centre, impulse)
+    torque_i = -share * lever + couple
+    torque_j = -(1 - share) * lever - couple
+    n = pos.shape[0]
+    momentum = pos.new_zeros(n, 3).index_add_(0, dst, impulse).index_add_(0, src, -impulse)
+    spin = pos.new_zeros(n, 3).index_add_(0, dst, torque_i).index_add_(0, src, torque_j)
+    return momentum / mass[:, None], spin / inertia[:, None]
+
+
+def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch.Tensor:
+    """``[N, 6 (+1)]``: the normalised (Δv, Δω) of the :class:`LearnedSimulator` ``sim`` (its
+    statistics) from the network's ``node_out [N, 6 (+1)]`` and ``pair_out [E'/2, 6]`` (the
+    graph's pairs first; padding after): the pair impulses (:func:`pair_changes`), gravity, and
+    the node decoder's own change for spheres ``on_plane [N]`` only; then the node outputs past
+    the sixth (the rest logit) as they are."""
+    half = graph.pp_index.shape[1] // 2
+    weight = graph.pp_weight(pair_out)
+    weight = None if weight is None else weight[:half]
+    scales = sim.delta_speed_scale, sim.delta_spin_scale
+    dvel, dang = pair_changes(state, graph.pp_index, pair_out[:half], *scales, weight)
+    own = on_plane[:, None].to(node_out.dtype)
+    gravity = ballistic_velocity(state) - state.vel[:, 0]
+    dvel = dvel + gravity + own * node_out[:, :3] * sim.delta_vel_std
+    dang = dang + own * node_out[:, 3:6] * sim.delta_angvel_std
+    parts = [(dvel - sim.delta_vel_mean) / sim.delta_vel_std]
+    parts.append((dang - sim.delta_angvel_mean) / sim.delta_angvel_std)
+    return torch.cat(parts + [node_out[:, 6:]], 1)
