@@ -11,6 +11,7 @@ line naming the file and the fix.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -137,9 +138,12 @@ def _move_in(staging: Path, folder: Path) -> None:
 
 
 def write_hdf5(folder: str | Path, trajs: list[Trajectory]) -> Path:
-    """``<folder>/trajectories.h5`` in physgnn's dataset schema, written whole."""
+    """``<folder>/trajectories.h5`` in physgnn's dataset schema, written whole; each group
+    named as its trajectory (a ``/`` becomes ``_``), unless its ``attrs`` name a group."""
+    named = [dataclasses.replace(t, attrs={"group": t.name.replace("/", "_")} | t.attrs)
+             for t in trajs]  # fmt: skip
     with staged_folder(folder, "hdf5") as staging:
-        write_split(staging / HDF5_FILE, trajs, {"split": "export", "preset": "api"})
+        write_split(staging / HDF5_FILE, named, {"split": "export", "preset": "api"})
     return Path(folder) / HDF5_FILE
 
 

@@ -42,7 +42,7 @@ def _write(path: Path, points: np.ndarray, cells: tuple[str, np.ndarray], **data
     """One .vtu file: ``points [P, 3]``, one block of ``cells`` (meshio's kind, connectivity)
     and ``data`` (``point_data`` or ``cell_data``), binary and zlib-compressed."""
     mesh = meshio.Mesh(np.asarray(points, np.float32), [cells], **data)
-    meshio.write(path, mesh, file_format="vtu", binary=True, compression="zlib")
+    meshio.vtu.write(path, mesh, binary=True, compression="zlib")
 
 
 def plane_corners(plane: np.ndarray, cover: float) -> np.ndarray:
@@ -91,7 +91,7 @@ def _write_planes(path: Path, traj: Trajectory) -> None:
 def _read(path: Path) -> meshio.Mesh:
     """A .vtu file; a missing, truncated or foreign one is a one-line :class:`DatasetError`."""
     try:
-        return meshio.read(path, file_format="vtu")
+        return meshio.vtu.read(path)
     except Exception as e:  # meshio raises many kinds (ReadError, ParseError, KeyError, ...)
         first = (str(e).splitlines() or [""])[0] or type(e).__name__
         raise DatasetError(
