@@ -6,6 +6,8 @@ from __future__ import annotations
 import dataclasses
 import errno
 import json
+import subprocess
+import sys
 import zipfile
 
 import meshio
@@ -181,3 +183,15 @@ def test_a_foreign_npz_names_the_file(tmp_path):
     with pytest.raises(DatasetError, match="test.npz is missing, truncated or not a gns") as err:
         interchange.read_gns(tmp_path, "test", 0.5)
     one_line(err)
+
+
+def test_the_leftovers_of_a_killed_export_go_at_the_next_one(tmp_path):
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    leftovers = [tmp_path / f".out.partial-{dead.pid}-x1", tmp_path / f".out.old-{dead.pid}-x2"]
+    for path in leftovers:
+        path.mkdir()
+        (path / "spheres_00000.vtu").write_text("half")
+    (tmp_path / ".out.partial-notes").mkdir()  # not named as an export's: kept
+    pg.export(trajectory(), tmp_path / "out", "vtk")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".out.partial-notes", "out"]

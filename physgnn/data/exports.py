@@ -12,6 +12,7 @@ line naming the file and the fix.
 from __future__ import annotations
 
 import dataclasses
+import glob
 import json
 import os
 import shutil
@@ -25,7 +26,7 @@ import numpy as np
 from physgnn import __version__
 from physgnn.data.dataset import DatasetError, read_split, write_split
 from physgnn.errors import PhysgnnError
-from physgnn.files import OUTPUT_MARKER, write_json
+from physgnn.files import OUTPUT_MARKER, process_alive, write_json
 from physgnn.physics.trajectory import FRAME_KEYS, Trajectory
 
 HDF5_FILE = "trajectories.h5"
@@ -64,16 +65,17 @@ def check_exportable(trajs: list, what: str) -> list[Trajectory]:
 
 def _check_finite(traj: Trajectory, what: str) -> None:
     """A trajectory with NaN or inf (a diverged rollout) is refused, with its finite prefix."""
-    for key in (*FRAME_KEYS, "radius", "mass"):
-        values = np.asarray(getattr(traj, key))
-        bad = np.argwhere(~np.isfinite(values))
-        if len(bad):
-            frame = int(bad[0][0]) if key in FRAME_KEYS else None
-            fix = (f"export its finite frames: traj.truncated({frame})" if frame
-                   else "give finite values")  # fmt: skip
-            where = f" at frame {frame}" if key in FRAME_KEYS else ""
-            raise ExportError(f"{what}: trajectory '{traj.name}' holds {values[tuple(bad[0])]} "
-                              f"in {key}{where} (not finite): {fix}")  # fmt: skip
+    bad = {key: np.argwhere(~np.isfinite(np.asarray(getattr(traj, key))))
+           for key in ("radius", "mass", *FRAME_KEYS)}  # fmt: skip
+    bad = {key: where[0] for key, where in bad.items() if len(where)}
+    if bad:
+        key = min(bad, key=lambda k: bad[k][0] if k in FRAME_KEYS else -1)
+        value = np.asarray(getattr(traj, key))[tuple(bad[key])]
+        frame = int(bad[key][0]) if key in FRAME_KEYS else 0
+        where = f" at frame {frame}" if key in FRAME_KEYS else ""
+        fix = f"export its finite frames: traj.truncated({frame})" if frame else "give finite ones"
+        raise ExportError(f"{what}: trajectory '{traj.name}' holds {value} in {key}{where} "
+                          f"(not finite): {fix}")  # fmt: skip
     if not np.isfinite(traj.dt) or traj.dt <= 0:
         raise ExportError(f"{what}: trajectory '{traj.name}' has dt {traj.dt}: give dt > 0")
 
@@ -86,7 +88,8 @@ def staged_folder(folder: str | Path, fmt: str) -> Iterator[Path]:
     folder = Path(folder)
     check_replaceable(folder)
     folder.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.partial-", dir=folder.parent))
+    _remove_leftovers(folder)
+    staging = _beside(folder, "partial")
     try:
         yield staging
         files = sorted(p.name for p in staging.iterdir())
@@ -129,12 +132,27 @@ def _move_in(staging: Path, folder: Path) -> None:
     if not folder.exists():
         os.replace(staging, folder)
         return
-    aside = Path(tempfile.mkdtemp(prefix=f".{folder.name}.old-", dir=folder.parent))
+    aside = _beside(folder, "old")
     try:
         os.replace(folder, aside / folder.name)
         os.replace(staging, folder)
     finally:
         shutil.rmtree(aside, ignore_errors=True)
+
+
+def _beside(folder: Path, kind: str) -> Path:
+    """A new hidden folder ``.<name>.<kind>-<pid>-<random>`` beside ``folder``."""
+    prefix = f".{folder.name}.{kind}-{os.getpid()}-"
+    return Path(tempfile.mkdtemp(prefix=prefix, dir=folder.parent))
+
+
+def _remove_leftovers(folder: Path) -> None:
+    """The staging and set-aside folders of exports whose process died (killed mid-way)."""
+    for kind in ("partial", "old"):
+        for path in folder.parent.glob(f".{glob.escape(folder.name)}.{kind}-*-*"):
+            pid = path.name[len(f".{folder.name}.{kind}-") :].split("-")[0]
+            if pid.isdigit() and int(pid) != os.getpid() and not process_alive(int(pid)):
+                shutil.rmtree(path, ignore_errors=True)
 
 
 def write_hdf5(folder: str | Path, trajs: list[Trajectory]) -> Path:
