@@ -104,9 +104,8 @@ class Trajectory:
         pos = _finite("pos", _array("pos", pos, np.float32, (None, None, 3)))
         t, n = pos.shape[:2]
         dt = _positive("dt", dt, "seconds between frames")
-        radius = np.asarray(radius, np.float32)
+        radius = np.asarray(_positive("radius", radius, "metres"), np.float32)
         radius = _array("radius", radius if radius.ndim else np.full(n, radius), np.float32, (n,))
-        radius = _positive("radius", radius, "metres")
         quat = _frames("quat", quat, (t, n, 4), _identity(t, n))
         vel_fd, angvel_fd = _finite_velocities(pos, quat, dt)
         volume = 4 / 3 * np.pi * radius.astype(np.float64) ** 3
