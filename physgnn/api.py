@@ -29,8 +29,7 @@ from pathlib import Path
 
 from omegaconf import DictConfig
 
-from physgnn.data import interchange, vtk
-from physgnn.data.dataset import read_split, write_split
+from physgnn.data import exports, interchange, vtk
 from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.simulate import scene_metrics
 from physgnn.evaluation.video3d import render_side_by_side
@@ -44,7 +43,7 @@ from physgnn.training.runs import load_run
 
 FORMATS = ("vtk", "gns", "lagrangebench", "hdf5")
 trajectory_from_arrays = Trajectory.from_arrays
-load_trajectories = read_split
+load_trajectories = exports.load_trajectories
 
 
 class OutOfDistributionWarning(UserWarning):
@@ -136,21 +135,19 @@ def animate(truth: Trajectory, pred: Trajectory | None = None, stem: str | Path 
 def export(trajs: Trajectory | list[Trajectory], folder: str | Path, format: str = "vtk") -> Path:
     """Write ``trajs`` into ``folder`` as ``format``: ``vtk`` (one trajectory: ParaView files,
     returns the series file), ``gns`` or ``lagrangebench`` (a ``test`` split and
-    metadata.json), ``hdf5`` (physgnn's dataset schema, ``trajectories.h5``). What each format
-    cannot hold: docs/DATA.md."""
+    metadata.json), ``hdf5`` (physgnn's dataset schema, ``trajectories.h5``). The folder is
+    written whole, replacing an earlier export there; a folder holding other files is refused
+    (:mod:`physgnn.data.exports`). What each format cannot hold: docs/DATA.md."""
     trajs = [trajs] if isinstance(trajs, Trajectory) else list(trajs)
     if format not in FORMATS:
         raise SceneError(f"export format '{format}' is unknown; choose one of {list(FORMATS)}")
+    if format == "vtk" and len(trajs) > 1:
+        raise SceneError(f"export to vtk takes one trajectory, got {len(trajs)}: one folder each")
+    exports.check_exportable(trajs, f"export to {format}")
     if format == "vtk":
-        if len(trajs) != 1:
-            raise SceneError(
-                f"export to vtk takes one trajectory, got {len(trajs)}: one folder each"
-            )
         return vtk.write_vtk(trajs[0], folder)
     if format == "gns":
         return interchange.write_gns(folder, {"test": trajs})
     if format == "lagrangebench":
         return interchange.write_lagrangebench(folder, {"test": trajs})
-    return write_split(
-        Path(folder) / "trajectories.h5", trajs, {"split": "export", "preset": "api"}
-    )
+    return exports.write_hdf5(folder, trajs)

@@ -228,11 +228,27 @@ def _fresh_staging(folder: Path) -> Path:
 
 
 def _publish(staging: Path, folder: Path, outputs: tuple[str, ...]) -> None:
-    """The previous outputs out of ``folder``, the staged ones in."""
+    """The previous outputs out of ``folder``, the staged ones in. In a folder of the user's
+    (no :data:`OUTPUT_MARKER`: written with ``overwrite=true``) an output folder is merged
+    instead: only the files physgnn writes now are replaced, the user's others stay."""
     folder.mkdir(parents=True, exist_ok=True)
+    ours = (folder / OUTPUT_MARKER).is_file()
     for name in outputs:
         old = folder / name
+        if old.is_dir() and not ours:
+            continue
         shutil.rmtree(old) if old.is_dir() else old.unlink(missing_ok=True)
     for item in staging.iterdir():
-        if item.name != OUTPUT_MARKER:
-            os.replace(item, folder / item.name)
+        if item.name == OUTPUT_MARKER:
+            continue
+        target = folder / item.name
+        _merge(item, target) if target.is_dir() and item.is_dir() else os.replace(item, target)
+
+
+def _merge(source: Path, target: Path) -> None:
+    """Each file under ``source`` moved to its place under ``target``; other files stay."""
+    for path in sorted(source.rglob("*")):
+        if path.is_file():
+            place = target / path.relative_to(source)
+            place.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(path, place)

@@ -31,7 +31,7 @@ def test_the_example_notebook_runs(tmp_path, monkeypatch):
         names = runpy.run_path(str(ROOT / "examples" / "notebook.py"))
     assert any("two_drops lies outside" in str(w.message) for w in caught)
     out = tmp_path / "outputs" / "notebook"
-    assert (out / "throw.gif").is_file() and (out / "throw_vtk" / "spheres.vtp.series").is_file()
+    assert (out / "throw.gif").is_file() and (out / "throw_vtk" / "spheres.vtu.series").is_file()
     assert names["pred"].n_frames == names["FRAMES"] and names["scores"]["mse"] >= 0
 
 

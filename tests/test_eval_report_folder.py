@@ -53,3 +53,16 @@ def test_an_interrupted_eval_leaves_the_last_report(tmp_path, monkeypatch):
         evaluate_again(outputs, "videos=false")
     after = {p.name: p.read_bytes() for p in report.parent.iterdir() if p.is_file()}
     assert after == before and not (outputs / "report.partial").exists()
+
+
+def test_overwrite_into_a_folder_of_yours_keeps_your_files_in_rollouts_and_figures(tmp_path):
+    mine = tmp_path / "mine"
+    for name in ("notes.txt", "rollouts/my_solver/test.h5", "figures/my_plot.png"):
+        (mine / name).parent.mkdir(parents=True, exist_ok=True)
+        (mine / name).write_text("mine")
+    overrides = ("videos=false", "save_rollouts=true", "overwrite=true")
+    evaluate_fake_runs(tmp_path / "outputs", f"report_dir={mine}", *overrides)
+    for name in ("notes.txt", "rollouts/my_solver/test.h5", "figures/my_plot.png"):
+        assert (mine / name).read_text() == "mine", name
+    assert (mine / "rollouts" / "runs" / "baseline" / "2026-01-01_00-00-00" / "test.h5").is_file()
+    assert (mine / "figures" / "energy_ood.png").is_file() and (mine / "report.md").is_file()

@@ -74,40 +74,47 @@ def test_from_arrays_names_a_wrong_shape(kwargs, message):
 
 def test_vtk_round_trip(tmp_path):
     ref = mixed(frames=4)
-    series = vtk.write_vtk(ref, tmp_path)
+    series = vtk.write_vtk(ref, tmp_path / "out")
     files = json.loads(series.read_text())["files"]
-    assert [f["name"] for f in files] == [f"spheres_{k:05d}.vtp" for k in range(4)]
+    assert [f["name"] for f in files] == [f"spheres_{k:05d}.vtu" for k in range(4)]
     assert_close(T([f["time"] for f in files]), T([0.0, 0.1, 0.2, 0.3]), rtol=0, atol=1e-12)
-    back = vtk.read_vtk(tmp_path)
+    back = vtk.read_vtk(tmp_path / "out")
     for key in ("pos", "quat", "vel", "angvel", "radius", "mass", "material", "plane_kind"):
         assert_close(T(getattr(back, key)), T(getattr(ref, key)), rtol=0, atol=0, msg=key)
     assert_close(T(back.planes), T(ref.planes), rtol=1e-6, atol=1e-5)
     assert back.dt == pytest.approx(ref.dt)
 
 
-def test_vtk_files_are_well_formed_polydata(tmp_path):
+def test_vtk_files_are_binary_compressed_unstructured_grids(tmp_path):
     ref = mixed(n=3, frames=2)
-    vtk.write_vtk(ref, tmp_path)
-    piece = ET.parse(tmp_path / "spheres_00001.vtp").getroot().find("PolyData/Piece")
-    assert piece.get("NumberOfPoints") == "3" and piece.get("NumberOfVerts") == "3"
-    names = {a.get("Name") for a in piece.iter("DataArray")}
-    assert {"radius", "velocity", "angular_velocity", "orientation"} <= names
-    planes = ET.parse(tmp_path / "planes.vtp").getroot().find("PolyData/Piece")
+    vtk.write_vtk(ref, tmp_path / "out")
+    root = ET.parse(tmp_path / "out" / "spheres_00001.vtu").getroot()
+    assert root.get("type") == "UnstructuredGrid"
+    assert root.get("compressor") == "vtkZLibDataCompressor"
+    piece = root.find("UnstructuredGrid/Piece")
+    assert piece.get("NumberOfPoints") == "3" and piece.get("NumberOfCells") == "3"
+    arrays = list(piece.iter("DataArray"))
+    assert {a.get("format") for a in arrays} == {"binary"}
+    assert {"radius", "velocity", "angular_velocity", "orientation"} <= {
+        a.get("Name") for a in arrays}  # fmt: skip
+    planes = ET.parse(tmp_path / "out" / "planes.vtu").getroot().find("UnstructuredGrid/Piece")
     assert planes.get("NumberOfPoints") == str(4 * len(ref.planes))
-    assert planes.get("NumberOfPolys") == str(len(ref.planes))
+    assert planes.get("NumberOfCells") == str(len(ref.planes))
 
 
 def test_gns_round_trip_and_metadata(tmp_path):
     splits = {"train": [mixed(0), mixed(1, n=2, frames=5)], "test": [mixed(2)]}
-    interchange.write_gns(tmp_path, splits)
-    with np.load(tmp_path / "train.npz", allow_pickle=True) as data:
-        pos, types = data["simulation_trajectory_1"]
+    interchange.write_gns(tmp_path / "out", splits)
+    with np.load(tmp_path / "out" / "train.npz", allow_pickle=True) as data:
+        pos, types, restitution = data["simulation_trajectory_1"]
     assert pos.shape == (5, 2, 3) and types.tolist() == [5, 6]  # GNS type 3 is kinematic
-    back = interchange.read_gns(tmp_path, "train", radius=0.5)
+    assert_close(T(restitution), T([0.5, 0.9]))  # the materials' restitution
+    back = interchange.read_gns(tmp_path / "out", "train", radius=0.5)
     for ref, got in zip(splits["train"], back, strict=True):
         np.testing.assert_array_equal(got.pos, ref.pos)
         np.testing.assert_array_equal(got.material, ref.material)
-    meta = json.loads((tmp_path / "metadata.json").read_text())
+        np.testing.assert_array_equal(got.materials, ref.materials)
+    meta = json.loads((tmp_path / "out" / "metadata.json").read_text())
     steps = np.concatenate([np.diff(t.pos.astype(np.float64), axis=0).reshape(-1, 3)
                             for t in [*splits["train"], *splits["test"]]])  # fmt: skip
     assert_close(T(meta["vel_mean"], dtype=torch.float64), T(steps.mean(0)))
@@ -116,14 +123,13 @@ def test_gns_round_trip_and_metadata(tmp_path):
 
 def test_lagrangebench_round_trip(tmp_path):
     splits = {"train": [mixed(0)], "val": [mixed(1)], "test": [mixed(2), mixed(3)]}
-    interchange.write_lagrangebench(tmp_path, splits)
-    assert sorted(p.name for p in tmp_path.iterdir()) == [
-        "metadata.json", "test.h5", "train.h5", "valid.h5"]  # fmt: skip
-    with h5py.File(tmp_path / "test.h5") as f:
+    out = interchange.write_lagrangebench(tmp_path / "out", splits)
+    assert sorted(p.name for p in out.iterdir()) == [
+        "metadata.json", "physgnn-output.json", "test.h5", "train.h5", "valid.h5"]  # fmt: skip
+    with h5py.File(out / "test.h5") as f:
         assert sorted(f) == ["00000", "00001"] and f["00001/position"].shape == (6, 3, 3)
-    back = interchange.read_lagrangebench(tmp_path, "test", radius=splits["test"][1].radius)
-    np.testing.assert_array_equal(back[1].pos, splits["test"][1].pos)
-    np.testing.assert_array_equal(back[1].radius, splits["test"][1].radius)
-    np.testing.assert_array_equal(back[1].material, splits["test"][1].material)
-    meta = json.loads((tmp_path / "metadata.json").read_text())
+    back = interchange.read_lagrangebench(out, "test", radius=splits["test"][1].radius)
+    for key in ("pos", "radius", "material", "materials"):
+        np.testing.assert_array_equal(getattr(back[1], key), getattr(splits["test"][1], key))
+    meta = json.loads((out / "metadata.json").read_text())
     assert meta["sequence_length_valid"] == 6 and meta["num_particles_max"] == 3

@@ -1,26 +1,34 @@
 """Trajectories in the particle formats of GNS and LagrangeBench, and back.
 
-Both formats hold particle positions and one integer type per particle, nothing else; a
-folder holds one file per split and a ``metadata.json`` that both share in spirit:
+Both formats hold particle positions and one integer type per particle; a folder holds one
+file per split and a ``metadata.json``. Each folder is written whole
+(:func:`physgnn.data.exports.staged_folder`). The types follow each reader's conventions:
 
-- GNS (``learning_to_simulate`` / the PyTorch GNS): ``<split>.npz`` with one entry
-  ``simulation_trajectory_<i>`` per trajectory, the pair ``(positions [T, N, 3] float32,
-  particle_type [N] int64)`` (a pickled object array: read it with ``allow_pickle=True``).
-  The particle type is the sphere's material id plus :data:`GNS_TYPE_OFFSET`: GNS treats
-  type 3 as kinematic (fixed) particles, which a sphere never is.
-- LagrangeBench: ``<split>.h5`` (splits ``train``, ``valid``, ``test``) with one group per
-  trajectory (``00000``, …) holding ``position [T, N, 3]`` and ``particle_type [N]`` (the
-  material id; LagrangeBench's 0 is its moving fluid particle).
+- GNS (``learning_to_simulate`` / the PyTorch GNS, geoelements/gns ``gns/data_loader.py``):
+  ``<split>.npz`` with one entry ``simulation_trajectory_<i>`` per trajectory, the triple
+  ``(positions [T, N, 3] float32, particle_type [N] int64, material_property [N] float32)``
+  (a pickled object array: read it with ``allow_pickle=True``). GNS embeds 9 particle types
+  and type 3 is its kinematic (fixed) particle, which a sphere never is: material ``k`` is
+  type ``GNS_TYPES[k]`` (DeepMind's datasets use 5, 6, 7 for water, sand, goop), so at most 8
+  materials. ``material_property`` is each sphere's restitution.
+- LagrangeBench (``lagrangebench/data/data.py``): ``<split>.h5`` (splits ``train``,
+  ``valid``, ``test``) with one group per trajectory (``00000``, …) holding ``position
+  [T, N, 3]`` and ``particle_type [N]``, 0 for every sphere: LagrangeBench's moving particle
+  (its types 1 and 2 are fixed and moving walls, ``lagrangebench/utils.py``). The material id
+  is the extra array ``material [N]`` beside them. LagrangeBench reads one length per split
+  (its first trajectory's): a split of trajectories of different lengths is refused.
 
 ``metadata.json``: ``dim`` 3, ``dt``, ``bounds`` (per axis, of every position),
-``sequence_length`` (and LagrangeBench's ``sequence_length_<split>``: the shortest trajectory
-of the split), ``default_connectivity_radius`` (three times the largest radius),
-``num_particles_max``, ``periodic_boundary_conditions`` (all false) and the statistics of
-velocity and acceleration in the formats' own units: position change per frame, and its
-change per frame (``vel_mean``, ``vel_std``, ``acc_mean``, ``acc_std``, per axis).
+``sequence_length`` (and ``sequence_length_<split>``: the shortest trajectory of the split),
+``default_connectivity_radius`` (three times the largest radius), ``dx`` (the side of a cube
+of a sphere's mean volume: LagrangeBench's ``e_kin`` weighs each particle by ``dx**dim``),
+``num_particles_max``, ``periodic_boundary_conditions`` (all false), ``write_every`` 1, the
+statistics of velocity and acceleration in the formats' own units: position change per frame,
+and its change per frame (``vel_mean``, ``vel_std``, ``acc_mean``, ``acc_std``, per axis), and
+physgnn's ``materials`` (``{split: [table [K, 4] per trajectory]}``, columns
+``material_columns``) that the readers below restore.
 
-Reading back needs what the formats drop: the radius (``radius``) and, for GNS, ``dt`` is in
-the metadata. See docs/DATA.md for what each format cannot hold.
+Reading back needs what the formats drop: the radius (``radius``). See docs/DATA.md.
 """
 
 from __future__ import annotations
@@ -31,11 +39,16 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from physgnn.files import atomic_path, write_json
+from physgnn.data.dataset import DatasetError
+from physgnn.data.exports import ExportError, staged_folder
+from physgnn.physics.scene import Material
 from physgnn.physics.trajectory import Trajectory
 
-GNS_TYPE_OFFSET = 5
+# The GNS particle type of material 0, 1, ...: GNS's 9 types less its kinematic type 3.
+GNS_TYPES = (5, 6, 7, 8, 0, 1, 2, 4)
+LAGRANGEBENCH_MOVING = 0
 LAGRANGEBENCH_SPLITS = {"train": "train", "val": "valid", "test": "test"}
+MATERIAL_COLUMNS = list(Material.__dataclass_fields__)
 
 
 def metadata(splits: dict[str, list[Trajectory]]) -> dict:
@@ -45,15 +58,19 @@ def metadata(splits: dict[str, list[Trajectory]]) -> dict:
     steps = [np.diff(t.pos.astype(np.float64), axis=0) for t in trajs]
     vel = np.concatenate([s.reshape(-1, 3) for s in steps])
     acc = np.concatenate([np.diff(s, axis=0).reshape(-1, 3) for s in steps])
+    radii = np.concatenate([t.radius for t in trajs]).astype(np.float64)
     out = {
         "dim": 3, "dt": float(trajs[0].dt), "solver": "pybullet (physgnn)",
         "bounds": np.stack([pos.min(0), pos.max(0)], axis=1).tolist(),
         "sequence_length": min(t.n_frames for t in trajs),
-        "default_connectivity_radius": 3.0 * max(float(t.radius.max()) for t in trajs),
+        "default_connectivity_radius": 3.0 * float(radii.max()),
+        "dx": float(np.cbrt(np.mean(4 / 3 * np.pi * radii**3))),
         "num_particles_max": max(t.n_spheres for t in trajs),
         "periodic_boundary_conditions": [False, False, False], "write_every": 1,
         "vel_mean": vel.mean(0).tolist(), "vel_std": vel.std(0).tolist(),
         "acc_mean": acc.mean(0).tolist(), "acc_std": acc.std(0).tolist(),
+        "material_columns": MATERIAL_COLUMNS,
+        "materials": {k: [t.materials.tolist() for t in v] for k, v in splits.items()},
     }  # fmt: skip
     for split, items in splits.items():
         out[f"sequence_length_{split}"] = min(t.n_frames for t in items)
@@ -62,63 +79,141 @@ def metadata(splits: dict[str, list[Trajectory]]) -> dict:
 
 def write_gns(folder: str | Path, splits: dict[str, list[Trajectory]]) -> Path:
     """``<folder>/<split>.npz`` per split and ``metadata.json``; returns the folder."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    for split, trajs in splits.items():
-        entries = {}
-        for i, traj in enumerate(trajs):
-            pair = np.empty(2, dtype=object)
-            pair[0] = traj.pos.astype(np.float32)
-            pair[1] = traj.material.astype(np.int64) + GNS_TYPE_OFFSET
-            entries[f"simulation_trajectory_{i}"] = pair
-        with atomic_path(folder / f"{split}.npz") as tmp, open(tmp, "wb") as f:
-            np.savez_compressed(f, **entries)
-    write_json(folder / "metadata.json", metadata(splits))
-    return folder
+    for trajs in splits.values():
+        for traj in trajs:
+            if traj.material.max(initial=0) >= len(GNS_TYPES):
+                raise ExportError(
+                    f"export to gns: trajectory '{traj.name}' has material id "
+                    f"{int(traj.material.max())}, GNS embeds {len(GNS_TYPES)} moving particle "
+                    f"types (0-8 but its kinematic 3): use at most {len(GNS_TYPES)} materials"
+                )
+    with staged_folder(folder, "gns") as staging:
+        for split, trajs in splits.items():
+            entries = {f"simulation_trajectory_{i}": _gns_entry(t) for i, t in enumerate(trajs)}
+            with open(staging / f"{split}.npz", "wb") as f:
+                np.savez_compressed(f, **entries)
+        (staging / "metadata.json").write_text(json.dumps(metadata(splits), indent=2))
+    return Path(folder)
+
+
+def _gns_entry(traj: Trajectory) -> np.ndarray:
+    """The triple (positions, particle_type, material_property) as GNS's reader takes it."""
+    entry = np.empty(3, dtype=object)
+    entry[0] = traj.pos.astype(np.float32)
+    entry[1] = np.asarray(GNS_TYPES, np.int64)[traj.material]
+    entry[2] = traj.materials[traj.material, 0].astype(np.float32)  # restitution
+    return entry
 
 
 def read_gns(folder: str | Path, split: str, radius: float | np.ndarray) -> list[Trajectory]:
     """The trajectories of ``<folder>/<split>.npz`` with spheres of ``radius`` (one number or
-    ``[N]``), ``dt`` from ``metadata.json``; orientation and velocities as
-    :meth:`~physgnn.physics.trajectory.Trajectory.from_arrays` makes them."""
+    ``[N]``), ``dt`` and the material tables from ``metadata.json``; orientation and velocities
+    as :meth:`~physgnn.physics.trajectory.Trajectory.from_arrays` makes them."""
     folder = Path(folder)
-    dt = json.loads((folder / "metadata.json").read_text())["dt"]
-    with np.load(folder / f"{split}.npz", allow_pickle=True) as data:
-        names = sorted(data.files, key=lambda k: int(k.rsplit("_", 1)[1]))
-        pairs = [data[k] for k in names]
+    meta = _metadata(folder)
+    path = folder / f"{split}.npz"
+    try:
+        with np.load(path, allow_pickle=True) as data:
+            names = sorted(data.files, key=lambda k: int(k.rsplit("_", 1)[1]))
+            entries = [data[k] for k in names]
+        material = [_gns_material(e[1]) for e in entries]
+    except Exception as e:  # a truncated zip, another npz, a pickle of something else
+        raise _unreadable(path, "gns", e) from None
+    tables = meta.get("materials", {}).get(split, [None] * len(entries))
     return [
-        Trajectory.from_arrays(pos, radius, dt, material=types - GNS_TYPE_OFFSET, name=name)
-        for name, (pos, types) in zip(names, pairs, strict=True)
+        _from_arrays(path, e[0], radius, meta["dt"], m, table, name)
+        for name, e, m, table in zip(names, entries, material, tables, strict=True)
     ]
+
+
+def _gns_material(types) -> np.ndarray:
+    """The material ids ``[N]`` of GNS particle types ``[N]`` (:data:`GNS_TYPES` inverted)."""
+    lookup = np.full(max(GNS_TYPES) + 1, -1)
+    lookup[list(GNS_TYPES)] = np.arange(len(GNS_TYPES))
+    material = lookup[np.broadcast_to(np.asarray(types, np.int64), np.shape(types))]
+    if (material < 0).any():
+        raise ValueError("particle type 3 is GNS's kinematic (fixed) particle, not a sphere")
+    return material
 
 
 def write_lagrangebench(folder: str | Path, splits: dict[str, list[Trajectory]]) -> Path:
     """``<folder>/{train,valid,test}.h5`` (from the splits ``train``, ``val``, ``test``; any
     other split keeps its name) and ``metadata.json``; returns the folder."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     named = {LAGRANGEBENCH_SPLITS.get(k, k): v for k, v in splits.items()}
     for split, trajs in named.items():
-        with atomic_path(folder / f"{split}.h5") as tmp, h5py.File(tmp, "w") as f:
-            for i, traj in enumerate(trajs):
-                group = f.create_group(f"{i:05d}")
-                group.create_dataset("position", data=traj.pos.astype(np.float32))
-                group.create_dataset("particle_type", data=traj.material.astype(np.int64))
-    write_json(folder / "metadata.json", metadata(named))
-    return folder
+        lengths = sorted({t.n_frames for t in trajs})
+        if len(lengths) > 1:
+            raise ExportError(
+                f"export to lagrangebench: split {split} holds trajectories of {lengths[0]} "
+                f"to {lengths[-1]} frames; LagrangeBench reads one length per split: cut them "
+                f"to {lengths[0]} (traj.truncated({lengths[0]})) or export them apart"
+            )
+    with staged_folder(folder, "lagrangebench") as staging:
+        for split, trajs in named.items():
+            with h5py.File(staging / f"{split}.h5", "w") as f:
+                for i, traj in enumerate(trajs):
+                    group = f.create_group(f"{i:05d}")
+                    group.create_dataset("position", data=traj.pos.astype(np.float32))
+                    moving = np.full(traj.n_spheres, LAGRANGEBENCH_MOVING, np.int64)
+                    group.create_dataset("particle_type", data=moving)
+                    group.create_dataset("material", data=traj.material.astype(np.int64))
+        (staging / "metadata.json").write_text(json.dumps(metadata(named), indent=2))
+    return Path(folder)
 
 
 def read_lagrangebench(
     folder: str | Path, split: str, radius: float | np.ndarray
 ) -> list[Trajectory]:
     """The trajectories of ``<folder>/<split>.h5`` (``split``: train, valid or test) with
-    spheres of ``radius``, ``dt`` from ``metadata.json``."""
+    spheres of ``radius``, ``dt`` and the material tables from ``metadata.json``."""
     folder = Path(folder)
-    dt = json.loads((folder / "metadata.json").read_text())["dt"]
-    with h5py.File(folder / f"{split}.h5", "r") as f:
-        return [
-            Trajectory.from_arrays(
-                f[k]["position"][()], radius, dt, material=f[k]["particle_type"][()], name=k
-            )  # fmt: skip
-            for k in sorted(f.keys())
-        ]
+    meta = _metadata(folder)
+    path = folder / f"{split}.h5"
+    try:
+        with h5py.File(path, "r") as f:
+            keys = sorted(f.keys())
+            groups = [(f[k]["position"][()], _lb_material(f[k])) for k in keys]
+    except Exception as e:  # a truncated file, not HDF5, groups of another layout
+        raise _unreadable(path, "lagrangebench", e) from None
+    tables = meta.get("materials", {}).get(split, [None] * len(keys))
+    return [
+        _from_arrays(path, pos, radius, meta["dt"], material, table, key)
+        for key, (pos, material), table in zip(keys, groups, tables, strict=True)
+    ]
+
+
+def _lb_material(group) -> np.ndarray:
+    """A group's material ids: physgnn's ``material``, else 0 (a LagrangeBench dataset's)."""
+    if "material" in group:
+        return group["material"][()]
+    return np.zeros(len(group["particle_type"]), np.int64)
+
+
+def _metadata(folder: Path) -> dict:
+    """``<folder>/metadata.json`` with its ``dt``; else a one-line :class:`DatasetError`."""
+    path = folder / "metadata.json"
+    try:
+        meta = json.loads(path.read_text())
+        meta["dt"] = float(meta["dt"])
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise _unreadable(path, "metadata", e) from None
+    return meta
+
+
+def _unreadable(path: Path, what: str, err: Exception) -> DatasetError:
+    first = (str(err).splitlines() or [""])[0] or type(err).__name__
+    return DatasetError(
+        f"{path} is missing, truncated or not a {what} file of an export "
+        f"({type(err).__name__}: {first}): give the folder physgnn.api.export wrote, whole"
+    )
+
+
+def _from_arrays(path: Path, pos, radius, dt, material, table, name: str) -> Trajectory:
+    """:meth:`Trajectory.from_arrays`, its errors naming ``path``."""
+    if table is None:  # a dataset not of physgnn: default materials, one per id
+        table = np.tile(Material().as_array(), (int(np.max(material, initial=0)) + 1, 1))
+    try:
+        return Trajectory.from_arrays(pos, radius, dt, material=material, name=name,
+                                      materials=np.asarray(table, np.float32))  # fmt: skip
+    except ValueError as e:
+        raise DatasetError(f"{path}: {e}") from None

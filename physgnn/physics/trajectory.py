@@ -98,11 +98,14 @@ class Trajectory:
         differences of pos and quat (frame 0 takes frame 1's, or zero for one frame); mass
         ``[N]`` from :data:`DEFAULT_DENSITY`; material ``[N]`` 0 with materials ``[K, 4]`` one
         default :class:`~physgnn.physics.scene.Material`; planes ``[S, 11]`` and plane_kind
-        ``[S]`` the ground alone. A wrong shape raises a one-line ``SceneError``.
+        ``[S]`` the ground alone. A wrong shape, a dt or radius not > 0, or a value not finite
+        (NaN, inf) raises a one-line ``SceneError``.
         """
-        pos = _array("pos", pos, np.float32, (None, None, 3))
+        pos = _finite("pos", _array("pos", pos, np.float32, (None, None, 3)))
         t, n = pos.shape[:2]
-        radius = np.broadcast_to(np.asarray(radius, np.float32), (n,)).copy()
+        dt = _positive("dt", dt, "seconds between frames")
+        radius = np.asarray(_positive("radius", radius, "metres"), np.float32)
+        radius = _array("radius", radius if radius.ndim else np.full(n, radius), np.float32, (n,))
         quat = _frames("quat", quat, (t, n, 4), _identity(t, n))
         vel_fd, angvel_fd = _finite_velocities(pos, quat, dt)
         volume = 4 / 3 * np.pi * radius.astype(np.float64) ** 3
@@ -135,8 +138,38 @@ def _array(key: str, value, dtype, shape: tuple) -> np.ndarray:
 
 
 def _frames(key: str, value, shape: tuple, default, dtype=np.float32) -> np.ndarray:
-    """:func:`_array` of ``value``, or of ``default`` when ``value`` is None."""
-    return _array(key, default if value is None else value, dtype, shape)
+    """:func:`_array` of ``value``, or of ``default`` when ``value`` is None; finite (planes:
+    not NaN, an infinite half length is an unbounded plane)."""
+    arr = _array(key, default if value is None else value, dtype, shape)
+    _finite(key, np.where(np.isposinf(arr), 0, arr) if key == "planes" else arr)
+    return arr
+
+
+def _finite(key: str, arr: np.ndarray) -> np.ndarray:
+    """``arr``, once every value is finite; else a ``SceneError`` naming the first bad one."""
+    bad = np.argwhere(~np.isfinite(arr)) if arr.dtype.kind == "f" else ()
+    if len(bad):
+        index = bad[0].tolist()
+        where = f"frame {index[0]}, sphere {index[1]}" if arr.ndim >= 3 else f"index {index}"
+        raise SceneError(f"Trajectory.from_arrays: {key} holds {arr[tuple(index)]} at {where} "
+                         f"({len(bad)} values not finite): give finite numbers")  # fmt: skip
+    return arr
+
+
+def _positive(key: str, value, unit: str):
+    """``value`` (a number, or an array ``[N]``) once each is finite and > 0; else a
+    ``SceneError`` naming the first that is not."""
+    try:
+        arr = np.asarray(value, np.float64)
+    except (TypeError, ValueError):
+        arr = np.array(np.nan)
+    good = np.isfinite(arr) & (arr > 0)
+    if not good.all():
+        first = int(np.flatnonzero(~good)[0])
+        got = value if arr.ndim == 0 else f"{arr.flat[first]:g} (sphere {first})"
+        raise SceneError(f"Trajectory.from_arrays: {key} must be a number > 0 ({unit}), "
+                         f"got {got!s}")  # fmt: skip
+    return float(arr) if arr.ndim == 0 else np.asarray(value)
 
 
 def _identity(t: int, n: int) -> np.ndarray:

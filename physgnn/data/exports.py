@@ -1,0 +1,181 @@
+"""Exports written whole: what :func:`physgnn.api.export` checks first and where it writes.
+
+An export folder is written into a staging folder beside it (``.<name>.partial-*``) and moved
+in at the end, replacing the previous folder whole: a failure mid-way (a full disk) leaves the
+previous export as it was, and a shorter export leaves no stale frame of a longer one. The
+folder gets :data:`~physgnn.files.OUTPUT_MARKER` listing its format and files; a folder is
+replaced only when it is absent, empty, or holds nothing but such an export's files. Any
+other folder (a file of the user's in it, or another command's output) is refused in one
+line naming the file and the fix.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import glob
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from physgnn import __version__
+from physgnn.data.dataset import DatasetError, read_split, write_split
+from physgnn.errors import PhysgnnError
+from physgnn.files import OUTPUT_MARKER, process_alive, write_json
+from physgnn.physics.trajectory import FRAME_KEYS, Trajectory
+
+HDF5_FILE = "trajectories.h5"
+# How each format reads back (the advice of load_trajectories given an export).
+READERS = {
+    "vtk": "physgnn.data.vtk.read_vtk('{folder}')",
+    "gns": "physgnn.data.interchange.read_gns('{folder}', 'test', radius)",
+    "lagrangebench": "physgnn.data.interchange.read_lagrangebench('{folder}', 'test', radius)",
+    "hdf5": f"physgnn.api.load_trajectories('{{folder}}/{HDF5_FILE}')",
+}
+
+
+class ExportError(PhysgnnError, ValueError):
+    """Trajectories an export cannot write (none, a name twice, values not finite, ...)."""
+
+
+def check_exportable(trajs: list, what: str) -> list[Trajectory]:
+    """``trajs`` once an export of them can be read back: at least one, each a
+    :class:`Trajectory` of finite values, no name twice; else :class:`ExportError`."""
+    if not trajs:
+        raise ExportError(f"{what} of no trajectory: give one Trajectory or a list of them")
+    seen = {}
+    for i, traj in enumerate(trajs):
+        if not isinstance(traj, Trajectory):
+            raise ExportError(f"{what}: item {i} is a {type(traj).__name__}, not a Trajectory")
+        if traj.name in seen:
+            raise ExportError(
+                f"{what}: trajectories {seen[traj.name]} and {i} are both named '{traj.name}' "
+                f"(a name identifies a trajectory in the files): rename one "
+                f"(dataclasses.replace(traj, name=...))"
+            )
+        seen[traj.name] = i
+        _check_finite(traj, what)
+    return trajs
+
+
+def _check_finite(traj: Trajectory, what: str) -> None:
+    """A trajectory with NaN or inf (a diverged rollout) is refused, with its finite prefix."""
+    bad = {key: np.argwhere(~np.isfinite(np.asarray(getattr(traj, key))))
+           for key in ("radius", "mass", *FRAME_KEYS)}  # fmt: skip
+    bad = {key: where[0] for key, where in bad.items() if len(where)}
+    if bad:
+        key = min(bad, key=lambda k: bad[k][0] if k in FRAME_KEYS else -1)
+        value = np.asarray(getattr(traj, key))[tuple(bad[key])]
+        frame = int(bad[key][0]) if key in FRAME_KEYS else 0
+        where = f" at frame {frame}" if key in FRAME_KEYS else ""
+        fix = f"export its finite frames: traj.truncated({frame})" if frame else "give finite ones"
+        raise ExportError(f"{what}: trajectory '{traj.name}' holds {value} in {key}{where} "
+                          f"(not finite): {fix}")  # fmt: skip
+    if not np.isfinite(traj.dt) or traj.dt <= 0:
+        raise ExportError(f"{what}: trajectory '{traj.name}' has dt {traj.dt}: give dt > 0")
+
+
+@contextmanager
+def staged_folder(folder: str | Path, fmt: str) -> Iterator[Path]:
+    """Yield an empty staging folder to write an export of format ``fmt`` into; at the end it
+    replaces ``folder`` whole (module doc). Refuses a folder it may not replace
+    (:class:`FileExistsError`, one line) before anything is written."""
+    folder = Path(folder)
+    check_replaceable(folder)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    _remove_leftovers(folder)
+    staging = _beside(folder, "partial")
+    try:
+        yield staging
+        files = sorted(p.name for p in staging.iterdir())
+        marker = {"physgnn_version": __version__, "export": fmt, "files": files}
+        write_json(staging / OUTPUT_MARKER, marker)
+        _move_in(staging, folder)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def check_replaceable(folder: Path) -> None:
+    """``folder`` is absent, empty, or an earlier export's with nothing else in it."""
+    if folder.exists() and not folder.is_dir():
+        raise FileExistsError(f"export folder {folder} is a file: choose a folder's name")
+    if not folder.exists():
+        return
+    marker = export_marker(folder)
+    ours = set(marker.get("files", [])) | ({OUTPUT_MARKER} if marker else set())
+    others = sorted(p.name for p in folder.iterdir() if p.name not in ours)
+    if others:
+        more = f" (and {len(others) - 1} more)" if len(others) > 1 else ""
+        raise FileExistsError(
+            f"export folder {folder} holds {others[0]}{more}, which no export wrote there: "
+            f"export into a new or empty folder, or move those files away"
+        )
+
+
+def export_marker(folder: Path) -> dict:
+    """The marker of an export folder (its ``export`` format and ``files``), else {}."""
+    try:
+        marker = json.loads((Path(folder) / OUTPUT_MARKER).read_text())
+    except (OSError, ValueError):
+        return {}
+    return marker if isinstance(marker, dict) and "export" in marker else {}
+
+
+def _move_in(staging: Path, folder: Path) -> None:
+    """``staging`` renamed to ``folder``; a previous ``folder`` is moved aside first, then
+    removed (renames only: nothing there is rewritten in place)."""
+    if not folder.exists():
+        os.replace(staging, folder)
+        return
+    aside = _beside(folder, "old")
+    try:
+        os.replace(folder, aside / folder.name)
+        os.replace(staging, folder)
+    finally:
+        shutil.rmtree(aside, ignore_errors=True)
+
+
+def _beside(folder: Path, kind: str) -> Path:
+    """A new hidden folder ``.<name>.<kind>-<pid>-<random>`` beside ``folder``."""
+    prefix = f".{folder.name}.{kind}-{os.getpid()}-"
+    return Path(tempfile.mkdtemp(prefix=prefix, dir=folder.parent))
+
+
+def _remove_leftovers(folder: Path) -> None:
+    """The staging and set-aside folders of exports whose process died (killed mid-way)."""
+    for kind in ("partial", "old"):
+        for path in folder.parent.glob(f".{glob.escape(folder.name)}.{kind}-*-*"):
+            pid = path.name[len(f".{folder.name}.{kind}-") :].split("-")[0]
+            if pid.isdigit() and int(pid) != os.getpid() and not process_alive(int(pid)):
+                shutil.rmtree(path, ignore_errors=True)
+
+
+def write_hdf5(folder: str | Path, trajs: list[Trajectory]) -> Path:
+    """``<folder>/trajectories.h5`` in physgnn's dataset schema, written whole; each group
+    named as its trajectory (a ``/`` becomes ``_``), unless its ``attrs`` name a group."""
+    named = [dataclasses.replace(t, attrs={"group": t.name.replace("/", "_")} | t.attrs)
+             for t in trajs]  # fmt: skip
+    with staged_folder(folder, "hdf5") as staging:
+        write_split(staging / HDF5_FILE, named, {"split": "export", "preset": "api"})
+    return Path(folder) / HDF5_FILE
+
+
+def load_trajectories(path: str | Path) -> list[Trajectory]:
+    """The trajectories of a physgnn HDF5 file (:func:`~physgnn.data.dataset.read_split`);
+    an export folder, or a file in one, is answered with the reader of its format."""
+    path = Path(path)
+    folder = path if path.is_dir() else path.parent
+    fmt = export_marker(folder).get("export")
+    if fmt and not (fmt == "hdf5" and path.is_file()):
+        reader = READERS[fmt].format(folder=folder)
+        raise DatasetError(f"{path} is a {fmt} export, not a physgnn HDF5 file: read it with "
+                           f"{reader}")  # fmt: skip
+    if path.is_dir():
+        raise DatasetError(f"{path} is a folder: give a physgnn HDF5 file (a dataset's test.h5, "
+                           f"simulate's simulate.h5, an hdf5 export's {HDF5_FILE})")  # fmt: skip
+    return read_split(path)
