@@ -34,6 +34,18 @@ from physgnn.groundtruth.scenefile import scene_from_dict
 from physgnn.physics.scene import STATIC, Scene, SceneError
 
 
+def _contact_scene(c: dict, rng: np.random.Generator) -> Scene | None:
+    """A dense scene with probability ``dense_fraction``, a rest scene with ``rest_fraction``,
+    else None (one draw; none when both are 0, so that such scenes stay as they were)."""
+    dense, rest = c.get("dense_fraction", 0.0), c.get("rest_fraction", 0.0)
+    if dense <= 0 and rest <= 0:
+        return None
+    u = rng.uniform()
+    if u < dense:
+        return dense_contact(c, rng)
+    return resting_contact(c, rng) if u < dense + rest else None
+
+
 def _box_size(c: dict, rng: np.random.Generator) -> tuple[int, float, float]:
     """``(N, arena side, highest centre)`` of a random_box scene (a pile scene or not)."""
     # The extra draw only when piles are asked for: scenes without them stay as they were.
@@ -69,13 +81,9 @@ def random_box(c: dict, rng: np.random.Generator) -> Scene:
             f"(got {c['radius_min']}, {c['radius_max']})"
         )
     # The extra draw only when dense scenes are asked for: scenes without them stay as they were.
-    dense, rest = c.get("dense_fraction", 0.0), c.get("rest_fraction", 0.0)
-    if dense > 0 or rest > 0:  # no draw without them: such scenes stay as they were
-        u = rng.uniform()
-        if u < dense:
-            return dense_contact(c, rng)
-        if u < dense + rest:
-            return resting_contact(c, rng)
+    contact = _contact_scene(c, rng)
+    if contact is not None:
+        return contact
     n, side, h_max = _box_size(c, rng)
     radius = rng.uniform(c["radius_min"], c["radius_max"], size=n)
     half = side / 2
@@ -94,10 +102,7 @@ def random_box(c: dict, rng: np.random.Generator) -> Scene:
     ang = rng.uniform(0, 2 * np.pi, size=n)
     speed = c["max_speed0"] * np.sqrt(rng.uniform(size=n))
     vel = np.stack([speed * np.cos(ang), speed * np.sin(ang), np.zeros(n)], axis=1)
-    w = rng.normal(size=(n, 3))
-    w *= (c["max_angvel0"] * rng.uniform(size=(n, 1)) ** (1 / 3)) / np.linalg.norm(
-        w, axis=1, keepdims=True
-    )
+    w = ball_vectors(rng, n, c["max_angvel0"])
     planes, kinds = arena_planes(side, c["wall_height"])
     return finish_scene(c, pos, radius, rng, planes, kinds, vel=vel, angvel=w)
 
