@@ -67,3 +67,31 @@ def test_states_and_batches_carry_plane_materials():
     want = torch.tensor([[0.6, 1.0, 0.0, 0.0], PLANE_MATERIAL])
     torch.testing.assert_close(batch.plane_materials, want)
     assert batch.plane_materials.shape == (batch.planes.shape[0], 4)
+
+
+def test_scene_files_keep_plane_restitutions(tmp_path):
+    from test_rest_scenes import family
+
+    from physgnn.groundtruth.families import build_scene
+    from physgnn.groundtruth.scenefile import load_scene, scene_to_dict, write_scene
+
+    scene = build_scene(family(), np.random.default_rng(1))  # a drawn plane restitution
+    back = load_scene(write_scene(tmp_path / "s.yaml", scene))
+    np.testing.assert_allclose(back.plane_materials, scene.plane_materials, atol=1e-7)
+    d = scene_to_dict(scene)
+    assert d["ground_restitution"] == d["planes"][0]["restitution"] < 1
+    plain = build_scene(family(plane_restitution=None), np.random.default_rng(1))
+    d = scene_to_dict(plain)
+    assert "ground_restitution" not in d and "restitution" not in d["planes"][0]
+    assert load_scene(write_scene(tmp_path / "p.yaml", plain)).plane_materials is None
+    plain.plane_materials = np.tile([0.5, 0.3, 0.0, 0.0], (5, 1))
+    with pytest.raises(SceneError, match="holds a plane's restitution only"):
+        scene_to_dict(plain)
+
+
+def test_a_plane_restitution_outside_0_1_is_one_line():
+    from physgnn.groundtruth.scenefile import scene_from_dict
+
+    d = {"spheres": [{"radius": 0.5, "position": [0, 0, 2]}], "ground_restitution": 1.5}
+    with pytest.raises(SceneError, match=r"scene: ground_restitution: must be in \[0, 1\]"):
+        scene_from_dict(d)
