@@ -21,8 +21,9 @@ from physgnn.physics.scene import SceneError
 
 REST_KINDS = ("column", "pyramid", "hex_layers", "deposit")
 COLUMN_CLEARANCE = 0.1  # m: least surface gap between two columns (they never touch)
-# Layers of a pyramid or of hexagonal layers: with a third, the bottom spheres roll out in
-# pybullet within seconds (as conf/scene/resting_pile.yaml says); two mostly hold.
+# Layers of a pyramid or of hexagonal layers. Measured in pybullet (drawn materials, no nudge):
+# with three, the bottom spheres roll out (2 of 2 of each collapsed, as resting_pile.yaml says
+# of its pyramid); with two, 3 of 4 pyramids held and 0 of 4 hexagonal patches did.
 LATTICE_LAYERS = 2
 TRIES = 1000  # random places tried for a column or a ground sphere before giving up
 INSIDE_MARGIN = 0.05  # least barycentric weight of a deposited sphere over its three supports
