@@ -34,7 +34,8 @@ def test_every_config_builds_a_valid_scene_with_declared_effects(name):
     assert scene.name == name
     assert scene.effects.as_dict() == cfg["effects"]
     assert scene.plane_kind[0] == GROUND and np.all(scene.planes[0, :3] == 0)
-    assert len(scene.materials) == len(cfg["materials"])
+    drawn = cfg.get("material_ranges") is not None
+    assert len(scene.materials) == (cfg["materials_per_scene"] if drawn else len(cfg["materials"]))
     np.testing.assert_allclose(np.linalg.norm(scene.quat, axis=1), 1.0, atol=1e-6)
     np.testing.assert_allclose(scene.mass, 1000.0 * 4 / 3 * np.pi * scene.radius**3, rtol=1e-5)
 
@@ -103,7 +104,7 @@ def test_impossible_spawn_is_one_line():
         ("random_box", {"radius_min": -0.5}, "radius_min"),
         ("ood_cubes", {"radius": -0.5}, "radius must be > 0"),
         ("ood_spaced_drop", {"spacing": 0.5}, "must exceed the diameter"),
-        ("random_box", {"materials": []}, "at least one material"),
+        ("random_box", {"material_ranges": None, "materials": []}, "at least one material"),
         ("ood_cubes", {"effects": {"gravity": True, "magnetism": True}}, "unknown effect"),
     ],
 )

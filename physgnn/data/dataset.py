@@ -29,6 +29,8 @@ from physgnn.physics.trajectory import Trajectory
 SCHEMA_VERSION = 1
 FRAME_FIELDS = ("pos", "quat", "vel", "angvel")
 STATIC_FIELDS = ("radius", "mass", "material", "materials", "planes", "plane_kind")
+# Written when a trajectory has it; a file without it reads as None (the default planes).
+OPTIONAL_FIELDS = ("plane_materials",)
 STD_FLOOR = 1e-6
 # Chunks hold this many frames of one trajectory (time-major, so a window is one read).
 CHUNK_FRAMES = 64
@@ -89,7 +91,8 @@ def _write_traj(group: h5py.Group, traj: Trajectory) -> None:
         arr = np.ascontiguousarray(getattr(traj, key), dtype=np.float32)
         chunk = (min(t, CHUNK_FRAMES), *arr.shape[1:])
         group.create_dataset(key, data=arr, chunks=chunk, compression="gzip", compression_opts=4)
-    for key in STATIC_FIELDS:
+    optional = [k for k in OPTIONAL_FIELDS if getattr(traj, k) is not None]
+    for key in (*STATIC_FIELDS, *optional):
         arr = np.asarray(getattr(traj, key))
         dtype = np.int64 if key in ("material", "plane_kind") else np.float32
         group.create_dataset(key, data=arr.astype(dtype))
@@ -147,16 +150,12 @@ def _read_traj(path: Path, name: str, g: h5py.Group) -> Trajectory:
     if missing:
         raise DatasetError(f"{where}: missing field(s) {missing} (schema v{SCHEMA_VERSION})")
     data = {k: g[k][()] for k in FRAME_FIELDS + STATIC_FIELDS}
+    data |= {k: g[k][()] if k in g else None for k in OPTIONAL_FIELDS}
     t, n = data["pos"].shape[:2]
-    shapes = {
-        "pos": (t, n, 3),
-        "quat": (t, n, 4),
-        "vel": (t, n, 3),
-        "angvel": (t, n, 3),
-        "radius": (n,),
-        "mass": (n,),
-        "material": (n,),
-    }
+    shapes = {"pos": (t, n, 3), "quat": (t, n, 4), "vel": (t, n, 3), "angvel": (t, n, 3),
+              "radius": (n,), "mass": (n,), "material": (n,)}  # fmt: skip
+    if data["plane_materials"] is not None:
+        shapes["plane_materials"] = (*data["planes"].shape[:1], 4)
     for key, shape in shapes.items():
         if data[key].shape != shape:
             raise DatasetError(f"{where}: {key} has shape {data[key].shape}, expected {shape}")
@@ -183,7 +182,7 @@ def _read_traj(path: Path, name: str, g: h5py.Group) -> Trajectory:
         dt=float(g.attrs["dt"]),
         effects=effects,
         attrs=attrs,
-        **{k: data[k] for k in FRAME_FIELDS + STATIC_FIELDS},
+        **{k: data[k] for k in FRAME_FIELDS + STATIC_FIELDS + OPTIONAL_FIELDS},
     )
 
 

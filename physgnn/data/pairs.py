@@ -26,6 +26,7 @@ from physgnn.data.state import SceneState, TrajectoryFrames
 
 _DYNAMIC = ("pos", "quat", "vel", "angvel")
 _SPHERE = ("radius", "mass", "material", "material_params")
+_PLANE = ("planes", "plane_kind", "plane_materials")
 
 
 class PairDataset(Dataset):
@@ -74,7 +75,7 @@ class PairDataset(Dataset):
         )
         flat = lambda x: x.reshape(-1, x.shape[-1])  # noqa: E731
         self.tables = {key: torch.cat([flat(getattr(f, key)) for f in frames]) for key in _DYNAMIC}
-        for key in (*_SPHERE, "planes", "plane_kind"):
+        for key in (*_SPHERE, *_PLANE):
             self.tables[key] = torch.cat([f.static[key] for f in frames])
         self.dt = torch.cat([f.static["dt"] for f in frames])
         self.effects = torch.cat([f.static["effects"] for f in frames])
@@ -112,7 +113,7 @@ class PairDataset(Dataset):
         fields |= {key: tab[key][sphere] for key in _SPHERE}
         plane_graph, plane_local, _ = _segments(self.n_planes[traj], sum(sizes[1]))
         plane = self.plane_start[traj][plane_graph] + plane_local
-        fields |= {"planes": tab["planes"][plane], "plane_kind": tab["plane_kind"][plane]}
+        fields |= {key: tab[key][plane] for key in _PLANE}
         fields |= {"plane_batch": plane_graph, "dt": self.dt[traj], "effects": self.effects[traj]}
         after = now[:, 0] + n[:, 0]  # frame t + 1
         fields["target_vel"], fields["target_angvel"] = tab["vel"][after], tab["angvel"][after]

@@ -24,7 +24,7 @@ NODE_KEYS = (
     "pos", "quat", "vel", "angvel", "radius", "mass", "material", "material_params", "batch",
     "target_vel", "target_angvel",
 )  # fmt: skip
-SCENE_KEYS = ("planes", "plane_kind", "plane_batch", "dt", "effects", "ptr")
+SCENE_KEYS = ("planes", "plane_kind", "plane_materials", "plane_batch", "dt", "effects", "ptr")
 
 
 class SceneState(Data):
@@ -35,6 +35,8 @@ class SceneState(Data):
     - ``radius [N]``, ``mass [N]``, ``material [N]`` (long), ``material_params [N, 4]``: the
       sphere's material row (restitution, lateral, rolling, spinning friction)
     - ``planes [S, 11]``, ``plane_kind [S]`` (long), ``plane_batch [S]`` (scene of each plane)
+    - ``plane_materials [S, 4]``: each plane's coefficients in the order of ``material_params``
+      (restitution ``e_p`` first: a sphere of ``e`` bounces off it with ``e·e_p``)
     - ``dt [B]``, ``effects [B, 5]`` (bool, order of ``scene.EFFECT_NAMES``)
     - optional targets ``target_vel [N, 3]``, ``target_angvel [N, 3]`` (``v_{t+1}``, ``ω_{t+1}``)
     - optional ``future_pos [N, K+1, 3]``, ``future_angvel [N, K+1, 3]``: ``p_{t+1..t+K+1}``,
@@ -108,6 +110,7 @@ class TrajectoryFrames:
             material=torch.as_tensor(np.asarray(traj.material), dtype=torch.long),
             material_params=f32(np.asarray(traj.materials).reshape(-1, 4)[traj.material]),
             planes=f32(traj.planes),
+            plane_materials=f32(traj.plane_coefficients),
             plane_kind=torch.as_tensor(np.asarray(traj.plane_kind), dtype=torch.long),
             plane_batch=torch.zeros(len(traj.planes), dtype=torch.long),
             dt=torch.tensor([traj.dt], dtype=torch.float32),

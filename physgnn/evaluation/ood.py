@@ -1,7 +1,8 @@
 """Does a scene lie inside what a run was trained on? One line naming what does not.
 
 The ranges come from the run's own config (``data.scene``: the training family's radius range,
-density, drop height and initial speed, frame interval and materials): radius, mass
+density, drop height and initial speed, frame interval and materials: the ranges of drawn
+materials, ``material_ranges``, else the fixed ``materials``): radius, mass
 (``density·4/3·π·r³`` over the radius range), speed (up to the initial speed bound plus a free
 fall from the highest start), frame interval and each material parameter. A scene value more
 than :data:`MARGIN` (relative) outside its range is named; a learned simulator there
@@ -31,8 +32,10 @@ def training_ranges(cfg) -> dict[str, tuple[float, float]]:
     ranges = {"radius (m)": (r0, r1), "mass (kg)": (ball(r0), ball(r1))}
     ranges["speed (m/s)"] = (0.0, float(family.get("max_speed0", 0.0)) + fall)
     ranges["dt (s)"] = (float(family.dt), float(family.dt))
+    drawn = family.get("material_ranges") or {}
     for k in MATERIAL_KEYS:
-        values = [float(m[k]) for m in family.get("materials", [])]
+        values = [float(v) for v in drawn[k]] if k in drawn else []
+        values = values or [float(m[k]) for m in family.get("materials") or []]
         if values:
             ranges[k] = (min(values), max(values))
     return ranges

@@ -7,9 +7,11 @@ walls and static planes are boxes whose top face is the bounded plane and whose 
 behind it. Quaternions are converted from pybullet's (x, y, z, w) here and only here.
 
 Bullet combines the coefficients of two touching bodies: restitution and lateral friction by
-product, rolling / spinning friction as ``r0·f1 + r1·f0``. Planes therefore get restitution 1,
-lateral friction 1 and rolling / spinning friction 0, so a sphere's material alone sets its
-sphere–plane contact; two spheres of restitution ``e`` collide with ``e²``.
+product, rolling / spinning friction as ``r0·f1 + r1·f0``: two spheres of restitution ``e``
+collide with ``e²``. Each plane gets its row of ``scene.plane_materials`` (None: restitution 1,
+lateral friction 1, rolling / spinning friction 0 for every plane, so that a sphere's material
+alone sets its sphere–plane contact); a sphere of restitution ``e`` on a plane of ``e_p``
+bounces with ``e·e_p``.
 See :class:`EngineSettings` for the chosen solver settings and why.
 """
 
@@ -26,7 +28,7 @@ from scipy.spatial.transform import Rotation
 
 from physgnn.groundtruth.settings import EngineSettings
 from physgnn.physics import quaternion as Q
-from physgnn.physics.scene import GROUND, Scene
+from physgnn.physics.scene import GROUND, Scene, default_plane_materials
 from physgnn.physics.trajectory import Trajectory
 
 
@@ -73,7 +75,12 @@ def plane_box_pose(row: np.ndarray, thickness: float):
 
 def _add_planes(scene: Scene, s: EngineSettings, cid: int) -> list[int]:
     ids = []
-    for row, kind in zip(scene.planes, scene.plane_kind, strict=True):
+    coefficients = (
+        default_plane_materials(len(scene.planes))
+        if scene.plane_materials is None
+        else scene.plane_materials
+    )
+    for row, kind, mat in zip(scene.planes, scene.plane_kind, coefficients, strict=True):
         if kind == GROUND:
             shape = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid)
             body = p.createMultiBody(0, shape, basePosition=row[:3].tolist(), physicsClientId=cid)
@@ -86,10 +93,10 @@ def _add_planes(scene: Scene, s: EngineSettings, cid: int) -> list[int]:
         p.changeDynamics(
             body,
             -1,
-            restitution=1.0,
-            lateralFriction=1.0,
-            rollingFriction=0.0,
-            spinningFriction=0.0,
+            restitution=float(mat[0]),
+            lateralFriction=float(mat[1]),
+            rollingFriction=float(mat[2]),
+            spinningFriction=float(mat[3]),
             physicsClientId=cid,
         )
         ids.append(body)
@@ -244,6 +251,7 @@ def simulate(
         planes=f32(scene.planes),
         plane_kind=np.asarray(scene.plane_kind, dtype=np.int64),
         materials=f32(scene.materials),
+        plane_materials=None if scene.plane_materials is None else f32(scene.plane_materials),
         dt=float(scene.dt),
         effects=scene.effects,
         attrs={

@@ -2,7 +2,9 @@
 
 ``build_scene(cfg, rng)`` dispatches on ``cfg.name``. Every config has ``dt``, ``n_frames``,
 ``effects`` (dict of :data:`physgnn.physics.scene.EFFECT_NAMES`), ``materials`` (list of dicts of
-:class:`physgnn.physics.scene.Material` fields) and ``density`` (kg/m³, mass = density·4/3·π·r³).
+:class:`physgnn.physics.scene.Material` fields) or ``material_ranges`` and
+``materials_per_scene`` (drawn materials), optionally ``plane_restitution`` (drawn per scene;
+:mod:`physgnn.groundtruth.assemble`) and ``density`` (kg/m³, mass = density·4/3·π·r³).
 Arenas are squares of side ``side`` centred at the origin, closed by 4 walls of height
 ``wall_height`` (planes of kind wall, normals inward); the ground is always plane row 0.
 """
@@ -12,8 +14,9 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 
 import numpy as np
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
+from physgnn.groundtruth.assemble import finish_scene, plain_config
 from physgnn.groundtruth.layouts import (
     aggregate_positions,
     arena_planes,
@@ -21,60 +24,26 @@ from physgnn.groundtruth.layouts import (
     clustered_positions,
     cube_positions,
     ground_only,
-    materials_array,
     pile_positions,
     ramp_plane,
-    random_quaternions,
     row_positions,
     spawn_without_overlap,
 )
+from physgnn.groundtruth.resting import ball_vectors, rest_layout
 from physgnn.groundtruth.scenefile import scene_from_dict
-from physgnn.physics.scene import (
-    STATIC,
-    Effects,
-    Scene,
-    SceneError,
-)
+from physgnn.physics.scene import STATIC, Scene, SceneError
 
 
-def plain_config(cfg) -> dict:
-    """A config (DictConfig, mapping or None) as a plain, resolved dict."""
-    if isinstance(cfg, DictConfig):
-        return OmegaConf.to_container(cfg, resolve=True)
-    return dict(cfg or {})
-
-
-def _finish(
-    c: dict, pos, radius, rng, planes, kinds, vel=None, angvel=None, material=None
-) -> Scene:
-    """Common tail: masses, orientations, materials, effects; validates the scene."""
-    pos = np.asarray(pos, dtype=np.float64).reshape(-1, 3)
-    n = len(pos)
-    radius = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n,))
-    if np.any(radius <= 0):
-        raise SceneError(f"scene '{c['name']}': radius must be > 0 (got {radius.min()})")
-    mats = materials_array(c["materials"])
-    if material is None:
-        material = rng.integers(0, len(mats), size=n)
-    zeros = np.zeros((n, 3))
-    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
-    scene = Scene(
-        name=c["name"],
-        radius=f32(radius),
-        mass=f32(c["density"] * 4 / 3 * np.pi * radius**3),
-        material=np.asarray(material, dtype=np.int64),
-        pos=f32(pos),
-        quat=f32(random_quaternions(rng, n)),
-        vel=f32(zeros if vel is None else vel),
-        angvel=f32(zeros if angvel is None else angvel),
-        planes=f32(planes),
-        plane_kind=np.asarray(kinds, dtype=np.int64),
-        materials=mats,
-        dt=float(c["dt"]),
-        n_frames=int(c["n_frames"]),
-        effects=Effects.from_dict(c.get("effects")),
-    )
-    return scene.validate()
+def _contact_scene(c: dict, rng: np.random.Generator) -> Scene | None:
+    """A dense scene with probability ``dense_fraction``, a rest scene with ``rest_fraction``,
+    else None (one draw; none when both are 0, so that such scenes stay as they were)."""
+    dense, rest = c.get("dense_fraction", 0.0), c.get("rest_fraction", 0.0)
+    if dense <= 0 and rest <= 0:
+        return None
+    u = rng.uniform()
+    if u < dense:
+        return dense_contact(c, rng)
+    return resting_contact(c, rng) if u < dense + rest else None
 
 
 def _box_size(c: dict, rng: np.random.Generator) -> tuple[int, float, float]:
@@ -99,7 +68,8 @@ def random_box(c: dict, rng: np.random.Generator) -> Scene:
     scene: N ~ U{⌈n_max/2⌉..n_max} spheres scattered (no lattice) over a small arena of side
     U[pile_side_min, pile_side_max], up to ``pile_h_max``, so that they settle into touching
     groups and piles that then rest. With probability ``dense_fraction`` (default 0) it is a
-    *dense* scene instead (:func:`dense_contact`)."""
+    *dense* scene instead (:func:`dense_contact`), with ``rest_fraction`` (default 0) a *rest*
+    scene (:func:`resting_contact`)."""
     if c["n_min"] < 1 or c["n_max"] < c["n_min"]:
         raise SceneError(
             f"random_box: need 1 <= n_min <= n_max (got {c['n_min']}, {c['n_max']}): "
@@ -111,8 +81,9 @@ def random_box(c: dict, rng: np.random.Generator) -> Scene:
             f"(got {c['radius_min']}, {c['radius_max']})"
         )
     # The extra draw only when dense scenes are asked for: scenes without them stay as they were.
-    if c.get("dense_fraction", 0.0) > 0 and rng.uniform() < c["dense_fraction"]:
-        return dense_contact(c, rng)
+    contact = _contact_scene(c, rng)
+    if contact is not None:
+        return contact
     n, side, h_max = _box_size(c, rng)
     radius = rng.uniform(c["radius_min"], c["radius_max"], size=n)
     half = side / 2
@@ -131,12 +102,9 @@ def random_box(c: dict, rng: np.random.Generator) -> Scene:
     ang = rng.uniform(0, 2 * np.pi, size=n)
     speed = c["max_speed0"] * np.sqrt(rng.uniform(size=n))
     vel = np.stack([speed * np.cos(ang), speed * np.sin(ang), np.zeros(n)], axis=1)
-    w = rng.normal(size=(n, 3))
-    w *= (c["max_angvel0"] * rng.uniform(size=(n, 1)) ** (1 / 3)) / np.linalg.norm(
-        w, axis=1, keepdims=True
-    )
+    w = ball_vectors(rng, n, c["max_angvel0"])
     planes, kinds = arena_planes(side, c["wall_height"])
-    return _finish(c, pos, radius, rng, planes, kinds, vel=vel, angvel=w)
+    return finish_scene(c, pos, radius, rng, planes, kinds, vel=vel, angvel=w)
 
 
 DENSE_KINDS = ("flying_aggregate", "settling_aggregate", "sliding_row")
@@ -181,7 +149,26 @@ def dense_contact(c: dict, rng: np.random.Generator) -> Scene:
     inside = np.all(np.abs(pos[:, :2]) <= room, axis=1)
     inside[np.argmin(np.abs(pos[:, :2]).max(1))] = True
     planes, kinds = arena_planes(2 * half, c["wall_height"])
-    return _finish(c, pos[inside], radius[inside], rng, planes, kinds, vel=vel[inside])
+    return finish_scene(c, pos[inside], radius[inside], rng, planes, kinds, vel=vel[inside])
+
+
+def resting_contact(c: dict, rng: np.random.Generator) -> Scene:
+    """A rest scene of the training mix: N ~ U{⌈n_max/2⌉..n_max} spheres resting on each other
+    and the ground (:func:`~physgnn.groundtruth.resting.rest_layout`: columns, a pyramid,
+    hexagonal layers or a deposit, equal odds; gaps 0 or U(0, ``rest_max_gap``)) at a random
+    place of an arena of the usual side (or just wider than the layout). With probability
+    ``rest_nudge_fraction`` every sphere starts with a velocity uniform in a ball of radius
+    ``rest_nudge_speed`` (m/s): a nudge that some of them do not survive."""
+    n = int(rng.integers((c["n_max"] + 1) // 2, c["n_max"] + 1))
+    pos, radius = rest_layout(rng, n, c["radius_min"], c["radius_max"], c["rest_max_gap"])
+    extent = float(np.max(np.abs(pos[:, :2]) + radius[:, None])) + 0.05
+    half = max(float(rng.uniform(c["side_min"], c["side_max"])) / 2, extent)
+    pos[:, :2] += rng.uniform(extent - half, half - extent, size=2)
+    vel = np.zeros_like(pos)
+    if rng.uniform() < c["rest_nudge_fraction"]:
+        vel = ball_vectors(rng, len(pos), c["rest_nudge_speed"])
+    planes, kinds = arena_planes(2 * half, c["wall_height"])
+    return finish_scene(c, pos, radius, rng, planes, kinds, vel=vel)
 
 
 def _cubes(c: dict) -> np.ndarray:
@@ -198,7 +185,7 @@ def _arena(c: dict):
 def ood_cubes(c: dict, rng: np.random.Generator) -> Scene:
     """(a) 4 cubes of k×k×k spheres, ``gap`` apart, falling from ``cube_corners``."""
     planes, kinds = _arena(c)
-    return _finish(c, _cubes(c), c["radius"], rng, planes, kinds)
+    return finish_scene(c, _cubes(c), c["radius"], rng, planes, kinds)
 
 
 def ood_cubes_ramps(c: dict, rng: np.random.Generator) -> Scene:
@@ -213,7 +200,7 @@ def ood_cubes_ramps(c: dict, rng: np.random.Generator) -> Scene:
     kinds = np.concatenate([kinds, np.full(len(ramps), STATIC)])
     pos = _cubes(c)
     check_clear_of_planes(c["name"], pos, c["radius"], planes.astype(np.float64))
-    return _finish(c, pos, c["radius"], rng, planes, kinds)
+    return finish_scene(c, pos, c["radius"], rng, planes, kinds)
 
 
 def ood_resting_hit(c: dict, rng: np.random.Generator) -> Scene:
@@ -230,7 +217,7 @@ def ood_resting_hit(c: dict, rng: np.random.Generator) -> Scene:
         pos.append([target[0], target[1], r])
         pos.append([target[0] - c["drop_offset"], target[1], h])
     planes, kinds = _arena(c)
-    return _finish(c, pos, r, rng, planes, kinds)
+    return finish_scene(c, pos, r, rng, planes, kinds)
 
 
 def ood_spaced_drop(c: dict, rng: np.random.Generator) -> Scene:
@@ -243,7 +230,7 @@ def ood_spaced_drop(c: dict, rng: np.random.Generator) -> Scene:
     gx, gy = np.meshgrid(xy, xy, indexing="ij")
     pos = np.stack([gx.ravel(), gy.ravel(), np.full(g * g, float(c["height"]))], axis=1)
     planes, kinds = _arena(c)
-    return _finish(c, pos, r, rng, planes, kinds)
+    return finish_scene(c, pos, r, rng, planes, kinds)
 
 
 def resting_pile(c: dict, rng: np.random.Generator) -> Scene:
@@ -253,7 +240,7 @@ def resting_pile(c: dict, rng: np.random.Generator) -> Scene:
     if n < 1 or not 1 <= layers <= n:
         raise SceneError(f"resting_pile: need n >= 1 and 1 <= layers <= n (got {n}, {layers})")
     planes, kinds = _arena(c)
-    return _finish(c, pile_positions(n, layers, r), r, rng, planes, kinds)
+    return finish_scene(c, pile_positions(n, layers, r), r, rng, planes, kinds)
 
 
 BUILDERS: dict[str, Callable[[dict, np.random.Generator], Scene]] = {

@@ -208,14 +208,14 @@ def pile_positions(n: int, layers: int, radius: float) -> np.ndarray:
     return np.concatenate(pos)
 
 
-def _contact_gap(rng, max_gap: float) -> float:
+def contact_gap(rng, max_gap: float) -> float:
     """A surface gap of a dense layout: exactly touching half the time, else U(0, max_gap)."""
     return 0.0 if rng.uniform() < 0.5 else float(rng.uniform(0.0, max_gap))
 
 
 def aggregate_positions(rng, radius: np.ndarray, max_gap: float, tries: int = 200) -> np.ndarray:
     """Centres ``[N, 3]`` of a random aggregate, lowest point at z = 0: each sphere after the
-    first touches (or nearly touches, :func:`_contact_gap`) a random earlier one from a random
+    first touches (or nearly touches, :func:`contact_gap`) a random earlier one from a random
     direction without overlapping any; so every sphere has 1–12 neighbours at random gaps, in
     no lattice. Raises SceneError when a sphere finds no place in ``tries`` draws."""
     pos = np.zeros((len(radius), 3))
@@ -224,7 +224,7 @@ def aggregate_positions(rng, radius: np.ndarray, max_gap: float, tries: int = 20
             k = int(rng.integers(i))
             u = rng.normal(size=3)
             u /= np.linalg.norm(u)
-            x = pos[k] + (radius[k] + radius[i] + _contact_gap(rng, max_gap)) * u
+            x = pos[k] + (radius[k] + radius[i] + contact_gap(rng, max_gap)) * u
             if np.all(np.linalg.norm(pos[:i] - x, axis=1) - radius[:i] - radius[i] > -OVERLAP_TOL):
                 pos[i] = x
                 break
@@ -237,9 +237,9 @@ def aggregate_positions(rng, radius: np.ndarray, max_gap: float, tries: int = 20
 def row_positions(rng, radius: np.ndarray, max_gap: float) -> np.ndarray:
     """Centres ``[N, 3]`` of a straight row on the ground (z = r) along a random horizontal
     direction, centred at 0, neighbours' centres ``r_i + r_j + g`` apart horizontally
-    (:func:`_contact_gap`): touching or nearly touching when of one radius, a few centimetres
+    (:func:`contact_gap`): touching or nearly touching when of one radius, a few centimetres
     more apart when their radii differ (their centres are at different heights)."""
-    step = [radius[i] + radius[i + 1] + _contact_gap(rng, max_gap) for i in range(len(radius) - 1)]
+    step = [radius[i] + radius[i + 1] + contact_gap(rng, max_gap) for i in range(len(radius) - 1)]
     along = np.concatenate([[0.0], np.cumsum(step)])
     along -= along.mean()
     a = rng.uniform(0, 2 * np.pi)

@@ -21,6 +21,7 @@ _QUAT = {
     "description": "unit quaternion (w, x, y, z); normalised on load",
 }
 _POS = {"type": "number", "exclusiveMinimum": 0}
+_RESTITUTION = {"type": "number", "minimum": 0, "maximum": 1, "default": 1}
 
 MATERIAL = {
     "type": "object",
@@ -65,6 +66,7 @@ PLANE = {
             "maxItems": 2,
             "description": "half lengths along reference and along normal × reference (m)",
         },
+        "restitution": {**_RESTITUTION, "description": "a sphere of e bounces off it with e·this"},
     },
 }
 
@@ -87,6 +89,7 @@ SCHEMA = {
         "materials": {"type": "object", "additionalProperties": MATERIAL},
         "spheres": {"type": "array", "items": SPHERE, "minItems": 1},
         "planes": {"type": "array", "items": PLANE},
+        "ground_restitution": {**_RESTITUTION, "description": "the ground's, as a plane's"},
     },
 }
 

@@ -33,10 +33,12 @@ from physgnn import SCENES_DIR
 from physgnn.files import write_text
 from physgnn.groundtruth.layouts import check_above_ground, check_clear_of_planes, check_no_overlap
 from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
+from physgnn.groundtruth.scene_values import known_keys, number, restitution, unit, vector
 from physgnn.physics.scene import (
     GRAVITY,
     GROUND,
     PLANE_KINDS,
+    PLANE_MATERIAL,
     Effects,
     Material,
     Scene,
@@ -61,42 +63,6 @@ _Loader.add_implicit_resolver(
 )
 
 
-def _keys(where: str, d, schema: dict) -> dict:
-    """``d`` as a dict whose keys are all known to ``schema`` and whose required keys exist."""
-    if not isinstance(d, dict):
-        raise SceneError(f"{where}: expected a mapping, got {type(d).__name__}")
-    known = schema["properties"]
-    for key in d:
-        if key not in known:
-            raise SceneError(f"{where}: unknown key '{key}'; known: {', '.join(known)}")
-    for key in schema.get("required", []):
-        if key not in d:
-            raise SceneError(f"{where}: missing key '{key}'")
-    return d
-
-
-def _number(where: str, x, positive: bool = False) -> float:
-    if isinstance(x, bool) or not isinstance(x, int | float) or not np.isfinite(x):
-        raise SceneError(f"{where}: expected a number, got {x!r}")
-    if positive and x <= 0:
-        raise SceneError(f"{where}: must be > 0, got {x}")
-    return float(x)
-
-
-def _vector(where: str, x, n: int) -> np.ndarray:
-    if not isinstance(x, list | tuple) or len(x) != n:
-        raise SceneError(f"{where}: expected a list of {n} numbers, got {x!r}")
-    return np.array([_number(where, v) for v in x], dtype=np.float64)
-
-
-def _unit(where: str, x, n: int) -> np.ndarray:
-    v = _vector(where, x, n)
-    norm = float(np.linalg.norm(v))
-    if norm < 1e-9:
-        raise SceneError(f"{where}: has length 0 (needs a direction)")
-    return v / norm
-
-
 def _materials(where: str, d) -> tuple[list[str], np.ndarray]:
     if d is None:
         return [DEFAULT_MATERIAL], Material().as_array()[None]
@@ -105,8 +71,8 @@ def _materials(where: str, d) -> tuple[list[str], np.ndarray]:
     rows = []
     for name, m in d.items():
         w = f"{where}.{name}"
-        m = _keys(w, m or {}, MATERIAL)
-        values = {k: _number(f"{w}.{k}", v) for k, v in m.items()}
+        m = known_keys(w, m or {}, MATERIAL)
+        values = {k: number(f"{w}.{k}", v) for k, v in m.items()}
         if any(v < 0 for v in values.values()) or values.get("restitution", 0) > 1:
             raise SceneError(f"{w}: coefficients must be >= 0 and restitution <= 1")
         rows.append(Material(**values).as_array())
@@ -114,14 +80,14 @@ def _materials(where: str, d) -> tuple[list[str], np.ndarray]:
 
 
 def _sphere(where: str, d, names: list[str]) -> dict:
-    d = _keys(where, d, SPHERE)
-    r = _number(f"{where}.radius", d["radius"], positive=True)
+    d = known_keys(where, d, SPHERE)
+    r = number(f"{where}.radius", d["radius"], positive=True)
     if "mass" in d and "density" in d:
         raise SceneError(f"{where}: give mass or density, not both")
     if "mass" in d:
-        mass = _number(f"{where}.mass", d["mass"], positive=True)
+        mass = number(f"{where}.mass", d["mass"], positive=True)
     else:
-        mass = _number(f"{where}.density", d.get("density", 1000.0), True) * 4 / 3 * np.pi * r**3
+        mass = number(f"{where}.density", d.get("density", 1000.0), True) * 4 / 3 * np.pi * r**3
     material = d.get("material", names[0])
     if material not in names:
         raise SceneError(f"{where}.material: unknown material '{material}'; known: {names}")
@@ -130,47 +96,56 @@ def _sphere(where: str, d, names: list[str]) -> dict:
         radius=r,
         mass=mass,
         material=names.index(material),
-        pos=_vector(f"{where}.position", d["position"], 3),
-        quat=_unit(f"{where}.orientation", d.get("orientation", [1.0, 0, 0, 0]), 4),
-        vel=_vector(f"{where}.velocity", d.get("velocity", zero), 3),
-        angvel=_vector(f"{where}.angular_velocity", d.get("angular_velocity", zero), 3),
+        pos=vector(f"{where}.position", d["position"], 3),
+        quat=unit(f"{where}.orientation", d.get("orientation", [1.0, 0, 0, 0]), 4),
+        vel=vector(f"{where}.velocity", d.get("velocity", zero), 3),
+        angvel=vector(f"{where}.angular_velocity", d.get("angular_velocity", zero), 3),
     )
 
 
-def _plane(where: str, d) -> tuple[np.ndarray, int]:
-    d = _keys(where, d, PLANE)
+def _plane_materials(restitutions: list[float]) -> np.ndarray | None:
+    """``[S, 4]`` plane materials of these restitutions (None when all are 1: the default)."""
+    if all(e == 1.0 for e in restitutions):
+        return None
+    return np.array([[e, *PLANE_MATERIAL[1:]] for e in restitutions], dtype=np.float32)
+
+
+def _plane(where: str, d) -> tuple[np.ndarray, int, float]:
+    d = known_keys(where, d, PLANE)
     kind = d.get("kind", "static")
     if kind not in ("wall", "static"):
         raise SceneError(f"{where}.kind: expected 'wall' or 'static', got {kind!r}")
-    n = _unit(f"{where}.normal", d["normal"], 3)
-    ref = _unit(f"{where}.reference", d["reference"], 3)
+    n = unit(f"{where}.normal", d["normal"], 3)
+    ref = unit(f"{where}.reference", d["reference"], 3)
     if abs(float(n @ ref)) > 1e-3:
         raise SceneError(
             f"{where}: reference {ref.round(3).tolist()} is not perpendicular to normal"
         )
     ref = ref - (n @ ref) * n
-    half = _vector(f"{where}.half_lengths", d["half_lengths"], 2)
+    half = vector(f"{where}.half_lengths", d["half_lengths"], 2)
     if np.any(half <= 0):
         raise SceneError(f"{where}.half_lengths: must be > 0, got {half.tolist()}")
-    centre = _vector(f"{where}.centre", d["centre"], 3)
+    centre = vector(f"{where}.centre", d["centre"], 3)
     row = np.concatenate([centre, n, ref / np.linalg.norm(ref), half])
-    return row, PLANE_KINDS.index(kind)
+    e = restitution(f"{where}.restitution", d.get("restitution", 1.0))
+    return row, PLANE_KINDS.index(kind), e
 
 
 def scene_from_dict(d, where: str = "scene") -> Scene:
     """A validated :class:`Scene` from a parsed scene file; ``where`` prefixes errors."""
-    d = _keys(where, d, SCHEMA)
+    d = known_keys(where, d, SCHEMA)
     names, materials = _materials(f"{where}: materials", d.get("materials"))
     spheres = d["spheres"]
     if not isinstance(spheres, list) or not spheres:
         raise SceneError(f"{where}: spheres must be a non-empty list")
     rows = [_sphere(f"{where}: spheres[{i}]", s, names) for i, s in enumerate(spheres)]
     planes = [_plane(f"{where}: planes[{i}]", p) for i, p in enumerate(d.get("planes") or [])]
+    ground_e = restitution(f"{where}: ground_restitution", d.get("ground_restitution", 1.0))
     col = lambda k: np.stack([np.asarray(r[k]) for r in rows])  # noqa: E731
     pos, radius = col("pos"), col("radius")
     check_no_overlap(where, pos, radius)
     check_above_ground(where, pos, radius)
-    plane_rows = np.stack([ground_plane().astype(np.float64), *[p for p, _ in planes]])
+    plane_rows = np.stack([ground_plane().astype(np.float64), *[p for p, _, _ in planes]])
     try:
         check_clear_of_planes(where, pos, radius, plane_rows, depth=1.0)  # engine's solid
     except SceneError as e:
@@ -190,12 +165,13 @@ def scene_from_dict(d, where: str = "scene") -> Scene:
         vel=f32(col("vel")),
         angvel=f32(col("angvel")),
         planes=f32(plane_rows),
-        plane_kind=np.array([GROUND] + [k for _, k in planes], dtype=np.int64),
+        plane_kind=np.array([GROUND] + [k for _, k, _ in planes], dtype=np.int64),
+        plane_materials=_plane_materials([ground_e] + [e for *_, e in planes]),
         materials=f32(materials),
-        dt=_number(f"{where}: dt", d.get("dt", 0.1), positive=True),
-        n_frames=int(_number(f"{where}: frames", d.get("frames", 100), positive=True)),
+        dt=number(f"{where}: dt", d.get("dt", 0.1), positive=True),
+        n_frames=int(number(f"{where}: frames", d.get("frames", 100), positive=True)),
         effects=effects,
-        gravity=tuple(_vector(f"{where}: gravity", d.get("gravity", list(GRAVITY)), 3)),
+        gravity=tuple(vector(f"{where}: gravity", d.get("gravity", list(GRAVITY)), 3)),
     )
     try:
         return scene.validate()
@@ -242,6 +218,17 @@ def _list(a) -> list:
     return [round(float(x), 7) for x in np.asarray(a).ravel()]
 
 
+def _plane_restitutions(scene: Scene) -> np.ndarray | None:
+    """``[S]`` restitutions of the scene's planes (None: the default planes); a scene file
+    holds no other plane coefficient, so a plane of another friction is refused."""
+    if scene.plane_materials is None:
+        return None
+    m = np.asarray(scene.plane_materials, dtype=np.float64)
+    if not np.allclose(m[:, 1:], PLANE_MATERIAL[1:]):
+        raise SceneError(f"scene '{scene.name}': a scene file holds a plane's restitution only")
+    return m[:, 0]
+
+
 def scene_to_dict(scene: Scene) -> dict:
     """The scene-file form of ``scene`` (the ground, row 0, is implicit)."""
     keys = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
@@ -258,6 +245,7 @@ def scene_to_dict(scene: Scene) -> dict:
         }
         for i in range(scene.n_spheres)
     ]
+    rest = _plane_restitutions(scene)
     planes = [
         {
             "kind": PLANE_KINDS[int(k)],
@@ -266,10 +254,12 @@ def scene_to_dict(scene: Scene) -> dict:
             "reference": _list(row[6:9]),
             "half_lengths": _list(row[9:11]),
         }
-        for row, k in zip(scene.planes, scene.plane_kind, strict=True)
+        | ({} if rest is None else {"restitution": _list(rest[s])[0]})
+        for s, (row, k) in enumerate(zip(scene.planes, scene.plane_kind, strict=True))
         if int(k) != GROUND
     ]
-    return {
+    ground = {} if rest is None else {"ground_restitution": _list(rest[:1])[0]}
+    return ground | {
         "name": scene.name,
         "dt": float(scene.dt),
         "frames": int(scene.n_frames),

@@ -62,6 +62,18 @@ class Material:
         return np.array(dataclasses.astuple(self), dtype=np.float32)
 
 
+# The coefficients of a plane that was given none (every scene and dataset before planes had
+# materials): restitution 1, lateral friction 1, no rolling or spinning friction, so that the
+# sphere's material alone sets a sphere–plane contact (Bullet multiplies restitutions and
+# lateral frictions and adds rolling / spinning friction as r0·f1 + r1·f0).
+PLANE_MATERIAL = (1.0, 1.0, 0.0, 0.0)
+
+
+def default_plane_materials(n_planes: int) -> np.ndarray:
+    """``[S, 4]`` float32: :data:`PLANE_MATERIAL` for each of ``n_planes`` planes."""
+    return np.tile(np.asarray(PLANE_MATERIAL, dtype=np.float32), (int(n_planes), 1))
+
+
 def make_plane(centre, normal, ref_dir, half_x: float, half_y: float) -> np.ndarray:
     """One plane row ``[11]``; normal and reference direction are normalised, checked ⟂."""
     n = np.asarray(normal, dtype=np.float64)
@@ -86,7 +98,8 @@ class Scene:
 
     radius, mass ``[N]``; material ``[N]`` int; pos ``[N, 3]``; quat ``[N, 4]`` (w, x, y, z);
     vel, angvel ``[N, 3]``; planes ``[S, 11]`` (row 0 the ground); plane_kind ``[S]`` int;
-    materials ``[K, 4]`` (restitution, lateral, rolling, spinning friction).
+    materials ``[K, 4]`` (restitution, lateral, rolling, spinning friction); plane_materials
+    ``[S, 4]`` the same coefficients per plane (None: :data:`PLANE_MATERIAL` for every plane).
     """
 
     name: str
@@ -104,6 +117,7 @@ class Scene:
     n_frames: int
     effects: Effects = field(default_factory=Effects)
     gravity: tuple[float, float, float] = GRAVITY
+    plane_materials: np.ndarray | None = None
 
     @property
     def n_spheres(self) -> int:
@@ -147,8 +161,22 @@ class Scene:
         for key in ("radius", "mass", "pos", "quat", "vel", "angvel"):
             if not np.all(np.isfinite(getattr(self, key))):
                 raise SceneError(f"scene '{self.name}': {key} contains NaN or inf")
+        if self.plane_materials is not None:
+            check_plane_materials(self.name, self.plane_materials, len(self.planes))
         check_float32_scale(self.name, self.pos, self.radius)
         return self
+
+
+def check_plane_materials(name: str, plane_materials: np.ndarray, n_planes: int) -> None:
+    """Raise :class:`SceneError` unless ``plane_materials`` is ``[n_planes, 4]`` of finite
+    coefficients >= 0 with restitution <= 1."""
+    m = np.asarray(plane_materials)
+    if m.shape != (n_planes, 4):
+        raise SceneError(
+            f"scene '{name}': plane_materials has shape {m.shape}, expected ({n_planes}, 4)"
+        )
+    if not np.all(np.isfinite(m)) or np.any(m < 0) or np.any(m[:, 0] > 1):
+        raise SceneError(f"scene '{name}': plane_materials must be finite, >= 0, restitution <= 1")
 
 
 # float32 (physgnn's tensors) resolves about 1.2e-7 of a value: the smallest sphere must span

@@ -10,7 +10,14 @@ import numpy as np
 import torch
 
 from physgnn.physics.kinematics import finite_difference_velocities
-from physgnn.physics.scene import GROUND, Effects, Material, SceneError, ground_plane
+from physgnn.physics.scene import (
+    GROUND,
+    Effects,
+    Material,
+    SceneError,
+    default_plane_materials,
+    ground_plane,
+)
 
 FRAME_KEYS = ("pos", "quat", "vel", "angvel")
 # Mass of an imported sphere given none: water's density (kg/m³) times its volume.
@@ -27,7 +34,9 @@ class Trajectory:
     prediction has finite-difference velocities; frames ``0..start`` are the truth's seed
     frames (``start = H``), ``diverged_at`` is the first frame it could not compute (its
     arrays then hold the finite prefix, ``T = diverged_at``) and ``fps`` the frames it
-    computed per second.
+    computed per second. ``plane_materials [S, 4]``: each plane's coefficients (restitution,
+    lateral, rolling, spinning friction); None (data written before planes had materials):
+    :data:`~physgnn.physics.scene.PLANE_MATERIAL` each, what the engine then gave every plane.
     """
 
     name: str
@@ -47,6 +56,14 @@ class Trajectory:
     start: int = 0
     diverged_at: int | None = None
     fps: float | None = None
+    plane_materials: np.ndarray | None = None
+
+    @property
+    def plane_coefficients(self) -> np.ndarray:
+        """``[S, 4]`` float32: ``plane_materials``, or the default of every plane when None."""
+        if self.plane_materials is None:
+            return default_plane_materials(len(self.planes))
+        return np.asarray(self.plane_materials, dtype=np.float32)
 
     @property
     def n_frames(self) -> int:
