@@ -105,8 +105,11 @@ def test_ps_contact_features_state_clearance_normal_and_tangential_speed():
     sigma = float(torch.tensor([1.0, 2.0, 4.0]).square().mean().sqrt())
     assert ps.shape == (1, 15)
     assert_close(ps[0, 10:13], torch.tensor([0.3 / 2.0, -2.0 / sigma, 5.0 / sigma]))
-    # then the sphere–plane contact's restitution and friction: the sphere's own values
-    assert_close(ps[0, 13:], state.material_params[0, :2])
+    # then the sphere–plane contact's restitution and friction: the sphere's times the plane's
+    assert_close(ps[0, 13:], state.material_params[0, :2] * state.plane_materials[0, :2])
+    state.plane_materials = torch.tensor([[0.5, 0.8, 0.0, 0.0]])
+    _, ps = sim.edge_features(graph, state)
+    assert_close(ps[0, 13:], state.material_params[0, :2] * torch.tensor([0.5, 0.8]))
 
 
 @pytest.mark.parametrize("mass_ratio", [False, True])

@@ -101,10 +101,13 @@ def ps_contact(graph, state, length_scale, speed_scale) -> torch.Tensor:
 
 
 def ps_material(graph, state) -> torch.Tensor:
-    """``[F, 2]``: restitution and lateral friction of each ps edge's sphere. Planes have
-    restitution and friction 1 in the ground truth (:mod:`physgnn.groundtruth.engine`), and
-    Bullet combines both by product, so these are the sphere–plane contact's own values."""
-    return state.material_params[graph.ps_index[1], :2]
+    """``[F, 2]``: the restitution and lateral friction of each ps edge's contact, the sphere's
+    times the plane's (Bullet's product rule; planes of a state without ``plane_materials``,
+    and the planes of earlier datasets, have restitution and friction 1)."""
+    plane, sphere = graph.ps_index
+    own = state.material_params[sphere, :2]
+    planes = getattr(state, "plane_materials", None)
+    return own if planes is None else own * planes[plane, :2]
 
 
 def material_features(state) -> torch.Tensor:

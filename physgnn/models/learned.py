@@ -80,9 +80,9 @@ class LearnedSimulator(nn.Module):
     absolute position and orientation are masked. ``contact_features``, ``gravity_prior``: see
     the module doc; ``pad_to_buckets``: the network sees graphs padded to capacity buckets
     (opt-in capture path, :mod:`physgnn.nn.padding`). ``contact_passes``, ``pair_impulses``,
-    ``recent_contact``: the module doc; ``plane_materials``: ps edges also carry the sphere's
-    restitution and lateral friction (planes have restitution and friction 1 in the ground
-    truth, so these are the sphere–plane contact's; needs ``material_features``).
+    ``recent_contact``: the module doc; ``plane_materials``: ps edges also carry the contact's
+    restitution and lateral friction, the sphere's times the plane's (needs
+    ``material_features``).
     """
 
     def __init__(
