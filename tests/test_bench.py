@@ -293,104 +293,21 @@ def test_targets_table_met_and_not_met():
     assert len(targets(result, extra)) == 6  # no training rows without a training run
 
 
-# --------------------------------------------------------------------------------- Pareto
-def test_pareto_frontier_hand_computed():
-    costs = [1.0, 2.0, 2.0, 3.0, 0.5, 4.0, 1.0, math.nan]
-    errors = [5.0, 3.0, 4.0, 3.0, 9.0, 1.0, 5.0, 0.0]
-    # 4 (0.5, 9) < 0 (1, 5) < 1 (2, 3) < 5 (4, 1); 6 duplicates 0; 2 and 3 dominated by 1
-    assert pareto.pareto_frontier(costs, errors) == [4, 0, 1, 5]
-    assert pareto.pareto_frontier([], []) == []
-    with pytest.raises(ValueError):
-        pareto.pareto_frontier([1.0], [])
-
-
-def _row(run, exp, overrides, split, chamfer, fps, diverged=None):
-    row = {
-        k: None
-        for k in (
-            "mse",
-            "mse20",
-            "energy_gain",
-            "depth_sphere",
-            "depth_ground",
-            "depth_static",
-            "pct_sphere",
-            "pct_ground",
-            "pct_static",
-            "rotation_error",
-            "n_spheres",
-            "n_frames",
-            "seed",
-        )
-    }
-    row.update(
-        run=run,
-        experiment=exp,
-        overrides=overrides,
-        split=split,
-        trajectory="t",
-        chamfer=chamfer,
-        fps=fps,
-        diverged_at=diverged,
-    )
-    return row
-
-
-def test_learned_and_pybullet_points():
-    rows = [
-        _row("a", "ablation_M", "model.network.M=1 seed=0", "test", 2.0, 100.0),
-        _row("b", "ablation_M", "model.network.M=1 seed=1", "test", 4.0, 300.0),
-        _row("c", "ablation_M", "model.network.M=9 seed=0", "test", 1.0, 10.0, diverged=5),
-        _row("g", "ground_truth", "", "test", 0.0, None),
-    ]
-    pts = pareto.learned_points(rows, "test", "chamfer")
-    assert [(p.label, p.error, p.valid) for p in pts] == [
-        ("ablation_M: model.network.M=1", 3.0, True),
-        ("ablation_M: model.network.M=9", 1.0, False),
-    ]
-    assert math.isclose(pts[0].ms_per_frame, 1000 / 200.0)
-    bench = {"pybullet": [{"n_spheres": 154, "substeps": 5, "fps": 50.0, "mse_vs_reference": 0.1}]}
+# ------------------------------------------------------------------- pybullet's bench curve
+def test_bench_curve_points_pair_each_substep_count_with_its_rate(tmp_path):
+    bench = {"pybullet": [{"n_spheres": 154, "substeps": s, "fps": 50.0 * s} for s in (1, 5)]}
     extra = {
         "pybullet_accuracy": [
-            {"n_spheres": 154, "substeps": 5, "chamfer": 0.2},
-            {"n_spheres": 154, "substeps": 400, "chamfer": None},
+            {"n_spheres": 154, "substeps": 5, "mse": 0.2},
+            {"n_spheres": 154, "substeps": 1, "mse": 0.5},
+            {"n_spheres": 154, "substeps": 400, "mse": None},  # the reference: no point
         ]
     }
-    [p] = pareto.pybullet_points(bench, extra, "chamfer")
-    assert (p.ms_per_frame, p.error, p.kind) == (20.0, 0.2, "pybullet")
-
-
-def test_pareto_figures_written(tmp_path):
-    (tmp_path / "bench").mkdir()
-    bench = {
-        "pybullet": [
-            {"n_spheres": 154, "substeps": s, "fps": 100.0 / s, "mse_vs_reference": 1.0 / s}
-            for s in (1, 10)
-        ]
-    }
-    extra = {
-        "pybullet_accuracy": [
-            {
-                "n_spheres": 154,
-                "substeps": s,
-                "chamfer": 1.0 / s,
-                "energy_gain": 0.1,
-                "depth_sphere": 0.01,
-                "depth_ground": 0.0,
-            }
-            for s in (1, 10)
-        ]
-    }
-    (tmp_path / "bench" / "bench.json").write_text(json.dumps(bench))
-    (tmp_path / "bench" / "bench_extra.json").write_text(json.dumps(extra))
-    rows = [
-        _row("a", "baseline", "", "test", 2.0, 100.0),
-        _row("a", "baseline", "", "ood", 3.0, 90.0),
-    ]
-    metrics = ("chamfer", "energy_gain")
-    paths = pareto.pareto_figures(rows, tmp_path / "bench", tmp_path / "fig", metrics=metrics)
-    assert [p.name for p in paths] == ["pareto_chamfer.png", "pareto_energy_gain.png"]
-    assert all(p.stat().st_size > 1000 for p in paths)
+    pts = pareto.pybullet_points(bench, extra, "mse")
+    got = [(p.ms_per_frame, p.error, p.kind) for p in pts]
+    assert got == [(4.0, 0.2, "pybullet"), (20.0, 0.5, "pybullet")]
+    path = pareto.bench_figure(tmp_path / "curve.png", bench, extra)
+    assert path.stat().st_size > 1000
 
 
 def test_training_profile_splits_one_step_into_its_parts(quick):
