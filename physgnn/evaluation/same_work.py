@@ -21,15 +21,13 @@ import os
 import signal
 import time
 
-import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
 from physgnn.evaluation.rollouts import metrics_row, progress
 from physgnn.evaluation.runs import SPLITS, RunInfo
 from physgnn.groundtruth.engine import simulate
-from physgnn.physics.scene import GRAVITY, Scene
-from physgnn.physics.trajectory import FRAME_KEYS, Trajectory
+from physgnn.physics.trajectory import Trajectory, continued, scene_at
 from physgnn.report.table import ENGINE
 
 
@@ -41,32 +39,11 @@ def engine_of(truth: Trajectory, substeps: int) -> dict:
     return settings | {"substeps": int(substeps)}
 
 
-def start_of(truth: Trajectory, H: int) -> Scene:
-    """The scene of ``truth`` from its frame ``H`` to its end (``T - H`` frames)."""
-    static = ("radius", "mass", "material", "planes", "plane_kind", "materials")
-    return Scene(
-        name=truth.name, n_frames=truth.n_frames - H, dt=truth.dt, effects=truth.effects,
-        gravity=tuple(truth.attrs.get("gravity", GRAVITY)),
-        **{k: getattr(truth, k)[H] for k in FRAME_KEYS},
-        **{k: getattr(truth, k) for k in static},
-    )  # fmt: skip
-
-
-def as_rollout(truth: Trajectory, run: Trajectory, H: int, fps: float) -> Trajectory:
-    """The truth's first ``H + 1`` frames, then the engine's ``run`` from frame ``H`` on, with
-    finite-difference velocities: a prediction recorded as a learned rollout is."""
-    frames = {
-        k: np.concatenate([getattr(truth, k)[: H + 1], getattr(run, k)[1:]]) for k in FRAME_KEYS
-    }
-    pred = dataclasses.replace(truth, **frames, attrs=dict(truth.attrs), start=H, fps=fps)
-    return pred.with_finite_velocities()
-
-
 def timed_run(job: tuple[Trajectory, int, int]) -> tuple[Trajectory, float]:
     """``job = (truth, H, substeps)``: the engine's run from frame H and its seconds."""
     truth, H, substeps = job
     t0 = time.perf_counter()
-    run = simulate(start_of(truth, H), engine_of(truth, substeps))
+    run = simulate(scene_at(truth, H), engine_of(truth, substeps))
     return run, time.perf_counter() - t0
 
 
@@ -78,7 +55,7 @@ def engine_split(trajs: list[Trajectory], H: int, substeps: int, processes: int)
     if processes <= 1:
         runs = [timed_run(job) for job in jobs]
         return [
-            as_rollout(t, run, H, (run.n_frames - 1) / s)
+            continued(t, run, H, (run.n_frames - 1) / s)
             for t, (run, s) in zip(trajs, runs, strict=True)
         ]
     with mp.get_context("fork").Pool(processes, initializer=_worker_signals) as pool:
@@ -88,7 +65,7 @@ def engine_split(trajs: list[Trajectory], H: int, substeps: int, processes: int)
         pool.close()
         pool.join()  # the workers end on their own, not by the pool's SIGTERM
     fps = sum(run.n_frames - 1 for run, _ in runs) / wall
-    return [as_rollout(t, run, H, fps) for t, (run, _) in zip(trajs, runs, strict=True)]
+    return [continued(t, run, H, fps) for t, (run, _) in zip(trajs, runs, strict=True)]
 
 
 def _worker_signals() -> None:
