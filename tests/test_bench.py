@@ -14,6 +14,7 @@ from hydra import compose, initialize_config_dir
 from torch.utils.flop_counter import FlopCounterMode
 
 from physgnn.benchmark import gpu as gpu_module
+from physgnn.benchmark import interleaved
 from physgnn.benchmark import scenes as bench_scenes
 from physgnn.benchmark.gpu import gpu_section
 from physgnn.benchmark.learned import frame_states, make_simulator, time_learned
@@ -47,7 +48,9 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
     out, result = quick
     data = json.loads((out / "bench.json").read_text())
     assert data == json.loads(json.dumps(result))
-    assert set(data) == {"machine", "learned", "pybullet", "training", "gpu_readiness", "gpu"}
+    assert set(data) == {
+        "machine", "learned", "pybullet", "interleaved", "training", "gpu_readiness", "gpu"
+    }  # fmt: skip
     parts = {"train_step", "rollout_frame"}
     kinds = ("", "_fixed_capacity", "_compiled")
     assert set(data["gpu_readiness"]) == {f"{p}{kind}" for p in parts for kind in kinds}
@@ -247,6 +250,11 @@ def _learned(n, fps, graph, network, share):
     }
 
 
+def _turns(config, n, ratio, load):
+    return {"config": config, "n_spheres": n, "substeps": 10, "median_ratio": ratio,
+            "loadavg_start": load}  # fmt: skip
+
+
 def test_targets_table_met_and_not_met():
     extra = {
         "learned": [
@@ -258,10 +266,10 @@ def test_targets_table_met_and_not_met():
         "training": {"share_of_matmul": 0.65, "gflops": 100.0, "nodes_per_s": 30_000.0},
     }
     result = {
-        "pybullet": [
-            {"n_spheres": 154, "substeps": 10, "fps": 150.0},
-            {"n_spheres": 1000, "substeps": 10, "fps": 40.0},
-            {"n_spheres": 10000, "substeps": 10, "fps": 5.0},
+        "interleaved": [
+            _turns("baseline", 154, 3.0, 0.5),
+            _turns("baseline", 1000, 1.25, 2.5),
+            _turns("baseline", 10000, 0.5, 2.5),  # not a size of the target
         ]
     }
     fps154, fps1000, share, graph, linear, pybullet, train_share, nodes = targets(result, extra)
@@ -270,15 +278,13 @@ def test_targets_table_met_and_not_met():
     assert share[2] == "met"  # 40 % at 154 spheres is not judged: from 300 up
     assert graph[2] == "not met"  # 30 % at 1000 spheres
     assert linear[1:] == ["1.25", "met"]  # (250 ms / 10 000) / (20 ms / 1000)
-    assert pybullet[1] == "154: 3.00× (450.0 vs 150.0 FPS), 1000: 1.25× (50.0 vs 40.0 FPS)"
+    assert pybullet[0].startswith("learned FPS over pybullet's (10 substeps, same frames; median")
+    assert pybullet[1] == "154: 3.00× (load 0.5), 1000: 1.25× (load 2.5)"
     assert pybullet[2] == "not met"  # 1.25 < 3 at 1 000 spheres
     # the compiled baseline counts too
-    compiled = [_learned(154, 450.0, 0.2, 1.0, 0.5), _learned(1000, 130.0, 0.2, 1.0, 0.5)]
-    compiled = [row | {"config": "compiled"} for row in compiled]
-    pybullet = targets(result, {**extra, "learned": extra["learned"] + compiled})[5]
-    assert pybullet[1].endswith(
-        "; compiled: 154: 3.00× (450.0 vs 150.0 FPS), 1000: 3.25× (130.0 vs 40.0 FPS)"
-    )
+    compiled = [_turns("compiled", 154, 3.0, 0.5), _turns("compiled", 1000, 3.25, 0.5)]
+    pybullet = targets({"interleaved": result["interleaved"] + compiled}, extra)[5]
+    assert pybullet[1].endswith("; compiled: 154: 3.00× (load 0.5), 1000: 3.25× (load 0.5)")
     assert pybullet[2] == "met"
     assert train_share[1:] == ["65% (100.0 GFLOP/s)", "met"]
     assert nodes[1:] == ["30.0 k nodes/s", "not met (needs ×1.3)"]
@@ -294,104 +300,61 @@ def test_targets_table_met_and_not_met():
     assert len(targets(result, extra)) == 6  # no training rows without a training run
 
 
-# --------------------------------------------------------------------------------- Pareto
-def test_pareto_frontier_hand_computed():
-    costs = [1.0, 2.0, 2.0, 3.0, 0.5, 4.0, 1.0, math.nan]
-    errors = [5.0, 3.0, 4.0, 3.0, 9.0, 1.0, 5.0, 0.0]
-    # 4 (0.5, 9) < 0 (1, 5) < 1 (2, 3) < 5 (4, 1); 6 duplicates 0; 2 and 3 dominated by 1
-    assert pareto.pareto_frontier(costs, errors) == [4, 0, 1, 5]
-    assert pareto.pareto_frontier([], []) == []
-    with pytest.raises(ValueError):
-        pareto.pareto_frontier([1.0], [])
-
-
-def _row(run, exp, overrides, split, chamfer, fps, diverged=None):
-    row = {
-        k: None
-        for k in (
-            "mse",
-            "mse20",
-            "energy_gain",
-            "depth_sphere",
-            "depth_ground",
-            "depth_static",
-            "pct_sphere",
-            "pct_ground",
-            "pct_static",
-            "rotation_error",
-            "n_spheres",
-            "n_frames",
-            "seed",
-        )
-    }
-    row.update(
-        run=run,
-        experiment=exp,
-        overrides=overrides,
-        split=split,
-        trajectory="t",
-        chamfer=chamfer,
-        fps=fps,
-        diverged_at=diverged,
+# ------------------------------------------------------------------------ interleaved rounds
+def test_taking_turns_keeps_each_rounds_ratio_and_their_median(monkeypatch):
+    # a busy spell in round 2 slows both halves: its ratio stays near the others
+    learned = iter([100.0, 40.0, 120.0, 90.0])
+    engine = iter([50.0, 25.0, 40.0, 60.0])
+    monkeypatch.setattr(interleaved, "step_once", lambda sim, state: None)
+    monkeypatch.setattr(interleaved, "learned_fps", lambda sim, states: next(learned))
+    monkeypatch.setattr(
+        interleaved, "timed_pybullet", lambda start, engine_cfg: (None, next(engine))
     )
-    return row
+    turns = interleaved.taking_turns(None, [None], None, {}, rounds=4)
+    assert turns["learned_fps"] == [100.0, 40.0, 120.0, 90.0]
+    assert turns["pybullet_fps"] == [50.0, 25.0, 40.0, 60.0]
+    assert turns["ratios"] == [2.0, 1.6, 3.0, 1.5]
+    assert turns["median_ratio"] == 1.8  # (1.6 + 2.0) / 2
+    assert turns["loadavg_start"] >= 0 and turns["loadavg_end"] >= 0
 
 
-def test_learned_and_pybullet_points():
-    rows = [
-        _row("a", "ablation_M", "model.network.M=1 seed=0", "test", 2.0, 100.0),
-        _row("b", "ablation_M", "model.network.M=1 seed=1", "test", 4.0, 300.0),
-        _row("c", "ablation_M", "model.network.M=9 seed=0", "test", 1.0, 10.0, diverged=5),
-        _row("g", "ground_truth", "", "test", 0.0, None),
-    ]
-    pts = pareto.learned_points(rows, "test", "chamfer")
-    assert [(p.label, p.error, p.valid) for p in pts] == [
-        ("ablation_M: model.network.M=1", 3.0, True),
-        ("ablation_M: model.network.M=9", 1.0, False),
-    ]
-    assert math.isclose(pts[0].ms_per_frame, 1000 / 200.0)
-    bench = {"pybullet": [{"n_spheres": 154, "substeps": 5, "fps": 50.0, "mse_vs_reference": 0.1}]}
+def test_quick_bench_takes_turns_and_names_the_model_in_the_targets_heading(quick):
+    out, result = quick
+    [row] = result["interleaved"]
+    assert (row["config"], row["n_spheres"], row["substeps"], len(row["ratios"])) == (
+        "baseline", 10, 10, 2)  # fmt: skip
+    ratios = [a / b for a, b in zip(row["learned_fps"], row["pybullet_fps"], strict=True)]
+    assert row["ratios"] == ratios and row["median_ratio"] == sum(ratios) / 2
+    md = (out / "bench.md").read_text()
+    model = _cfg().model
+    heading = (f"## Targets (baseline M={model.network.M} H={model.H} "
+               f"{model.graph.connectivity} h={model.network.hidden})")  # fmt: skip
+    assert heading in md and "## Learned against pybullet, taking turns" in md
+    assert "![pybullet accuracy versus time on the bench pile](pybullet_accuracy.png)" in md
+    assert (out / "pybullet_accuracy.png").stat().st_size > 1000
+
+
+def test_interleaved_configs_must_be_learned_configs(tmp_path):
+    cfg = _cfg("threads=1", f"out_dir={tmp_path}", "interleaved.configs=[nope]")
+    with pytest.raises(BenchError, match="interleaved.configs names nope, not among"):
+        bench(cfg)
+
+
+# ------------------------------------------------------------------- pybullet's bench curve
+def test_bench_curve_points_pair_each_substep_count_with_its_rate(tmp_path):
+    bench = {"pybullet": [{"n_spheres": 154, "substeps": s, "fps": 50.0 * s} for s in (1, 5)]}
     extra = {
         "pybullet_accuracy": [
-            {"n_spheres": 154, "substeps": 5, "chamfer": 0.2},
-            {"n_spheres": 154, "substeps": 400, "chamfer": None},
+            {"n_spheres": 154, "substeps": 5, "mse": 0.2},
+            {"n_spheres": 154, "substeps": 1, "mse": 0.5},
+            {"n_spheres": 154, "substeps": 400, "mse": None},  # the reference: no point
         ]
     }
-    [p] = pareto.pybullet_points(bench, extra, "chamfer")
-    assert (p.ms_per_frame, p.error, p.kind) == (20.0, 0.2, "pybullet")
-
-
-def test_pareto_figures_written(tmp_path):
-    (tmp_path / "bench").mkdir()
-    bench = {
-        "pybullet": [
-            {"n_spheres": 154, "substeps": s, "fps": 100.0 / s, "mse_vs_reference": 1.0 / s}
-            for s in (1, 10)
-        ]
-    }
-    extra = {
-        "pybullet_accuracy": [
-            {
-                "n_spheres": 154,
-                "substeps": s,
-                "chamfer": 1.0 / s,
-                "energy_gain": 0.1,
-                "depth_sphere": 0.01,
-                "depth_ground": 0.0,
-            }
-            for s in (1, 10)
-        ]
-    }
-    (tmp_path / "bench" / "bench.json").write_text(json.dumps(bench))
-    (tmp_path / "bench" / "bench_extra.json").write_text(json.dumps(extra))
-    rows = [
-        _row("a", "baseline", "", "test", 2.0, 100.0),
-        _row("a", "baseline", "", "ood", 3.0, 90.0),
-    ]
-    metrics = ("chamfer", "energy_gain")
-    paths = pareto.pareto_figures(rows, tmp_path / "bench", tmp_path / "fig", metrics=metrics)
-    assert [p.name for p in paths] == ["pareto_chamfer.png", "pareto_energy_gain.png"]
-    assert all(p.stat().st_size > 1000 for p in paths)
+    pts = pareto.pybullet_points(bench, extra, "mse")
+    got = [(p.ms_per_frame, p.error, p.kind) for p in pts]
+    assert got == [(4.0, 0.2, "pybullet"), (20.0, 0.5, "pybullet")]
+    path = pareto.bench_figure(tmp_path / "curve.png", bench, extra)
+    assert path.stat().st_size > 1000
 
 
 def test_training_profile_splits_one_step_into_its_parts(quick):

@@ -218,8 +218,14 @@ def test_save_rollouts_writes_each_learned_run_in_the_dataset_schema(evaluated):
 def test_eval_writes_one_row_per_run_split_and_trajectory(evaluated):
     outputs, rows, _ = evaluated
     runs = [r["run"] for r in rows]
-    # 3 references and 2 runs x (2 test + 2 ood) + OOD (c) again with sleeping on
-    assert len(rows) == 5 * 4 + 1
+    # 3 references and 2 runs x (2 test + 2 ood) + OOD (c) again with sleeping on, and pybullet
+    # at each substep count on the same 4 trajectories (both runs have H = 1: one start)
+    substeps = list(eval_cfg().pybullet.substeps)
+    assert len(rows) == 5 * 4 + 1 + 4 * len(substeps)
+    assert [r["substeps"] for r in rows if r["experiment"] == "pybullet"] == [
+        k for k in substeps for _ in range(4)
+    ]
+    assert runs.count("pybullet-1") == 4 and rows[0]["substeps"] is None
     assert runs.count("ground_truth") == runs.count("static") == runs.count("gravity_only") == 4
     assert runs.count("runs/baseline/2026-01-01_00-00-00+sleeping") == 1
     assert {r["trajectory"] for r in rows if r["split"] == "ood"} == {

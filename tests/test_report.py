@@ -1,6 +1,5 @@
 """report.md, tables and figures from a hand-made metrics table (no training needed)."""
 
-import json
 import math
 
 import pytest
@@ -177,14 +176,19 @@ def test_fmt(value, text):
     assert report_format.fmt(value) == text
 
 
-def test_report_links_the_pareto_figures_when_the_bench_ran(tmp_path):
-    bench = tmp_path / "bench"
-    bench.mkdir()
-    pybullet = [{"n_spheres": 154, "substeps": s, "fps": 400.0 / s} for s in (1, 10)]
-    (bench / "bench.json").write_text(json.dumps({"pybullet": pybullet}))
-    accuracy = [{"n_spheres": 154, "substeps": s, "chamfer": 1.0 / s} for s in (1, 10)]
-    (bench / "bench_extra.json").write_text(json.dumps({"pybullet_accuracy": accuracy}))
-    write_csv(tmp_path / "metrics.csv", fake_rows())
-    text = report.write_report(tmp_path, bench_dir=bench).read_text()
+def test_report_draws_the_same_work_when_pybullet_rows_are_there(tmp_path):
+    rows = fake_rows()
+    write_csv(tmp_path / "metrics.csv", rows)
+    assert "No pybullet rows" in report.write_report(tmp_path).read_text()
+    engine = [
+        make_row(f"pybullet-{k}", "pybullet", f"substeps={k}", None, r["split"], r["trajectory"],
+                 1.0 / k, fps=1000.0 / k) | {"substeps": k}
+        for k in (1, 10) for r in rows if r["run"] == "ground_truth"
+    ]  # fmt: skip
+    write_csv(tmp_path / "metrics.csv", rows + engine)
+    text = report.write_report(tmp_path).read_text()
     assert "![pareto_chamfer](figures/pareto_chamfer.png)" in text
+    assert "![pareto_mse20](figures/pareto_mse20.png)" in text
     assert (tmp_path / "figures" / "pareto_chamfer.png").stat().st_size > 1000
+    line = next(ln for ln in text.splitlines() if ln.startswith("| pybullet-10 |"))
+    assert "| 0.05 | 0.0333 |" in line and "| 100 | 10 |" in line  # mse20, chamfer; fps, ms

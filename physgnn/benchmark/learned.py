@@ -119,22 +119,29 @@ def repeats_for(n: int, c: DictConfig) -> int:
     return int(min(max(c.sphere_frames // max(n, 1), c.min_repeats), c.max_repeats))
 
 
-def learned_rows(cfg: DictConfig, runs: dict, stats: dict, matmul_gflops: float) -> list[dict]:
-    """Every configuration on every size it asks for (``runs[n]`` = pybullet run of size n);
-    the configurations of one size are timed together (:func:`time_cases`)."""
-    sims, sizes = {}, {}
+def build_simulators(cfg: DictConfig, stats: dict) -> dict[str, tuple[object, list[int]]]:
+    """Every configuration of ``cfg.learned.configs``: its simulator (random weights; compiled
+    or followed by the constraint stage when the configuration says so) and its sizes."""
+    sims = {}
     for name, c in cfg.learned.configs.items():
-        sims[name] = make_simulator(cfg.model, OmegaConf.to_container(c.overrides), stats)
+        sim = make_simulator(cfg.model, OmegaConf.to_container(c.overrides), stats)
         if c.get("compile"):  # as lit.compile=true: two regions, dynamic shapes
-            compile_simulator(sims[name])
+            compile_simulator(sim)
         if c.get("constraints"):  # the learned step followed by the constraint stage
-            sims[name] = ConstrainedSimulator(sims[name], int(c.constraints))
-        sizes[name] = list(cfg.sizes) if c.sizes is None else list(c.sizes)
+            sim = ConstrainedSimulator(sim, int(c.constraints))
+        sims[name] = sim, list(cfg.sizes) if c.sizes is None else list(c.sizes)
+    return sims
+
+
+def learned_rows(cfg: DictConfig, runs: dict, sims: dict, matmul_gflops: float) -> list[dict]:
+    """Every configuration of ``sims`` (:func:`build_simulators`) on every size it asks for
+    (``runs[n]`` = pybullet run of size n); the configurations of one size are timed together
+    (:func:`time_cases`)."""
     rows = {}
-    for n in sorted({n for s in sizes.values() for n in s}):
-        names = [name for name in sims if n in sizes[name]]
-        states = {h: frame_states(runs[n]["traj"], h) for h in {sims[k].H for k in names}}
-        cases = [(sims[k], states[sims[k].H]) for k in names]
+    for n in sorted({n for _, sizes in sims.values() for n in sizes}):
+        names = [name for name, (_, sizes) in sims.items() if n in sizes]
+        states = {h: frame_states(runs[n]["traj"], h) for h in {sims[k][0].H for k in names}}
+        cases = [(sims[k][0], states[sims[k][0].H]) for k in names]
         for name, t in zip(names, time_cases(cases, repeats_for(n, cfg.learned)), strict=True):
             rate = t["gflop_per_step"] / max(t["network_ms"] / 1000, 1e-12)
             rows[name, n] = {
@@ -149,7 +156,7 @@ def learned_rows(cfg: DictConfig, runs: dict, stats: dict, matmul_gflops: float)
                 f"{rate:.1f} GFLOP/s",
                 flush=True,
             )
-    return [rows[name, n] for name in sims for n in sizes[name]]
+    return [rows[name, n] for name, (_, sizes) in sims.items() for n in sizes]
 
 
 def batched_rows(cfg: DictConfig, runs: dict, stats: dict) -> list[dict]:

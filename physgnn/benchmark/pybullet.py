@@ -22,6 +22,7 @@ def pybullet_runs(cfg: DictConfig, rng: np.random.Generator) -> dict:
         cfg.batched.n_spheres,
         *cfg.sizes,
         *cfg.rollout_sizes,
+        *cfg.interleaved.sizes,
     }
     for c in cfg.learned.configs.values():
         sizes |= set(c.sizes or [])

@@ -4,8 +4,10 @@ Measures the machine (CPU, threads, fp32 matmul rate), the learned simulator per
 and scene size (ms per frame split into graph / network / integration, FPS, FLOPs and the share
 of the matmul rate), pybullet on the same scenes (FPS at 10 substeps; at one size, FPS and
 accuracy against a fine reference for several substep counts), the training throughput of the
-baseline and the cost of idle spheres, contacts and walls. Writes ``bench.json`` (the keys the
-Pareto view reads), ``bench_extra.json`` (everything else) and ``bench.md``.
+baseline and the cost of idle spheres, contacts and walls, and the speed ratio of learned steps
+to pybullet on the same frames in interleaved rounds (:mod:`.interleaved`). Writes
+``bench.json`` (the headline numbers), ``bench_extra.json`` (everything else), pybullet's
+accuracy-versus-time curve on the bench pile (``pybullet_accuracy.png``) and ``bench.md``.
 
 Scenes are random_box scenes in motion: pybullet runs ``warmup_frames`` from the initial
 state, and the timed frames start from there, so learned steps (one step per ground-truth
@@ -25,12 +27,14 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn.benchmark import activity, machine, profile, scenes
 from physgnn.benchmark.gpu import gpu_section
 from physgnn.benchmark.gpu_readiness import gpu_readiness
-from physgnn.benchmark.learned import batched_rows, learned_rows
-from physgnn.benchmark.markdown import write_markdown
+from physgnn.benchmark.interleaved import interleaved_rows
+from physgnn.benchmark.learned import batched_rows, build_simulators, learned_rows
+from physgnn.benchmark.markdown import ACCURACY_FIGURE, write_markdown
 from physgnn.benchmark.pybullet import accuracy_sweep, pybullet_rows, pybullet_runs
 from physgnn.data.dataset import compute_stats
 from physgnn.errors import ConfigError
 from physgnn.files import write_json, write_text
+from physgnn.report.pareto import bench_figure
 
 
 class BenchError(ConfigError):
@@ -43,6 +47,12 @@ def bench(cfg: DictConfig) -> dict:
         cfg = quick_config(cfg)
     if int(cfg.threads) < 1:
         raise BenchError(f"threads must be >= 1 (got {cfg.threads})")
+    unknown = [c for c in cfg.interleaved.configs if c not in cfg.learned.configs]
+    if unknown:
+        raise BenchError(
+            f"interleaved.configs names {', '.join(unknown)}, not among learned.configs "
+            f"({', '.join(cfg.learned.configs)})"
+        )
     torch.set_num_threads(int(cfg.threads))
     torch.manual_seed(int(cfg.seed))
     start = time.perf_counter()
@@ -57,6 +67,7 @@ def bench(cfg: DictConfig) -> dict:
         "machine": {k: info[k] for k in ("cpu", "threads", "matmul_gflops")},
         "learned": [{k: r[k] for k in LEARNED_KEYS} for r in m["learned"]],
         "pybullet": pybullet_rows(cfg, m["runs"], m["pybullet_accuracy"]),
+        "interleaved": m["interleaved"],
         "training": {
             k: m["training"][k] for k in ("pairs_per_s", "nodes_per_s", "share_of_matmul")
         },
@@ -68,7 +79,7 @@ def bench(cfg: DictConfig) -> dict:
     }
     extra = {
         "machine": info,
-        **{k: v for k, v in m.items() if k != "runs"},
+        **{k: v for k, v in m.items() if k not in ("runs", "interleaved")},
         "settings": OmegaConf.to_container(cfg, resolve=True),
         "wall_s": time.perf_counter() - start,
         "phase_s": phases,
@@ -92,7 +103,9 @@ def measure(cfg: DictConfig, rng: np.random.Generator, matmul: float, phases: di
     stats = compute_stats(train_trajs)
     m = {"runs": timed("pybullet sizes", pybullet_runs, cfg, rng)}
     runs = m["runs"]
-    m["learned"] = timed("learned", learned_rows, cfg, runs, stats, matmul)
+    sims = build_simulators(cfg, stats)
+    m["learned"] = timed("learned", learned_rows, cfg, runs, sims, matmul)
+    m["interleaved"] = timed("interleaved", interleaved_rows, cfg, runs, sims)
     start = runs[cfg.accuracy.n_spheres]["start"]
     m["pybullet_accuracy"] = timed("pybullet substeps", accuracy_sweep, cfg, start)
     m["training"] = timed("training", activity.training_throughput, cfg, train_trajs, stats, matmul)
@@ -130,7 +143,9 @@ LEARNED_KEYS = (
 
 
 def write_outputs(out_dir: Path, result: dict, extra: dict) -> None:
-    """``bench.json``, ``bench_extra.json`` and ``bench.md`` in ``out_dir``, atomically."""
+    """``bench.json``, ``bench_extra.json``, pybullet's accuracy-versus-time curve on the bench
+    pile (``pybullet_accuracy.png``) and ``bench.md`` in ``out_dir``, atomically."""
     write_json(out_dir / "bench.json", result)
     write_json(out_dir / "bench_extra.json", extra)
+    bench_figure(out_dir / ACCURACY_FIGURE, result, extra)
     write_text(out_dir / "bench.md", write_markdown(result, extra))

@@ -25,7 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.data.dataset import write_split
 from physgnn.errors import ConfigError
-from physgnn.evaluation import rerun_log
+from physgnn.evaluation import rerun_log, same_work
 from physgnn.evaluation.bounce import bounce_rows
 from physgnn.evaluation.freefall import freefall_rows
 from physgnn.evaluation.invariance import invariance_rows
@@ -79,7 +79,7 @@ def evaluate(cfg: DictConfig) -> Path:
 
 def check_eval_values(cfg: DictConfig) -> None:
     """``max_frames`` is null or a whole number >= 2 (a rollout needs frames to predict);
-    ``tol`` a number >= 0."""
+    ``tol`` a number >= 0; ``pybullet`` null or its substep counts and processes."""
     frames, tol = cfg.get("max_frames"), cfg.get("tol")
     if frames is not None and (not isinstance(frames, int) or isinstance(frames, bool)
                                or frames < 2):  # fmt: skip
@@ -91,6 +91,7 @@ def check_eval_values(cfg: DictConfig) -> None:
             f"tol must be a number >= 0 (a fraction of the diameter; 0: any overlap counts), "
             f"got {tol!r}"
         )
+    same_work.check_settings(cfg.get("pybullet"))
 
 
 def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
@@ -114,6 +115,7 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
     collected = Collected(keep, filmed, cfg.tol, stab, rest_tol(cfg))
     collected.saved = {} if cfg.get("save_rollouts") else None
     out = roll_all(jobs, data, collected, settings, batch_scenes=batched)
+    out.rows += engine_rows(cfg, runs, data, batched)
     if out.saved:
         write_rollouts(report_dir / "rollouts", out.saved)
     if film is not None and cfg.sleeping_compare and not settings["sleeping"]:
@@ -134,8 +136,20 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
     if cfg.get("rerun"):
         for scene, (traj, panels) in sorted(out.films.items()):
             rerun_log.log_rerun(report_dir / "videos" / f"{scene}.rrd", traj, panels[0][0])
-    bench_dir = cfg.paths.get("bench_dir")
-    return write_report(report_dir, out.rows, bench_dir=bench_dir, skipped=skipped)
+    return write_report(report_dir, out.rows, skipped=skipped)
+
+
+def engine_rows(cfg: DictConfig, runs: list[RunInfo], data: dict, batched: bool) -> list[dict]:
+    """pybullet at ``cfg.pybullet.substeps`` on the learned runs' own work
+    (:mod:`physgnn.evaluation.same_work`), timed as the learned rollouts are: with
+    ``batched``, each split's scenes at once in ``cfg.pybullet.processes`` processes, else
+    one scene at a time here. None without a ``pybullet`` config."""
+    settings = same_work.check_settings(cfg.get("pybullet"))
+    if settings is None:
+        return []
+    substeps, processes = settings
+    jobs = same_work.engine_jobs(runs, len(data) > 1)
+    return same_work.engine_rows(jobs, data, substeps, processes if batched else 1, cfg.tol)
 
 
 def _freefall(runs: list[RunInfo], cfg: DictConfig, settings: dict) -> list[dict]:

@@ -21,6 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import check_seed
 from physgnn.files import exclusive
+from physgnn.groundtruth.engine import as_stored
 from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.folders import FILES, build_folder, check_target
 from physgnn.groundtruth.jobs import SPLITS, Job, check_workers, plan, run_jobs, trajectory_seed
@@ -41,8 +42,8 @@ __all__ = ["FILES", "SPLITS", "after_sweep", "generate", "plan", "trajectory_see
 
 
 def export_scenes(jobs: list[Job], folder: Path) -> Path:
-    """Write each job's initial scene as a YAML scene file ``<split>_<group>.yaml`` (no file
-    already there is replaced)."""
+    """Write each job's initial scene, as its trajectory stores it, as a YAML scene file
+    ``<split>_<group>.yaml`` (no file already there is replaced)."""
     paths = [folder / f"{job.split}_{job.group}.yaml" for job in jobs]
     taken = [p.name for p in paths if p.exists()]
     if taken:
@@ -51,7 +52,8 @@ def export_scenes(jobs: list[Job], folder: Path) -> Path:
             f"{' ...' if len(taken) > 3 else ''}; choose another folder"
         )
     for job, path in zip(jobs, paths, strict=True):
-        write_scene(path, build_scene(job.scene, np.random.default_rng(job.seed)))
+        scene = build_scene(job.scene, np.random.default_rng(job.seed))
+        write_scene(path, as_stored(scene, job.engine))
     return folder
 
 

@@ -17,7 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from physgnn.errors import ConfigError
-from physgnn.groundtruth.engine import simulate
+from physgnn.groundtruth.engine import as_stored, simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.physics.scene import SceneError
 from physgnn.physics.trajectory import Trajectory
@@ -67,8 +67,10 @@ def plan(data: DictConfig, engine: dict) -> list[Job]:
 
 
 def run_job(job: Job) -> Trajectory:
-    """Build and simulate one scene; the trajectory carries its seed, scene and config."""
-    scene = build_scene(job.scene, np.random.default_rng(job.seed))
+    """Build and simulate one scene, from the start its trajectory stores
+    (:func:`~physgnn.groundtruth.engine.as_stored`: the truth replays from its own frame 0);
+    the trajectory carries its seed, scene and config."""
+    scene = as_stored(build_scene(job.scene, np.random.default_rng(job.seed)), job.engine)
     traj = simulate(scene, job.engine)
     traj.attrs.update(
         group=job.group,

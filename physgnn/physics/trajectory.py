@@ -11,9 +11,11 @@ import torch
 
 from physgnn.physics.kinematics import finite_difference_velocities
 from physgnn.physics.scene import (
+    GRAVITY,
     GROUND,
     Effects,
     Material,
+    Scene,
     SceneError,
     default_plane_materials,
     ground_plane,
@@ -139,6 +141,30 @@ class Trajectory:
             vel=_frames("vel", vel, (t, n, 3), vel_fd), attrs=dict(attrs or {}),
             angvel=_frames("angvel", angvel, (t, n, 3), angvel_fd), **static,
         )  # fmt: skip
+
+
+STATIC_KEYS = ("radius", "mass", "material", "planes", "plane_kind", "materials", "plane_materials")
+
+
+def scene_at(traj: Trajectory, t: int) -> Scene:
+    """The scene of ``traj`` from its frame ``t`` (positions, orientations, velocities) to its
+    last frame (``T - t`` frames), at its gravity."""
+    return Scene(
+        name=traj.name, n_frames=traj.n_frames - t, dt=traj.dt, effects=traj.effects,
+        gravity=tuple(traj.attrs.get("gravity", GRAVITY)),
+        **{k: getattr(traj, k)[t] for k in FRAME_KEYS},
+        **{k: getattr(traj, k) for k in STATIC_KEYS},
+    )  # fmt: skip
+
+
+def continued(truth: Trajectory, run: Trajectory, start: int, fps: float) -> Trajectory:
+    """``truth``'s frames ``0..start``, then ``run`` (an engine run of :func:`scene_at` of
+    ``truth`` at ``start``) from its frame 1 on, with finite-difference velocities: a
+    prediction recorded as a rollout is (``start``, ``fps``)."""
+    frames = {k: np.concatenate([getattr(truth, k)[: start + 1], getattr(run, k)[1:]])
+              for k in FRAME_KEYS}  # fmt: skip
+    pred = dataclasses.replace(truth, **frames, attrs=dict(truth.attrs), start=start, fps=fps)
+    return pred.with_finite_velocities()
 
 
 def _array(key: str, value, dtype, shape: tuple) -> np.ndarray:

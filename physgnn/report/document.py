@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from physgnn.files import write_text
-from physgnn.report import bounce, freefall, invariance, pareto, stability
+from physgnn.report import bounce, freefall, invariance, pareto, same_work, stability
 from physgnn.report.sections import (
     baselines_table,
     components_section,
@@ -17,14 +17,25 @@ from physgnn.report.sweeps import fps_figure, rel, sweep_sections
 from physgnn.report.table import SLEEP_SCENE, group_rows, read_csv
 
 
-def pareto_section(
-    rows: list[dict], bench_dir: str | Path | None, fig_dir: Path, root: Path
-) -> str:
-    """Accuracy against ms per frame (learned runs and pybullet), when ``make bench`` ran."""
-    if bench_dir is None or not (Path(bench_dir) / "bench.json").exists():
-        return "No bench results (`make bench` writes them; then run `make eval` again)."
-    paths = pareto.pareto_figures(rows, bench_dir, fig_dir)
-    return "\n\n".join(f"![{p.stem}]({rel(p, root)})" for p in paths)
+def pareto_section(rows: list[dict], fig_dir: Path, root: Path) -> str:
+    """Accuracy against ms per frame on the same work: the learned runs and pybullet's rows,
+    a table per split and the Pareto figures."""
+    if not same_work.engine_groups(rows):
+        return same_work.section(rows)
+    paths = pareto.pareto_figures(rows, fig_dir)
+    return "\n\n".join(
+        [
+            "Every simulator from the same start states (each trajectory's first H+1 truth "
+            "frames; pybullet restarts from frame H at the truth's other settings), scored with "
+            "the same metrics against the same truth; means over the rollouts. frames/s: as the "
+            "learned rollouts were timed (batched scenes: pybullet runs each split's scenes in "
+            "as many processes as cores, every row the split's scene-frames per second; one "
+            "scene at a time: both in one process). pybullet's own curve on the bench pile "
+            "is in the bench report (bench.md).",
+            same_work.section(rows),
+            *(f"![{p.stem}]({rel(p, root)})" for p in paths),
+        ]
+    )
 
 
 def stability_section(root: Path) -> str:
@@ -54,15 +65,12 @@ def bounce_section(root: Path) -> str:
 
 
 def write_report(
-    report_dir: str | Path,
-    rows: list[dict] | None = None,
-    bench_dir: str | Path | None = None,
-    skipped: list[str] | None = None,
+    report_dir: str | Path, rows: list[dict] | None = None, skipped: list[str] | None = None
 ) -> Path:
     """Write ``report.md`` (and the sweep / FPS / Pareto figures) from ``report_dir/metrics.csv``.
 
     Figures the eval already wrote (``figures/energy_ood.png``, ``videos/*.gif`` and
-    ``.mp4``) are linked; the Pareto view needs ``bench_dir/bench.json``.
+    ``.mp4``) are linked; the Pareto view needs pybullet's rows (the eval's ``pybullet``).
     """
     root = Path(report_dir)
     rows = read_csv(root / "metrics.csv") if rows is None else rows
@@ -92,7 +100,7 @@ def write_report(
         "## Invariances of rigid contact",
         invariance_section(root),
     ]
-    parts += _figures(rows, bench_dir, root)
+    parts += _figures(rows, root)
     if skipped:
         parts += ["## Runs not evaluated", "\n".join(f"- {s}" for s in skipped)]
     return write_text(root / "report.md", "\n\n".join(parts) + "\n")
@@ -106,7 +114,7 @@ def _video_line(gif: Path, root: Path) -> str:
     )
 
 
-def _figures(rows: list[dict], bench_dir, root: Path) -> list[str]:
+def _figures(rows: list[dict], root: Path) -> list[str]:
     """The sections of figures and videos: runtime, Pareto view, OOD energy, videos."""
     fig_dir = root / "figures"
     fps = fps_figure(fig_dir / "fps.png", group_rows(rows))
@@ -115,8 +123,8 @@ def _figures(rows: list[dict], bench_dir, root: Path) -> list[str]:
     return [
         "## Runtime (the report's Figure 18)",
         f"![fps]({rel(fps, root)})" if fps else "No learned rollout timed.",
-        "## Accuracy versus time (Pareto view)",
-        pareto_section(rows, bench_dir, fig_dir, root),
+        "## Accuracy versus time on the same work (Pareto view)",
+        pareto_section(rows, fig_dir, root),
         "## Energy over time on the OOD scenes",
         f"![energy]({rel(energy, root)})" if energy.exists() else "No OOD energy figure.",
         "## Videos (ground truth left, prediction right; shaded 3-D)",

@@ -1,17 +1,14 @@
-"""The Pareto view: accuracy against cost (ms per frame) for learned simulators and pybullet.
+"""The Pareto view: accuracy against cost (ms per frame) on the same work.
 
-Learned points come from the eval report's ``metrics.csv`` (one point per configuration and
-split: the mean of the metric and of the FPS over its rollouts); pybullet points come from
-the bench (``bench.json`` for the frame rate, ``bench_extra.json`` for the accuracy of each
-substep count against the fine reference on the bench's scene). Lower is better on both axes;
-the frontier is the set of points no other point beats or ties on both.
+``make eval`` draws the learned runs and pybullet at each substep count, every point from the
+same start states and scored against the same truth (metrics.csv; the points and the front:
+:mod:`physgnn.report.same_work`). ``make bench`` draws pybullet's own curve on its bench pile
+against a fine reference (``bench.json`` for the frame rate, ``bench_extra.json`` for the
+accuracy of each substep count): a different work, so it stays in the bench report.
 """
 
 from __future__ import annotations
 
-import json
-import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
@@ -20,10 +17,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from physgnn.report.figures import save_figure  # noqa: E402
-from physgnn.report.table import SPLITS, diverged_note, group_rows, select, stat  # noqa: E402
+from physgnn.report.same_work import Point, front, points  # noqa: E402
+from physgnn.report.table import SPLITS  # noqa: E402
 
-PARETO_METRICS = ("chamfer", "energy_gain", "depth_sphere", "depth_ground")
+PARETO_METRICS = ("mse20", "chamfer", "energy_gain", "depth_sphere", "depth_ground")
 METRIC_NAMES = {
+    "mse20": "position MSE over the first 20 predicted frames (m²)",
     "chamfer": "Chamfer distance (m², squared, per frame)",
     "energy_gain": "normalised cumulative energy gain",
     "depth_sphere": "penetration: mean depth sphere–sphere / diameter",
@@ -31,71 +30,29 @@ METRIC_NAMES = {
 }
 
 
-@dataclass(frozen=True)
-class Point:
-    """One simulator on the cost/accuracy plane; ``valid`` is False for a diverged group."""
-
-    label: str
-    ms_per_frame: float
-    error: float
-    kind: str  # "learned" or "pybullet"
-    valid: bool = True
-
-
-def pareto_frontier(costs: list[float], errors: list[float]) -> list[int]:
-    """Indices of the non-dominated points (minimising both), sorted by cost.
-
-    Point i is dominated when some j has ``cost_j ≤ cost_i`` and ``error_j ≤ error_i`` with at
-    least one strict; of exact duplicates the first is kept. Non-finite points are ignored.
-    """
-    if len(costs) != len(errors):
-        raise ValueError(f"{len(costs)} costs but {len(errors)} errors")
-    ok = [i for i in range(len(costs)) if math.isfinite(costs[i]) and math.isfinite(errors[i])]
-    order = sorted(ok, key=lambda i: (costs[i], errors[i], i))
-    front, best = [], math.inf
-    for i in order:
-        if errors[i] < best:
-            front.append(i)
-            best = errors[i]
-    return front
-
-
-def learned_points(rows: list[dict], split: str, metric: str) -> list[Point]:
-    """One point per (experiment, configuration) of ``metrics.csv`` rows on ``split``."""
-    points = []
-    for (exp, label), group in group_rows(rows).items():
-        sel = select(group, split)
-        err, fps = stat(sel, metric), stat(sel, "fps")
-        if err is None or fps is None or fps[0] <= 0:
-            continue
-        valid = not diverged_note(sel)
-        points.append(Point(f"{exp}: {label}", 1000.0 / fps[0], err[0], "learned", valid))
-    return points
-
-
 def pybullet_points(bench: dict, extra: dict, metric: str) -> list[Point]:
-    """pybullet at each substep count: cost from ``bench['pybullet']``, accuracy from
-    ``extra['pybullet_accuracy']`` (entries ``{n_spheres, substeps, <metric>}``)."""
+    """The bench's pybullet at each substep count: cost from ``bench['pybullet']``, accuracy
+    from ``extra['pybullet_accuracy']`` (entries ``{n_spheres, substeps, <metric>}``)."""
     fps = {(e["n_spheres"], e["substeps"]): e["fps"] for e in bench.get("pybullet", [])}
-    points = []
+    pts = []
     for e in extra.get("pybullet_accuracy", []):
         f = fps.get((e["n_spheres"], e["substeps"]))
         value = e.get(metric)
         if f is None or value is None or f <= 0:
             continue
         label = f"pybullet {e['substeps']} substeps ({e['n_spheres']} spheres)"
-        points.append(Point(label, 1000.0 / f, float(value), "pybullet"))
-    return points
+        pts.append(Point(label, 1000.0 / f, float(value), "pybullet"))
+    return pts
 
 
-def _xy(points: list[Point]) -> tuple[list[float], list[float]]:
-    return [p.ms_per_frame for p in points], [p.error for p in points]
+def _xy(pts: list[Point]) -> tuple[list[float], list[float]]:
+    return [p.ms_per_frame for p in pts], [p.error for p in pts]
 
 
 def _draw(ax, points: list[Point], title: str, ylabel: str) -> None:
     """One panel: the points by kind, the diverged ones as red crosses, the frontier."""
     valid = [p for p in points if p.valid]
-    front = [valid[i] for i in pareto_frontier(*_xy(valid))]
+    on_front = front(points)
     styles = {
         "learned": dict(marker="o", color="tab:blue"),
         "pybullet": dict(marker="s", color="tab:orange"),
@@ -107,9 +64,9 @@ def _draw(ax, points: list[Point], title: str, ylabel: str) -> None:
     bad = [p for p in points if not p.valid]
     if bad:
         ax.scatter(*_xy(bad), marker="x", color="red", label="diverged (prefix)", s=30)
-    if front:
-        ax.step(*_xy(front), where="post", color="black", lw=1.0, label="Pareto frontier")
-        ax.scatter(*_xy(front), s=80, facecolors="none", edgecolors="black")
+    if on_front:
+        ax.step(*_xy(on_front), where="post", color="black", lw=1.0, label="Pareto frontier")
+        ax.scatter(*_xy(on_front), s=80, facecolors="none", edgecolors="black")
     for p in points:
         ax.annotate(p.label, (p.ms_per_frame, p.error), fontsize=5, xytext=(3, 2),
                     textcoords="offset points")  # fmt: skip
@@ -117,11 +74,16 @@ def _draw(ax, points: list[Point], title: str, ylabel: str) -> None:
 
 
 def _axes(ax, points: list[Point], title: str, ylabel: str) -> None:
-    """Log axes when every point is positive, titles, labels and the legend."""
-    positive = [p for p in points if p.error > 0 and p.ms_per_frame > 0]
-    if points and len(positive) == len(points):
+    """Log axes when every point is positive (errors of exactly 0, as the engine at the truth's
+    own settings can reach: a linear band below the smallest positive one), titles, labels and
+    the legend."""
+    positive = [p.error for p in points if p.error > 0]
+    if points and all(p.ms_per_frame > 0 for p in points) and positive:
         ax.set_xscale("log")
-        ax.set_yscale("log")
+        if len(positive) == len(points):
+            ax.set_yscale("log")
+        else:
+            ax.set_yscale("symlog", linthresh=min(positive))
     if not points:
         ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
     ax.set_title(title, fontsize=8)
@@ -132,40 +94,36 @@ def _axes(ax, points: list[Point], title: str, ylabel: str) -> None:
         ax.legend(fontsize=6)
 
 
-def plot_pareto(path: str | Path, metric: str, panels: dict[str, list[Point]]) -> Path:
+def plot_pareto(path: str | Path, metric: str, panels: dict[str, list[Point]], title: str) -> Path:
     """One PNG: a panel per split (``panels[split] = points``), frontier drawn in black."""
     fig, axes = plt.subplots(1, len(panels), squeeze=False, figsize=(6 * len(panels), 4.6))
-    for ax, (split, points) in zip(axes[0], panels.items(), strict=True):
-        _draw(ax, points, f"{split}: {metric} vs cost", METRIC_NAMES.get(metric, metric))
-    fig.suptitle(
-        "Accuracy vs time. Learned: eval rollouts (their own scenes); pybullet: "
-        "bench scene against its fine reference",
-        fontsize=8,
-    )
+    for ax, (split, pts) in zip(axes[0], panels.items(), strict=True):
+        _draw(ax, pts, f"{split}: {metric} vs cost", METRIC_NAMES.get(metric, metric))
+    fig.suptitle(title, fontsize=8)
     return save_figure(fig, path)
 
 
-def read_bench(bench_dir: str | Path) -> tuple[dict, dict]:
-    """``bench.json`` and ``bench_extra.json`` (empty dict when the extra file is absent)."""
-    bench_dir = Path(bench_dir)
-    bench = json.loads((bench_dir / "bench.json").read_text())
-    extra_path = bench_dir / "bench_extra.json"
-    extra = json.loads(extra_path.read_text()) if extra_path.exists() else {}
-    return bench, extra
+SAME_WORK = (
+    "Accuracy vs time on the same work: every simulator from the same start states (the first "
+    "H+1 truth frames), scored against the same truth"
+)
 
 
 def pareto_figures(
-    rows: list[dict],
-    bench_dir: str | Path,
-    fig_dir: str | Path,
-    metrics=PARETO_METRICS,
-    splits=SPLITS,
+    rows: list[dict], fig_dir: str | Path, metrics=PARETO_METRICS, splits=SPLITS
 ) -> list[Path]:
-    """Write ``fig_dir/pareto_<metric>.png`` for each metric; returns the paths written."""
-    bench, extra = read_bench(bench_dir)
+    """Write ``fig_dir/pareto_<metric>.png`` for each metric (metrics.csv rows: the learned
+    runs and pybullet's rows on their work); returns the paths written."""
     paths = []
     for metric in metrics:
-        pyb = pybullet_points(bench, extra, metric)
-        panels = {s: learned_points(rows, s, metric) + pyb for s in splits}
-        paths.append(plot_pareto(Path(fig_dir) / f"pareto_{metric}.png", metric, panels))
+        panels = {s: points(rows, s, metric) for s in splits}
+        paths.append(plot_pareto(Path(fig_dir) / f"pareto_{metric}.png", metric, panels, SAME_WORK))
     return paths
+
+
+def bench_figure(path: str | Path, bench: dict, extra: dict, metric: str = "mse") -> Path:
+    """The bench's pybullet curve: each substep count on the bench pile against the fine
+    reference (``bench.json`` and ``bench_extra.json``'s dicts)."""
+    n = next((e["n_spheres"] for e in extra.get("pybullet_accuracy", [])), "?")
+    title = f"pybullet on the bench pile ({n} spheres in motion) against its fine reference"
+    return plot_pareto(path, metric, {"bench": pybullet_points(bench, extra, metric)}, title)

@@ -17,8 +17,8 @@ from physgnn.files import read_rows, write_rows
 from physgnn.metrics import PENETRATION_KEYS
 from physgnn.report.format import fmt_stat
 
-# metrics.csv: identification columns, the metrics, then the divergence step and the speed.
-# metrics.csv: identification columns, the metrics, then the divergence step and the speed.
+# metrics.csv: identification columns, the metrics, then the divergence step and the speed
+# (``substeps``: pybullet's, on its rows ``pybullet-<k>``; empty on the others).
 METRICS = [
     "mse",
     "mse20",
@@ -31,12 +31,15 @@ METRICS = [
 ]
 COLUMNS = [
     *("run", "experiment", "overrides", "seed", "split", "trajectory", "n_spheres", "n_frames"),
+    "substeps",
     *METRICS[:-1],
     "diverged_at",
     "fps",
 ]
-INTS = ["n_spheres", "n_frames", "diverged_at", "seed"]
+INTS = ["n_spheres", "n_frames", "diverged_at", "seed", "substeps"]
 REFERENCES = ("ground_truth", "static", "gravity_only")
+# The experiment of pybullet's rows on the learned runs' own work (physgnn.evaluation.same_work)
+ENGINE = "pybullet"
 COMPONENTS = "ablation_components"
 SPLITS = ("test", "ood")
 SLEEP_SUFFIX = "+sleeping"
@@ -73,11 +76,11 @@ def config_label(overrides: str) -> str:
 
 
 def group_rows(rows: list[dict]) -> dict[tuple[str, str], list[dict]]:
-    """Learned runs grouped by (experiment, configuration label); references and the extra
-    sleeping rollouts (see :func:`sleeping_section`) excluded."""
+    """Learned runs grouped by (experiment, configuration label); references, pybullet's rows
+    and the extra sleeping rollouts (see :func:`sleeping_section`) excluded."""
     groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for row in rows:
-        if row["experiment"] in REFERENCES or row["run"].endswith(SLEEP_SUFFIX):
+        if row["experiment"] in (*REFERENCES, ENGINE) or row["run"].endswith(SLEEP_SUFFIX):
             continue
         groups[(row["experiment"] or "default", config_label(row["overrides"]))].append(row)
     return dict(sorted(groups.items()))

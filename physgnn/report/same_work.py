@@ -1,0 +1,116 @@
+"""Accuracy against cost on the same work: the learned runs and pybullet at each substep count
+(the rows ``pybullet-<k>`` of metrics.csv), every point from the same start states, scored
+against the same truth. One point per simulator and split: the mean of the metric and of the
+frame rate over its rollouts. Lower is better on both axes; the front is the set of points
+no other point beats or ties on both (:func:`pareto_frontier`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from dataclasses import dataclass
+
+from physgnn.report.format import fmt, md_table
+from physgnn.report.table import ENGINE, SPLITS, diverged_note, group_rows, select, stat
+
+# The accuracy a simulator is judged on in the table (the matched-accuracy metric)
+FRONT_METRIC = "mse20"
+TABLE_METRICS = ("mse20", "chamfer", "energy_gain", "depth_sphere", "depth_ground")
+
+
+@dataclass(frozen=True)
+class Point:
+    """One simulator on the cost/accuracy plane; ``valid`` is False for a diverged group."""
+
+    label: str
+    ms_per_frame: float
+    error: float
+    kind: str  # "learned" or "pybullet"
+    valid: bool = True
+
+
+def pareto_frontier(costs: list[float], errors: list[float]) -> list[int]:
+    """Indices of the non-dominated points (minimising both), sorted by cost.
+
+    Point i is dominated when some j has ``cost_j ≤ cost_i`` and ``error_j ≤ error_i`` with at
+    least one strict; of exact duplicates the first is kept. Non-finite points are ignored.
+    """
+    if len(costs) != len(errors):
+        raise ValueError(f"{len(costs)} costs but {len(errors)} errors")
+    ok = [i for i in range(len(costs)) if math.isfinite(costs[i]) and math.isfinite(errors[i])]
+    order = sorted(ok, key=lambda i: (costs[i], errors[i], i))
+    front, best = [], math.inf
+    for i in order:
+        if errors[i] < best:
+            front.append(i)
+            best = errors[i]
+    return front
+
+
+def engine_groups(rows: list[dict]) -> dict[str, list[dict]]:
+    """pybullet's rows by run (``pybullet-<k>...``), fewest substeps first."""
+    groups: dict[str, list[dict]] = defaultdict(list)
+    for row in rows:
+        if row["experiment"] == ENGINE:
+            groups[row["run"]].append(row)
+    return dict(sorted(groups.items(), key=lambda kv: (kv[1][0].get("substeps") or 0, kv[0])))
+
+
+def _point(label: str, rows: list[dict], metric: str, kind: str) -> Point | None:
+    err, fps = stat(rows, metric), stat(rows, "fps")
+    if err is None or fps is None or fps[0] <= 0:
+        return None
+    return Point(label, 1000.0 / fps[0], err[0], kind, not diverged_note(rows))
+
+
+def points(rows: list[dict], split: str, metric: str) -> list[Point]:
+    """The learned configurations (one per experiment and configuration) and pybullet at each
+    substep count on ``split``, in that order; groups without the metric or a rate left out."""
+    learned = [
+        _point(f"{exp}: {label}", select(g, split), metric, "learned")
+        for (exp, label), g in group_rows(rows).items()
+    ]
+    engine = [
+        _point(run, select(g, split), metric, ENGINE) for run, g in engine_groups(rows).items()
+    ]
+    return [p for p in learned + engine if p is not None]
+
+
+def front(pts: list[Point]) -> list[Point]:
+    """The points of ``pts`` on the Pareto front (valid ones only), cheapest first."""
+    valid = [p for p in pts if p.valid]
+    return [valid[i] for i in pareto_frontier([p.ms_per_frame for p in valid],
+                                              [p.error for p in valid])]  # fmt: skip
+
+
+def split_table(rows: list[dict], split: str) -> str:
+    """Every simulator on ``split``: the metrics, frames per second, ms per frame and whether
+    it is on the :data:`FRONT_METRIC` front."""
+    on_front = {p.label for p in front(points(rows, split, FRONT_METRIC))}
+    groups = [(f"{e}: {c}", select(g, split)) for (e, c), g in group_rows(rows).items()]
+    groups += [(run, select(g, split)) for run, g in engine_groups(rows).items()]
+    body = []
+    for name, sel in groups:
+        if not sel:
+            continue
+        means = [stat(sel, m) for m in (*TABLE_METRICS, "fps")]
+        fps = means[-1][0] if means[-1] else None
+        cells = [fmt(s[0] if s else None) for s in means]
+        ms = fmt(1000.0 / fps) if fps else "–"
+        note = diverged_note(sel)
+        body.append([name, *cells, ms, "✓" if name in on_front else "", note or ""])
+    header = ["simulator", *TABLE_METRICS, "frames/s", "ms/frame", f"on the {FRONT_METRIC} front",
+              "diverged"]  # fmt: skip
+    return md_table(header, body)
+
+
+def section(rows: list[dict]) -> str:
+    """report.md's same-work section: one table per split, or why there is none."""
+    if not engine_groups(rows):
+        return "No pybullet rows (the eval's `pybullet` config is null)."
+    parts = []
+    for split in SPLITS:
+        if select(rows, split):
+            parts += [f"**{split}**", split_table(rows, split)]
+    return "\n\n".join(parts)

@@ -1,0 +1,142 @@
+"""Accuracy versus time on the same work: pybullet's rows of metrics.csv
+(physgnn.evaluation.same_work) and the view of them (physgnn.report.same_work)."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from omegaconf import OmegaConf
+
+from physgnn.data.dataset import read_split
+from physgnn.errors import ConfigError
+from physgnn.evaluation import same_work as engine_work
+from physgnn.evaluation.runs import RunInfo
+from physgnn.physics.trajectory import FRAME_KEYS
+from physgnn.report import same_work
+from physgnn.report.table import COLUMNS
+
+
+def row(run, experiment, mse20, fps, split="test", substeps=None, trajectory="t0"):
+    r = dict.fromkeys(COLUMNS)
+    r.update(run=run, experiment=experiment, overrides="", split=split, trajectory=trajectory,
+             mse20=mse20, chamfer=mse20, fps=fps, substeps=substeps)  # fmt: skip
+    return r
+
+
+def engine(k, mse20, fps):
+    return row(f"pybullet-{k}", "pybullet", mse20, fps, substeps=k)
+
+
+# pybullet: 1 ms at 1.0, 5 ms at 0.1, 20 ms at 0.01 (ms per frame = 1000 / fps)
+ENGINE_ROWS = [engine(1, 1.0, 1000.0), engine(5, 0.1, 200.0), engine(20, 0.01, 50.0)]
+
+
+def test_pareto_frontier_hand_computed():
+    costs = [1.0, 2.0, 2.0, 3.0, 0.5, 4.0, 1.0, math.nan]
+    errors = [5.0, 3.0, 4.0, 3.0, 9.0, 1.0, 5.0, 0.0]
+    # 4 (0.5, 9) < 0 (1, 5) < 1 (2, 3) < 5 (4, 1); 6 duplicates 0; 2 and 3 dominated by 1
+    assert same_work.pareto_frontier(costs, errors) == [4, 0, 1, 5]
+    assert same_work.pareto_frontier([], []) == []
+    with pytest.raises(ValueError):
+        same_work.pareto_frontier([1.0], [])
+
+
+def test_a_fake_learned_run_lands_where_its_cost_and_error_put_it():
+    # 2 ms at 0.5: nothing cheaper is as accurate -> on the front, between pybullet-1 and -5;
+    # 10 ms at 0.2: pybullet-5 is cheaper (5 ms) and more accurate (0.1) -> off the front
+    fast = row("runs/fast", "baseline", 0.5, 500.0)
+    slow = row("runs/slow", "slower", 0.2, 100.0)
+    pts = same_work.points([fast, slow, *ENGINE_ROWS], "test", "mse20")
+    assert [(p.label, p.ms_per_frame, p.error, p.kind) for p in pts] == [
+        ("baseline: default", 2.0, 0.5, "learned"),
+        ("slower: default", 10.0, 0.2, "learned"),
+        ("pybullet-1", 1.0, 1.0, "pybullet"),
+        ("pybullet-5", 5.0, 0.1, "pybullet"),
+        ("pybullet-20", 20.0, 0.01, "pybullet"),
+    ]
+    on_front = [p.label for p in same_work.front(pts)]
+    assert on_front == ["pybullet-1", "baseline: default", "pybullet-5", "pybullet-20"]
+    table = same_work.split_table([fast, slow, *ENGINE_ROWS], "test")
+    marks = {ln.split(" | ")[0][2:]: ln.split(" | ")[-2] for ln in table.splitlines()[2:]}
+    assert marks == {"baseline: default": "✓", "slower: default": "", "pybullet-1": "✓",
+                     "pybullet-5": "✓", "pybullet-20": "✓"}  # fmt: skip
+
+
+def test_a_diverged_learned_run_is_never_on_the_front():
+    best = row("runs/best", "baseline", 1e-6, 1e6) | {"diverged_at": 7}
+    assert "baseline: default" not in {p.label for p in same_work.front(
+        same_work.points([best, *ENGINE_ROWS], "test", "mse20"))}  # fmt: skip
+
+
+def test_the_view_reads_only_its_split_and_says_when_pybullet_is_missing():
+    ood = [row("runs/a", "baseline", 0.5, 500.0, split="ood")]
+    assert same_work.points(ood + ENGINE_ROWS, "ood", "mse20")[0].label == "baseline: default"
+    assert len(same_work.points(ood + ENGINE_ROWS, "ood", "mse20")) == 1
+    assert "No pybullet rows" in same_work.section(ood)
+
+
+def learned_run(dataset, H):
+    return RunInfo(name="runs/x", experiment="baseline", run_dir=dataset, dataset=dataset,
+                   simulator=SimpleNamespace(H=H))  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def tiny(tiny_dataset):
+    return {tiny_dataset: {s: read_split(tiny_dataset / f"{s}.h5") for s in ("test", "ood")}}
+
+
+def test_pybullet_at_the_truths_settings_from_frame_0_is_the_truth(tiny, tiny_dataset):
+    jobs = engine_work.engine_jobs([learned_run(tiny_dataset, 0)], several=False)
+    rows = engine_work.engine_rows(jobs, tiny, [40], processes=1, tol=0.0)
+    assert [r["run"] for r in rows] == ["pybullet-40"] * 5 and {r["substeps"] for r in rows} == {40}
+    assert [r["trajectory"] for r in rows] == ["traj_00000", "ood_cubes", "ood_cubes_ramps",
+                                               "ood_resting_hit", "ood_spaced_drop"]  # fmt: skip
+    for r in rows:
+        assert r["mse"] == r["chamfer"] == 0.0 and r["fps"] > 0  # (20 frames: no mse20)
+
+
+def test_pybullet_starts_where_the_learned_run_starts(tiny, tiny_dataset):
+    """From frame H: the first H+1 frames are the truth's, the rest the engine's, and the rows
+    of a split run in two processes score as one at a time (each row the split's rate)."""
+    truth = tiny[tiny_dataset]["ood"][1]
+    [pred] = engine_work.engine_split([truth], 2, 1, processes=1)
+    assert (pred.start, pred.n_frames, pred.diverged_at) == (2, truth.n_frames, None)
+    for key in ("pos", "quat"):
+        np.testing.assert_array_equal(getattr(pred, key)[:3], getattr(truth, key)[:3])
+    assert not np.array_equal(pred.pos[3:], truth.pos[3:])  # 1 substep, not 40
+    np.testing.assert_allclose(pred.vel[3], (pred.pos[3] - pred.pos[2]) / truth.dt, rtol=1e-5)
+    jobs = engine_work.engine_jobs([learned_run(tiny_dataset, 2)], several=False)
+    alone = engine_work.engine_rows(jobs, tiny, [1], processes=1, tol=0.0)
+    pooled = engine_work.engine_rows(jobs, tiny, [1], processes=2, tol=0.0)
+    for a, b in zip(alone, pooled, strict=True):
+        assert {k: a[k] for k in ("mse", "chamfer", "energy_gain")} == {
+            k: b[k] for k in ("mse", "chamfer", "energy_gain")}  # fmt: skip
+    assert len({r["fps"] for r in pooled if r["split"] == "ood"}) == 1
+
+
+def test_engine_settings_come_from_the_truth_with_the_substeps_replaced(tiny, tiny_dataset):
+    truth = tiny[tiny_dataset]["test"][0]
+    settings = engine_work.engine_of(truth, 3)
+    assert settings["substeps"] == 3 and settings["contact_erp"] == 0.005
+    assert engine_work.engine_of(truth.__class__(**{**truth.__dict__, "attrs": {}}), 3) == {
+        "substeps": 3}  # fmt: skip
+    assert set(FRAME_KEYS) <= set(truth.__dict__)
+
+
+@pytest.mark.parametrize(
+    "settings, text",
+    [
+        ({"substeps": [], "processes": None}, "pybullet.substeps must be a list"),
+        ({"substeps": [0], "processes": None}, "pybullet.substeps must be a list"),
+        ({"substeps": [2], "processes": 0}, "pybullet.processes must be a whole number"),
+    ],
+)
+def test_bad_pybullet_settings_are_one_line(settings, text):
+    with pytest.raises(ConfigError, match=text):
+        engine_work.check_settings(OmegaConf.create(settings))
+    assert engine_work.check_settings(None) is None
+    assert engine_work.check_settings(OmegaConf.create({"substeps": [1, 5], "processes": 3})) == (
+        [1, 5], 3)  # fmt: skip
