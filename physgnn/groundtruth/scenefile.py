@@ -30,6 +30,7 @@ import numpy as np
 import yaml
 
 from physgnn import SCENES_DIR
+from physgnn.errors import check_whole
 from physgnn.files import write_text
 from physgnn.groundtruth.layouts import check_above_ground, check_clear_of_planes, check_no_overlap
 from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
@@ -45,6 +46,7 @@ from physgnn.physics.scene import (
 )
 
 DEFAULT_MATERIAL = "default"
+FRAMES = "frames to simulate, the first is the start"
 
 
 class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
@@ -54,6 +56,21 @@ class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
     this loader."""
 
 
+def _unique_keys(loader: _Loader, node: yaml.MappingNode) -> dict:
+    """A mapping whose keys are all different: a key given twice (YAML would keep the last
+    silently) is an error naming its line."""
+    seen = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=True)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"key '{key}' given twice (keep one)", key_node.start_mark
+            )
+        seen.add(key)
+    return loader.construct_mapping(node, deep=True)
+
+
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _unique_keys)
 _Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"),
@@ -157,6 +174,19 @@ def _plane(where: str, d) -> tuple[np.ndarray, int]:
     return row, PLANE_KINDS.index(kind)
 
 
+def check_placement(where: str, pos, radius, planes) -> None:
+    """No two spheres overlap, none reaches below the ground or into a plane's solid (pos
+    ``[N, 3]``, radius ``[N]``, planes ``[S, 11]``, row 0 the ground): a scene file's check,
+    and :func:`physgnn.api.scene_from_arrays`'s; one line naming ``where`` and the sphere."""
+    pos, radius = np.asarray(pos, np.float64), np.asarray(radius, np.float64)
+    check_no_overlap(where, pos, radius)
+    check_above_ground(where, pos, radius)
+    try:
+        check_clear_of_planes(where, pos, radius, np.asarray(planes, np.float64), depth=1.0)
+    except SceneError as e:  # depth: the engine's solid behind a plane
+        raise SceneError(str(e).replace(f"scene '{where}'", where)) from None
+
+
 def scene_from_dict(d, where: str = "scene") -> Scene:
     """A validated :class:`Scene` from a parsed scene file; ``where`` prefixes errors."""
     d = _keys(where, d, SCHEMA)
@@ -168,13 +198,8 @@ def scene_from_dict(d, where: str = "scene") -> Scene:
     planes = [_plane(f"{where}: planes[{i}]", p) for i, p in enumerate(d.get("planes") or [])]
     col = lambda k: np.stack([np.asarray(r[k]) for r in rows])  # noqa: E731
     pos, radius = col("pos"), col("radius")
-    check_no_overlap(where, pos, radius)
-    check_above_ground(where, pos, radius)
     plane_rows = np.stack([ground_plane().astype(np.float64), *[p for p, _ in planes]])
-    try:
-        check_clear_of_planes(where, pos, radius, plane_rows, depth=1.0)  # engine's solid
-    except SceneError as e:
-        raise SceneError(str(e).replace(f"scene '{where}'", where)) from None
+    check_placement(where, pos, radius, plane_rows)
     try:
         effects = Effects.from_dict(d.get("effects"))
     except (SceneError, TypeError) as e:
@@ -193,7 +218,7 @@ def scene_from_dict(d, where: str = "scene") -> Scene:
         plane_kind=np.array([GROUND] + [k for _, k in planes], dtype=np.int64),
         materials=f32(materials),
         dt=_number(f"{where}: dt", d.get("dt", 0.1), positive=True),
-        n_frames=int(_number(f"{where}: frames", d.get("frames", 100), positive=True)),
+        n_frames=check_whole(f"{where}: frames", d.get("frames", 100), 2, FRAMES, SceneError),
         effects=effects,
         gravity=tuple(_vector(f"{where}: gravity", d.get("gravity", list(GRAVITY)), 3)),
     )
@@ -209,6 +234,8 @@ def scene_file(path: str | Path) -> Path:
     path = Path(path)
     if path.is_file():
         return path
+    if path.is_dir():
+        raise SceneError(f"scene file {path} is a folder; give a YAML scene file in it")
     example = Path(SCENES_DIR) / f"{path.stem}.yaml"
     if path.parent == Path(".") and example in example_scenes():
         return example

@@ -46,7 +46,12 @@ class Effects:
         unknown = set(d) - set(EFFECT_NAMES)
         if unknown:
             raise SceneError(f"unknown effect(s) {sorted(unknown)}; known: {list(EFFECT_NAMES)}")
-        return cls(**{k: bool(v) for k, v in d.items()})
+        flags = {k: v.item() if isinstance(v, np.bool_) else v for k, v in d.items()}
+        wrong = {k: v for k, v in flags.items() if not isinstance(v, bool)}
+        if wrong:  # bool('no') is True: a word or a number is never taken for a switch
+            key, value = next(iter(wrong.items()))
+            raise SceneError(f"effect {key} must be true or false, got {value!r}")
+        return cls(**flags)
 
 
 @dataclass(frozen=True)
@@ -148,6 +153,7 @@ class Scene:
             if not np.all(np.isfinite(getattr(self, key))):
                 raise SceneError(f"scene '{self.name}': {key} contains NaN or inf")
         check_float32_scale(self.name, self.pos, self.radius)
+        check_speeds(self.name, self.pos, self.vel, self.radius, self.dt * (self.n_frames - 1))
         return self
 
 
@@ -169,4 +175,21 @@ def check_float32_scale(name: str, pos: np.ndarray, radius: np.ndarray) -> None:
             f"scene '{name}': sphere {i} has radius {float(radius[i]):g} m in a scene reaching "
             f"{extent:g} m from the origin, finer than float32 resolves there: bring the scene "
             f"near the origin (metres), or give radii >= {extent * MIN_RADIUS_PER_EXTENT:g} m"
+        )
+
+
+def check_speeds(name: str, pos: np.ndarray, vel: np.ndarray, radius: np.ndarray,
+                 duration: float) -> None:  # fmt: skip
+    """Starting speeds whose straight flight over the scene's ``duration`` (s) stays where
+    float32 resolves the smallest radius (:data:`MIN_RADIUS_PER_EXTENT`): pybullet froze a
+    sphere thrown at 1e30 m/s (it did not even fall) instead of failing."""
+    speed = np.linalg.norm(np.asarray(vel, np.float64), axis=1)
+    start = float(np.abs(np.asarray(pos, np.float64)).max())
+    limit = max(1.0, float(radius.min()) / MIN_RADIUS_PER_EXTENT) - start
+    i = int(np.argmax(speed))
+    if speed[i] * duration > limit:
+        raise SceneError(
+            f"scene '{name}': sphere {i} starts at {speed[i]:g} m/s, which carries it farther "
+            f"in the scene's {duration:g} s than float32 resolves a radius of "
+            f"{float(radius.min()):g} m: give speeds below {max(limit, 0) / duration:g} m/s"
         )

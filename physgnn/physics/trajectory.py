@@ -102,7 +102,9 @@ class Trajectory:
         """
         pos = _array("pos", pos, np.float32, (None, None, 3))
         t, n = pos.shape[:2]
-        radius = np.broadcast_to(np.asarray(radius, np.float32), (n,)).copy()
+        radius = np.asarray(radius, np.float32)
+        radius = _array("radius", np.full(n, radius) if radius.ndim == 0 else radius, np.float32,
+                        (n,))  # fmt: skip
         quat = _frames("quat", quat, (t, n, 4), _identity(t, n))
         vel_fd, angvel_fd = _finite_velocities(pos, quat, dt)
         volume = 4 / 3 * np.pi * radius.astype(np.float64) ** 3

@@ -1,0 +1,66 @@
+"""Values a command took for something else: each is now one line naming the key or file and
+the fix (a scene file's duplicate key, whole frames, switches, speeds; eval's switches)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+
+from physgnn.errors import ConfigError
+from physgnn.evaluation.evaluate import evaluate
+from physgnn.groundtruth.scenefile import load_scene
+from physgnn.physics.scene import Effects, SceneError
+
+ROOT = Path(__file__).resolve().parents[1]
+SPHERE = "spheres:\n  - {radius: 0.5, position: [0, 0, 1]%s}\n"
+
+
+@pytest.mark.parametrize(
+    "text,message",
+    [
+        ("frames: 5\nframes: 7\n" + SPHERE % "", "not valid YAML (line 2): key 'frames' given "
+         "twice (keep one)"),
+        ("spheres:\n  - {radius: 0.5, radius: 0.4, position: [0, 0, 1]}\n", "not valid YAML "
+         "(line 2): key 'radius' given twice (keep one)"),
+        ("frames: 2.5\n" + SPHERE % "", "frames must be a whole number >= 2 (frames to simulate, "
+         "the first is the start), got 2.5"),
+        ("effects: {gravity: 'no'}\n" + SPHERE % "", "effects: effect gravity must be true or "
+         "false, got 'no'"),
+        ("effects: {rotation: 1}\n" + SPHERE % "", "effects: effect rotation must be true or "
+         "false, got 1"),
+        (SPHERE % ", velocity: [1e30, 0, 0]", "sphere 0 starts at 1e+30 m/s, which carries it "
+         "farther in the scene's 9.9 s than float32 resolves a radius of 0.5 m: give speeds "
+         "below 5050.4 m/s"),
+    ],
+)  # fmt: skip
+def test_a_scene_file_value_taken_for_another_is_one_line(tmp_path, text, message):
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    with pytest.raises(SceneError) as err:
+        load_scene(path)
+    assert str(err.value).startswith(f"{path}: ") and str(err.value).endswith(message)
+    assert "\n" not in str(err.value)
+
+
+def test_a_fast_scene_within_float32_and_whole_frames_as_floats_load(tmp_path):
+    path = tmp_path / "s.yaml"
+    path.write_text("frames: 1e1\n" + SPHERE % ", velocity: [1000, 0, 0]")
+    assert load_scene(path).n_frames == 10
+
+
+def test_effects_read_from_a_file_take_numpy_booleans():
+    assert Effects.from_dict({"gravity": np.bool_(False)}).gravity is False
+
+
+@pytest.mark.parametrize("key", ["save_rollouts", "overwrite", "videos", "stability"])
+def test_an_eval_switch_that_is_not_true_or_false_is_refused(tmp_path, key):
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose("eval", overrides=[f"paths.outputs={tmp_path}", f"{key}=maybe"])
+    message = f"{key} must be true or false, got 'maybe'"
+    with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
+        evaluate(cfg)
+    assert not (tmp_path / "report").exists()
