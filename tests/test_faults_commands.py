@@ -3,9 +3,14 @@ into a run_dir in use leaves its files alone, and the console script's own lines
 
 from __future__ import annotations
 
+import json
+import shutil
+import socket
+import subprocess
 import sys
 
 import pytest
+from test_train import SHORT, outputs_of, run_main
 
 from physgnn import generate as generate_command
 
@@ -26,3 +31,51 @@ def test_a_generate_sweep_whose_jobs_fail_exits_1_naming_them(tmp_path, monkeypa
         f"error: 2 job(s) of the sweep failed (their errors above; logs in {sweep})",
     ]
     assert not (tmp_path / "data").exists()
+
+
+def hydra_files(run_dir) -> dict:
+    return {p.name: p.read_bytes() for p in (run_dir / ".hydra").iterdir()}
+
+
+def test_a_training_into_a_run_dir_in_use_rewrites_none_of_its_files(
+    tiny_dataset, tmp_path, monkeypatch, capsys
+):
+    """The first training (a live process holding the run folder, started the same second)
+    keeps its .hydra/config.yaml and overrides.yaml: the second is refused before Hydra
+    writes them."""
+    run_dir = tmp_path / "run"
+    (run_dir / ".hydra").mkdir(parents=True)
+    (run_dir / ".hydra" / "config.yaml").write_text("model: {network: {M: 1}}\n")
+    (run_dir / ".hydra" / "overrides.yaml").write_text("- model.network.M=1\n")
+    before = hydra_files(run_dir)
+    first = subprocess.Popen(["sleep", "30"])  # stands for the first training
+    holder = {"pid": first.pid, "host": socket.gethostname(), "since": "2026-11-26T10:00:00"}
+    (tmp_path / "run.lock").write_text(json.dumps(holder))
+    args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={run_dir}"]
+    try:
+        code, line = run_main(monkeypatch, capsys, *args, *SHORT, "model.network.M=2")
+    finally:
+        first.kill()
+        first.wait()
+    assert code == 2 and line.startswith(
+        f"error: run_dir {run_dir} is in use: pid {first.pid} on {socket.gethostname()} writes "
+        "there since 2026-11-26T10:00:00"
+    )
+    assert hydra_files(run_dir) == before and sorted(p.name for p in run_dir.iterdir()) == [
+        ".hydra"
+    ]
+
+
+def test_a_training_into_a_finished_run_rewrites_none_of_its_files(
+    tiny_run, tiny_dataset, tmp_path, monkeypatch, capsys
+):
+    run_dir = tmp_path / "run"
+    shutil.copytree(tiny_run, run_dir)
+    before = hydra_files(run_dir)
+    args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={run_dir}"]
+    code, line = run_main(monkeypatch, capsys, *args, *SHORT, "model.network.M=2")
+    assert code == 2 and line.startswith(
+        f"error: run_dir {run_dir} already holds a finished run with checkpoints and is never "
+        "trained over"
+    )
+    assert hydra_files(run_dir) == before and not (tmp_path / "run.lock").exists()
