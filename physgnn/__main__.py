@@ -24,7 +24,8 @@ COMMANDS = {
 
 
 def usage() -> str:
-    lines = ["usage: physgnn <command> [arguments]   (physgnn <command> --help)", "", "commands:"]
+    lines = ["usage: physgnn <command> [arguments]   (physgnn <command> --help; physgnn --version)",
+             "", "commands:"]  # fmt: skip
     lines += [f"  {name:<12} {text}" for name, (_, text) in COMMANDS.items()]
     return "\n".join(lines)
 
@@ -34,6 +35,9 @@ def main(argv: list[str] | None = None) -> object:
     argv = sys.argv[1:] if argv is None else list(argv)
     if not argv or argv[0] in ("-h", "--help"):
         print(usage())
+        return 0
+    if argv[0] in ("-V", "--version"):
+        print(f"physgnn {importlib.import_module('physgnn').__version__}")
         return 0
     name, rest = argv[0], argv[1:]
     if name not in COMMANDS:

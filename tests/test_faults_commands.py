@@ -12,7 +12,10 @@ import sys
 import pytest
 from test_train import SHORT, outputs_of, run_main
 
+import physgnn
 from physgnn import generate as generate_command
+from physgnn.__main__ import main as console
+from physgnn.files import OUTPUT_MARKER
 
 
 def test_a_generate_sweep_whose_jobs_fail_exits_1_naming_them(tmp_path, monkeypatch, capsys):
@@ -79,3 +82,23 @@ def test_a_training_into_a_finished_run_rewrites_none_of_its_files(
         "trained over"
     )
     assert hydra_files(run_dir) == before and not (tmp_path / "run.lock").exists()
+
+
+def test_ship_into_a_users_folder_advises_no_switch_it_lacks(tiny_run, tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(SystemExit) as exit_info:
+        console(["ship", str(tiny_run), str(out)])
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err == (
+        f"error: OUT_DIR {out} is a folder with files that physgnn did not write (no "
+        f"{OUTPUT_MARKER}): choose another OUT_DIR\n"
+    )
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+
+
+@pytest.mark.parametrize("flag", ["--version", "-V"])
+def test_the_console_script_says_its_version(flag, capsys):
+    assert console([flag]) == 0
+    assert capsys.readouterr().out == f"physgnn {physgnn.__version__}\n"

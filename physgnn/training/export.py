@@ -53,7 +53,7 @@ def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path |
                            weights_only=True)  # fmt: skip
     weights = {k: v for k, v in full["state_dict"].items() if k.startswith("simulator.")}
     step = int(full.get("global_step", 0))
-    claim_folder(out_dir, "OUT_DIR")
+    claim_folder(out_dir, "OUT_DIR", overwrite=None)  # ship takes no overwrite=true
     for old in (out_dir / "checkpoints").glob("*.ckpt"):
         old.unlink()  # one set of weights per folder
     target = out_dir / "checkpoints" / f"best-step{step:06d}.ckpt"
