@@ -102,3 +102,19 @@ def test_ship_into_a_users_folder_advises_no_switch_it_lacks(tiny_run, tmp_path,
 def test_the_console_script_says_its_version(flag, capsys):
     assert console([flag]) == 0
     assert capsys.readouterr().out == f"physgnn {physgnn.__version__}\n"
+
+
+def test_an_unquoted_non_ascii_path_gives_the_quoting_fix(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        console(["simulate", f"scene_file={tmp_path}/été/s.yaml", "video=false"])
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err == (
+        f"error: scene_file: Hydra reads a value with 'é' only in quotes: write "
+        f"'scene_file=\"{tmp_path}/été/s.yaml\"' (the shell's quotes around Hydra's)\n"
+    )
+    scene = tmp_path / "été" / "s.yaml"
+    scene.parent.mkdir()
+    scene.write_text("frames: 3\nspheres:\n  - {radius: 0.5, position: [0, 0, 1]}\n")
+    out = tmp_path / "out"
+    console(["simulate", f'scene_file="{scene}"', "video=false", f"out={out}"])
+    assert (out / "simulate.h5").is_file()

@@ -43,7 +43,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
 from physgnn.cli.outputs import OWN_FOLDER, check_outputs_env
-from physgnn.cli.overrides import check_added_keys, compose_config  # noqa: F401 (re-exported)
+from physgnn.cli.overrides import check_added_keys, check_quoting, compose_config  # noqa: F401
 from physgnn.errors import (
     ConfigError,
     Interrupted,
@@ -234,6 +234,7 @@ def _outputs_checked(hydra_main: Callable, before: Callable | None = None,
                 sys.argv[:] = saved
         try:
             check_outputs_env(own=OWN_FOLDER.get(name, "paths.outputs"))
+            check_quoting(sys.argv[1:])
             if before is not None:
                 before(sys.argv[1:])
         except USER_ERRORS as err:
