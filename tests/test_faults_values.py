@@ -3,6 +3,7 @@ the fix (a scene file's duplicate key, whole frames, switches, speeds; eval's sw
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -12,9 +13,10 @@ from hydra import compose, initialize_config_dir
 from test_train import SHORT, outputs_of, run_main
 
 from physgnn.errors import ConfigError
+from physgnn.evaluation import simulate as simulate_module
 from physgnn.evaluation.evaluate import evaluate
-from physgnn.groundtruth.scenefile import load_scene
-from physgnn.physics.scene import Effects, SceneError
+from physgnn.groundtruth.scenefile import load_scene, scene_from_dict
+from physgnn.physics.scene import MAX_FRAMES, Effects, SceneError
 
 ROOT = Path(__file__).resolve().parents[1]
 SPHERE = "spheres:\n  - {radius: 0.5, position: [0, 0, 1]%s}\n"
@@ -84,3 +86,27 @@ def test_compile_and_precision_words_are_one_line_while_compile_is_off(
     args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={tmp_path}"]
     code, line = run_main(monkeypatch, capsys, *args, *SHORT, "lit.compile=false", override)
     assert code == 2 and line.startswith(f"error: {message}")
+
+
+def test_a_billion_frames_are_refused_above_the_documented_cap(tmp_path):
+    path = tmp_path / "s.yaml"
+    path.write_text("frames: 1000000000\n" + SPHERE % "")
+    with pytest.raises(SceneError) as err:
+        load_scene(path)
+    assert str(err.value) == (
+        f"{path}: scene 'scene': 1000000000 frames is more than {MAX_FRAMES} (a trajectory is "
+        "kept whole in memory; 1e9 frames of pybullet would run for years): simulate at most "
+        f"{MAX_FRAMES} frames, or a longer dt"
+    )
+    schema = json.loads((ROOT / "docs" / "scene.schema.json").read_text())
+    assert schema["properties"]["frames"]["maximum"] == MAX_FRAMES == 100_000
+
+
+def test_a_long_simulation_says_so_off_a_terminal(monkeypatch, capsys):
+    scene = scene_from_dict({"frames": 3, "spheres": [{"radius": 0.5, "position": [0, 0, 1]}]})
+    scene.n_frames = simulate_module.LONG  # one sphere: the least that is long
+    monkeypatch.setattr(simulate_module, "engine_simulate", lambda s, on_frame=None: s)
+    simulate_module.simulate_with_progress(scene)
+    assert capsys.readouterr().err.startswith(
+        f"simulating with pybullet: 1 spheres, {simulate_module.LONG} frames ...\n"
+    )

@@ -201,9 +201,13 @@ LONG = 100_000
 
 
 def simulate_with_progress(scene) -> Trajectory:
-    """pybullet's run of ``scene``, with a progress bar on the terminal when it is long."""
+    """pybullet's run of ``scene``; when it is long, a line saying so and a progress bar on
+    the terminal."""
     if scene.n_spheres * scene.n_frames < LONG:
         return engine_simulate(scene)
+    # a line: the bar below shows on a terminal only
+    print(f"simulating with pybullet: {scene.n_spheres} spheres, {scene.n_frames} frames ...",
+          file=sys.stderr, flush=True)  # fmt: skip
     columns = (TextColumn("pybullet"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with Progress(*columns, transient=True) as bar:
         task = bar.add_task("frames", total=scene.n_frames)

@@ -20,6 +20,9 @@ PLANE_DIM = 11
 PLANE_KINDS = ("ground", "wall", "static")
 GROUND, WALL, STATIC = 0, 1, 2
 GRAVITY = (0.0, 0.0, -9.81)
+# The most frames of one scene: 1e4 s at dt 0.1 (a rollout of the report is 1 000 frames at
+# most); more is a slip of the keyboard (1e9 frames: years of pybullet, and memory it lacks).
+MAX_FRAMES = 100_000
 EFFECT_NAMES = ("gravity", "sphere_contact", "surface_contact", "friction", "rotation")
 
 
@@ -145,6 +148,12 @@ class Scene:
             raise SceneError(f"scene '{self.name}': plane_kind must have one entry per plane")
         if self.dt <= 0 or self.n_frames < 2:
             raise SceneError(f"scene '{self.name}': need dt > 0 and n_frames >= 2")
+        if self.n_frames > MAX_FRAMES:
+            raise SceneError(
+                f"scene '{self.name}': {self.n_frames} frames is more than {MAX_FRAMES} (a "
+                "trajectory is kept whole in memory; 1e9 frames of pybullet would run for years):"
+                f" simulate at most {MAX_FRAMES} frames, or a longer dt"
+            )
         if self.material.min() < 0 or self.material.max() >= len(self.materials):
             raise SceneError(
                 f"scene '{self.name}': material id out of range [0, {len(self.materials)})"
