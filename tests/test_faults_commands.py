@@ -3,6 +3,7 @@ into a run_dir in use leaves its files alone, and the console script's own lines
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shutil
 import socket
@@ -118,3 +119,11 @@ def test_an_unquoted_non_ascii_path_gives_the_quoting_fix(tmp_path, capsys):
     out = tmp_path / "out"
     console(["simulate", f'scene_file="{scene}"', "video=false", f"out={out}"])
     assert (out / "simulate.h5").is_file()
+
+
+def test_a_run_records_which_dataset_it_trained_on(tiny_run, tiny_dataset):
+    digest = hashlib.sha256((tiny_dataset / "stats.json").read_bytes())
+    for name in ("stats.json", "train.h5", "val.h5"):
+        digest.update(f"{name}:{(tiny_dataset / name).stat().st_size};".encode())
+    recorded = json.loads((tiny_run / "run.json").read_text())["dataset"]
+    assert recorded == {"preset": "tiny", "dir": str(tiny_dataset), "sha256": digest.hexdigest()}

@@ -36,7 +36,7 @@ from physgnn.training.runs import (
     write_run_json,
 )
 
-KEPT = ("experiment", "overrides", "seed", "epochs", "max_epochs", "global_step",
+KEPT = ("experiment", "overrides", "seed", "dataset", "epochs", "max_epochs", "global_step",
         "train_time_s", "sessions", "threads", "host", "pairs_seen")  # fmt: skip
 
 
