@@ -48,7 +48,16 @@ def main(argv: list[str] | None = None) -> object:
     sys.argv = [f"physgnn {name}", *rest]  # what the command parses, and its help's name
     if name == "ship":
         sys.exit(module.main(rest))
-    return module.main()
+    # DDP's launcher starts the other processes as `python -m <__main__'s module>` followed by
+    # sys.argv[1:]: as the command's module, they run `python -m physgnn.train <rest>`, not
+    # this script without its command (the console script's __main__ has no module at all).
+    main_module = sys.modules["__main__"]
+    kept = getattr(main_module, "__spec__", None)
+    main_module.__spec__ = module.__spec__
+    try:
+        return module.main()
+    finally:
+        main_module.__spec__ = kept
 
 
 if __name__ == "__main__":

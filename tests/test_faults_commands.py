@@ -5,16 +5,21 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import shutil
 import socket
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
+from lightning.fabric.strategies.launchers import subprocess_script
 from test_train import SHORT, outputs_of, run_main
 
 import physgnn
+import physgnn.__main__ as console_module
 from physgnn import generate as generate_command
+from physgnn import train as train_command
 from physgnn.__main__ import main as console
 from physgnn.files import OUTPUT_MARKER
 
@@ -127,3 +132,34 @@ def test_a_run_records_which_dataset_it_trained_on(tiny_run, tiny_dataset):
         digest.update(f"{name}:{(tiny_dataset / name).stat().st_size};".encode())
     recorded = json.loads((tiny_run / "run.json").read_text())["dataset"]
     assert recorded == {"preset": "tiny", "dir": str(tiny_dataset), "sha256": digest.hexdigest()}
+
+
+def test_ddps_other_processes_rerun_the_command_not_the_console_script(monkeypatch):
+    """Lightning starts DDP's other processes from __main__'s module and sys.argv[1:]: through
+    ``physgnn train`` (a console script: no module) and ``python -m physgnn train`` alike, that
+    is ``python -m physgnn.train <the same overrides>``."""
+    monkeypatch.setattr(train_command, "main", subprocess_script._basic_subprocess_cmd)
+    main_module = sys.modules["__main__"]
+    for spec in (None, main_module.__spec__):  # the console script; python -m physgnn
+        monkeypatch.setattr(main_module, "__spec__", spec)
+        command = console(["train", "trainer=ddp_cpu", "data=tiny"])
+        assert command == [sys.executable, "-m", "physgnn.train", "trainer=ddp_cpu", "data=tiny"]
+        assert main_module.__spec__ is spec  # as it was, after the command
+    assert console_module.COMMANDS["train"][0] == "physgnn.train"
+
+
+@pytest.mark.slow
+def test_ddp_on_two_gloo_processes_through_the_console_script(tiny_dataset, tmp_path):
+    run_dir = tmp_path / "run"
+    script = Path(sys.executable).parent / "physgnn"
+    cmd = [str(script), "train", "trainer=ddp_cpu", "trainer.devices=2", "data=tiny",
+           f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={run_dir}", *SHORT,
+           "datamodule.pairs_per_epoch=16"]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1]),
+           "OMP_NUM_THREADS": "1"}  # fmt: skip
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    info = json.loads((run_dir / "run.json").read_text())
+    assert info["status"] == "finished" and info["global_step"] == 2  # 16 pairs: 2 x 2 x 4
+    log = (run_dir / "train.log").read_text() + done.stderr
+    assert "Initializing distributed: GLOBAL_RANK: 1, MEMBER: 2/2" in log
