@@ -34,6 +34,7 @@ from physgnn.errors import check_whole
 from physgnn.files import write_text
 from physgnn.groundtruth.layouts import check_above_ground, check_clear_of_planes, check_no_overlap
 from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
+from physgnn.groundtruth.scene_yaml import SceneLoader
 from physgnn.physics.scene import (
     GRAVITY,
     GROUND,
@@ -47,35 +48,6 @@ from physgnn.physics.scene import (
 
 DEFAULT_MATERIAL = "default"
 FRAMES = "frames to simulate, the first is the start"
-
-
-class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
-    """``yaml.safe_load`` (libyaml's parser where installed) that reads every number a person
-    writes as a number: YAML 1.1 (PyYAML) takes an exponent without a dot or without a sign
-    (``1e+01``, ``1e1``, ``1.0e5``) for a string; YAML 1.2 and JSON read a float, and so does
-    this loader."""
-
-
-def _unique_keys(loader: _Loader, node: yaml.MappingNode) -> dict:
-    """A mapping whose keys are all different: a key given twice (YAML would keep the last
-    silently) is an error naming its line."""
-    seen = set()
-    for key_node, _ in node.value:
-        key = loader.construct_object(key_node, deep=True)
-        if key in seen:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"key '{key}' given twice (keep one)", key_node.start_mark
-            )
-        seen.add(key)
-    return loader.construct_mapping(node, deep=True)
-
-
-_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _unique_keys)
-_Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"),
-    list("-+0123456789."),
-)
 
 
 def _keys(where: str, d, schema: dict) -> dict:
@@ -254,7 +226,7 @@ def load_scene(path: str | Path) -> Scene:
     one-line :class:`SceneError` on any problem."""
     path = scene_file(path)
     try:
-        d = yaml.load(path.read_text(), Loader=_Loader)
+        d = yaml.load(path.read_text(), Loader=SceneLoader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         at = f" (line {mark.line + 1})" if mark else ""
