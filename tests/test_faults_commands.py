@@ -163,3 +163,24 @@ def test_ddp_on_two_gloo_processes_through_the_console_script(tiny_dataset, tmp_
     assert info["status"] == "finished" and info["global_step"] == 2  # 16 pairs: 2 x 2 x 4
     log = (run_dir / "train.log").read_text() + done.stderr
     assert "Initializing distributed: GLOBAL_RANK: 1, MEMBER: 2/2" in log
+
+
+def test_simulate_refuses_a_run_still_training(tiny_run, tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run, run)
+    trainer = subprocess.Popen(["sleep", "30"])  # stands for the training process
+    info = {"status": "running", "pid": trainer.pid, "host": socket.gethostname(),
+            "started": "2026-11-26T10:00:00"}  # fmt: skip
+    (run / "run.json").write_text(json.dumps(info))
+    try:
+        with pytest.raises(SystemExit) as exit_info:
+            console(["simulate", "scene=head_on", f"run={run}", "video=false", "frames=5",
+                     f"out={tmp_path / 'out'}"])  # fmt: skip
+    finally:
+        trainer.kill()
+        trainer.wait()
+    assert exit_info.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == (
+        f"error: run {run} is still training (pid {trainer.pid} on {socket.gethostname()}, "
+        "started 2026-11-26T10:00:00): its checkpoints are mid-run; load it when it has finished"
+    )
