@@ -24,7 +24,8 @@ COMMANDS = {
 
 
 def usage() -> str:
-    lines = ["usage: physgnn <command> [arguments]   (physgnn <command> --help)", "", "commands:"]
+    lines = ["usage: physgnn <command> [arguments]   (physgnn <command> --help; physgnn --version)",
+             "", "commands:"]  # fmt: skip
     lines += [f"  {name:<12} {text}" for name, (_, text) in COMMANDS.items()]
     return "\n".join(lines)
 
@@ -35,6 +36,9 @@ def main(argv: list[str] | None = None) -> object:
     if not argv or argv[0] in ("-h", "--help"):
         print(usage())
         return 0
+    if argv[0] in ("-V", "--version"):
+        print(f"physgnn {importlib.import_module('physgnn').__version__}")
+        return 0
     name, rest = argv[0], argv[1:]
     if name not in COMMANDS:
         print(f"error: unknown command '{name}'; choose one of {', '.join(COMMANDS)}",
@@ -44,7 +48,16 @@ def main(argv: list[str] | None = None) -> object:
     sys.argv = [f"physgnn {name}", *rest]  # what the command parses, and its help's name
     if name == "ship":
         sys.exit(module.main(rest))
-    return module.main()
+    # DDP's launcher starts the other processes as `python -m <__main__'s module>` followed by
+    # sys.argv[1:]: as the command's module, they run `python -m physgnn.train <rest>`, not
+    # this script without its command (the console script's __main__ has no module at all).
+    main_module = sys.modules["__main__"]
+    kept = getattr(main_module, "__spec__", None)
+    main_module.__spec__ = module.__spec__
+    try:
+        return module.main()
+    finally:
+        main_module.__spec__ = kept
 
 
 if __name__ == "__main__":

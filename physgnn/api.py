@@ -18,6 +18,9 @@ Both take the optional fields of :meth:`~physgnn.physics.trajectory.Trajectory.f
 A scene outside what the model was trained on makes :func:`roll_out` warn with an
 :class:`OutOfDistributionWarning` (``warnings.simplefilter("error", pg.OutOfDistributionWarning)``
 turns it into an error). Every trajectory is a :class:`~physgnn.physics.trajectory.Trajectory`.
+An argument of the wrong type or out of range is one :class:`ArgumentError` line naming it;
+the values are checked by the same functions as the commands' keys (``tol``, ``frames``,
+``constraints``; a scene as a scene file's).
 """
 
 from __future__ import annotations
@@ -30,11 +33,13 @@ from pathlib import Path
 from omegaconf import DictConfig
 
 from physgnn.data import exports, interchange, vtk
+from physgnn.errors import PhysgnnError, check_whole
 from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.simulate import scene_metrics
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.groundtruth import scenefile
 from physgnn.groundtruth.engine import simulate as engine_simulate
+from physgnn.metrics import check_tolerance
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.scene import Scene, SceneError
 from physgnn.physics.trajectory import Trajectory
@@ -48,6 +53,16 @@ load_trajectories = exports.load_trajectories
 
 class OutOfDistributionWarning(UserWarning):
     """A scene outside the ranges the model was trained on: its rollout is extrapolation."""
+
+
+class ArgumentError(PhysgnnError, TypeError, ValueError):
+    """An argument of the wrong type or out of range (one line naming it and the fix)."""
+
+
+def _of_type(name: str, value, kind: type | tuple, fix: str) -> None:
+    """``value`` of the argument ``name`` is a ``kind``; else one line naming it and ``fix``."""
+    if not isinstance(value, kind):
+        raise ArgumentError(f"{name} must be {fix}, got {type(value).__name__}")
 
 
 @dataclass
@@ -66,12 +81,15 @@ class Model:
 
 
 def load_model(run: str | Path = "pretrained") -> Model:
-    """The model of a finished run folder, or of the shipped weights (``"pretrained"``)."""
+    """The model of a finished run folder, or of the shipped weights (``"pretrained"``); a run
+    still training is refused (its checkpoints are mid-run)."""
+    _of_type("run", run, (str, Path), "a run folder (str or Path) or 'pretrained'")
     return Model(*load_run(run))
 
 
 def load_scene(path: str | Path) -> Scene:
     """A YAML scene file (docs/scene.schema.json), or an example's name (``"throw"``)."""
+    _of_type("path", path, (str, Path), "a YAML scene file (str or Path) or an example's name")
     return scenefile.load_scene(path)
 
 
@@ -81,9 +99,12 @@ def scene_from_arrays(pos, radius, *, frames: int = 100, dt: float = 0.1, name: 
     simulate at interval ``dt``; ``fields``: vel, angvel ``[N, 3]``, quat ``[N, 4]``, and
     mass, material, materials, planes, plane_kind, effects as in
     :meth:`Trajectory.from_arrays` (velocities default to zero)."""
+    frames = check_whole("frames", frames, 2, "the first frame is the start", ArgumentError)
     start = {k: v if k not in ("vel", "angvel", "quat") else [v] for k, v in fields.items()}
     first = Trajectory.from_arrays([pos], radius, dt, name=name, **start)
-    return dataclasses.replace(scene_of(first), n_frames=int(frames)).validate()
+    scene = dataclasses.replace(scene_of(first), n_frames=frames).validate()
+    scenefile.check_placement(f"scene '{name}'", scene.pos, scene.radius, scene.planes)
+    return scene
 
 
 def scene_of(traj: Trajectory) -> Scene:
@@ -98,8 +119,11 @@ def scene_of(traj: Trajectory) -> Scene:
 
 def simulate(scene: Scene, frames: int | None = None) -> Trajectory:
     """pybullet's trajectory of ``scene`` (``frames`` instead of its own length)."""
+    _of_type("scene", scene, Scene, "a Scene: load_scene('throw'), scene_from_arrays(...)")
     if frames is not None:
-        scene = dataclasses.replace(scene, n_frames=int(frames))
+        what = "the first frame is the start; e.g. frames=100"
+        scene = dataclasses.replace(scene, n_frames=check_whole("frames", frames, 2, what,
+                                                                ArgumentError))  # fmt: skip
     return engine_simulate(scene)
 
 
@@ -108,6 +132,10 @@ def roll_out(model: Model, truth: Trajectory, constraints: int = 0) -> Trajector
     diverged: ``diverged_at``); with ``constraints`` > 0, each learned step is followed by that
     many iterations of the constraint stage. Warns (:class:`OutOfDistributionWarning`) when
     ``truth`` starts outside the model's training ranges."""
+    _of_type("model", model, Model, "a Model: load_model('pretrained') or load_model(run_dir)")
+    _of_type("truth", truth, Trajectory, "a Trajectory: simulate(scene) gives a scene's truth")
+    what = "iterations of the constraint stage; 0: the learned model alone"
+    constraints = check_whole("constraints", constraints, 0, what, ArgumentError)
     found = outside(scene_of(truth), model.cfg)
     if found:
         warnings.warn(warning_text(truth.name, found), OutOfDistributionWarning, stacklevel=2)
@@ -121,13 +149,18 @@ def score(pred: Trajectory | None, truth: Trajectory, tol: float = 0.0) -> dict:
     """The metrics of ``pred`` against ``truth`` (``make eval``'s columns; None for a rollout
     that diverged, then ``diverged_at``), or the truth's own physics when ``pred`` is None.
     ``tol``: the penetration tolerance, a fraction of the diameter."""
-    return scene_metrics(truth, pred, tol)
+    _of_type("pred", pred, (Trajectory, type(None)), "a Trajectory (roll_out's) or None")
+    _of_type("truth", truth, Trajectory, "a Trajectory: simulate(scene) gives a scene's truth")
+    return scene_metrics(truth, pred, check_tolerance(tol, ArgumentError))
 
 
 def animate(truth: Trajectory, pred: Trajectory | None = None, stem: str | Path = "video",
             max_frames: int = 80) -> dict:  # fmt: skip
     """The shaded 3-D film of ``truth`` (left) beside ``pred`` (right; the truth again without
     one): ``stem.gif``, ``stem.mp4`` and ``stem_frame.png``; returns their paths by kind."""
+    _of_type("truth", truth, Trajectory, "a Trajectory: simulate(scene) gives a scene's truth")
+    _of_type("pred", pred, (Trajectory, type(None)), "a Trajectory (roll_out's) or None")
+    max_frames = check_whole("max_frames", max_frames, 2, "frames of the film", ArgumentError)
     panel = (truth, "ground truth") if pred is None else (pred, "prediction")
     return render_side_by_side(stem, truth, [panel], title=truth.name, max_frames=max_frames)
 

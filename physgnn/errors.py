@@ -11,6 +11,8 @@ raise ``KeyboardInterrupt`` like Ctrl-C, so ``finally`` blocks clean up after bo
 
 from __future__ import annotations
 
+import math
+import numbers
 import signal
 import threading
 from collections.abc import Iterator
@@ -43,6 +45,32 @@ def check_seed(seed, key: str = "seed", where: str = "conf/train.yaml: seed") ->
             f"{key} must be a whole number from 0 to {MAX_SEED}, got {seed!r} ({where}; e.g. "
             f"{key}=0)"
         )
+
+
+def check_whole(key: str, value, least: int, what: str, error: type = ConfigError) -> int:
+    """``value`` of the argument ``key`` is a whole number >= ``least`` (``what``: its meaning
+    and an example), else one line naming ``key`` (2.5 too: never truncated; 10.0, as JSON
+    and YAML write 1e1, is 10). The one check of a count for the commands and the API alike."""
+    number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    whole = number and math.isfinite(value) and float(value).is_integer()
+    if not whole or value < least:
+        raise error(f"{key} must be a whole number >= {least} ({what}), got {value!r}")
+    return int(value)
+
+
+def check_number(key: str, value, least: float, what: str, error: type = ConfigError) -> float:
+    """``value`` of ``key`` is a finite number >= ``least`` (NaN never is), else one line."""
+    number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    if not number or not math.isfinite(value) or value < least:
+        raise error(f"{key} must be a number >= {least:g} ({what}), got {value!r}")
+    return float(value)
+
+
+def check_flag(key: str, value, error: type = ConfigError) -> bool:
+    """``value`` of ``key`` is true or false (``maybe``, ``'no'`` or 1 is not), else one line."""
+    if not isinstance(value, bool):
+        raise error(f"{key} must be true or false, got {value!r}")
+    return value
 
 
 class Interrupted(PhysgnnError):

@@ -106,12 +106,14 @@ def read_rows(path: str | Path, floats: Iterable[str], ints: Iterable[str]) -> l
     return rows
 
 
-def claim_folder(folder: str | Path, key: str, overwrite: bool = False, ours: bool = False) -> Path:
+def claim_folder(folder: str | Path, key: str, overwrite: bool | None = False,
+                 ours: bool = False) -> Path:  # fmt: skip
     """Make ``folder`` (if needed) for physgnn to write into, once it may: an absent or empty
     folder, one marked with :data:`OUTPUT_MARKER` or ``ours`` (the command's default folder
     under ``paths.outputs``) gets the marker; any other folder is written into only with
     ``overwrite`` (and stays unmarked), else :class:`FileExistsError`, one line naming ``key``,
-    the folder and the fix."""
+    the folder and the fix (``overwrite=true`` only where the command takes it: ``overwrite``
+    None says it does not)."""
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise FileExistsError(f"{key} {folder} is a file: choose another {key}")
@@ -121,7 +123,8 @@ def claim_folder(folder: str | Path, key: str, overwrite: bool = False, ours: bo
             return folder
         raise FileExistsError(
             f"{key} {folder} is a folder with files that physgnn did not write (no "
-            f"{OUTPUT_MARKER}): choose another {key}, or pass overwrite=true to write over them"
+            f"{OUTPUT_MARKER}): choose another {key}"
+            + (", or pass overwrite=true to write over them" if overwrite is not None else "")
         )
     write_json(folder / OUTPUT_MARKER, {"physgnn_version": __version__})
     return folder

@@ -61,7 +61,8 @@ def test_roll_out_warns_only_outside_the_training_ranges(model):
         warnings.simplefilter("error", pg.OutOfDistributionWarning)
         pred = pg.roll_out(model, inside)
     assert pred.n_frames == 6 and pred.start == model.H
-    big = pg.simulate(pg.scene_from_arrays(pos, 2.0, frames=6, materials=IN_RANGE))
+    apart = np.array([[0.0, 0.0, 2.5], [5.0, 0.0, 2.5]])  # radius 2: clear of each other
+    big = pg.simulate(pg.scene_from_arrays(apart, 2.0, frames=6, materials=IN_RANGE))
     with pytest.warns(pg.OutOfDistributionWarning, match=r"radius \(m\) 2–2 \(trained on"):
         pg.roll_out(model, big)
 

@@ -27,7 +27,11 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_every_subpackage_is_in_the_wheel_list():
     listed = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
     found = find_packages(str(ROOT), include=["physgnn*"])
-    assert sorted(listed) == sorted([*found, "physgnn.conf"])
+    conf = ROOT / "conf"  # data folders: each config group, the shipped weights
+    groups = [".".join(p.relative_to(conf).parts) for p in conf.rglob("*") if any(p.glob("*.yaml"))]
+    data = ["physgnn.conf", *(f"physgnn.conf.{g}" for g in groups), "physgnn.pretrained",
+            "physgnn.pretrained.checkpoints"]  # fmt: skip
+    assert sorted(listed) == sorted([*found, *data])
 
 
 def test_a_checkout_reads_its_top_level_conf():

@@ -30,6 +30,7 @@ import sys
 import time
 import traceback
 from collections.abc import Callable
+from pathlib import Path
 from typing import NoReturn
 
 import hydra
@@ -42,7 +43,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
 from physgnn.cli.outputs import OWN_FOLDER, check_outputs_env
-from physgnn.cli.overrides import check_added_keys, compose_config  # noqa: F401 (re-exported)
+from physgnn.cli.overrides import check_added_keys, check_quoting, compose_config  # noqa: F401
 from physgnn.errors import (
     ConfigError,
     Interrupted,
@@ -51,6 +52,7 @@ from physgnn.errors import (
     one_line,
     sigterm_interrupts,
 )
+from physgnn.files import write_text
 
 # A sweep job's folder name (conf/train.yaml: hydra.sweep.subdir) is its overrides: at most
 # this many characters (a file name holds 255 bytes), and a path in one (``data.dir=/a/b``)
@@ -232,6 +234,7 @@ def _outputs_checked(hydra_main: Callable, before: Callable | None = None,
                 sys.argv[:] = saved
         try:
             check_outputs_env(own=OWN_FOLDER.get(name, "paths.outputs"))
+            check_quoting(sys.argv[1:])
             if before is not None:
                 before(sys.argv[1:])
         except USER_ERRORS as err:
@@ -247,8 +250,17 @@ def _in_sweep() -> bool:
     return HydraConfig.initialized() and HydraConfig.get().mode == RunMode.MULTIRUN
 
 
+# A failed sweep job's error, in its Hydra folder (``.hydra/``): the sweep's end counts them
+JOB_ERROR = "job_error.txt"
+
+
 def _report_failed_job(err: Exception) -> None:
-    """One line for a user error, the traceback for a bug; the sweep goes on."""
+    """One line for a user error, the traceback for a bug; the sweep goes on. The line is kept
+    in the job's folder (:data:`JOB_ERROR`), whichever process or machine ran the job, for the
+    end of the sweep to count (:class:`~physgnn.cli.sweeps.AfterSweep`)."""
     if not isinstance(err, USER_ERRORS):
         traceback.print_exception(err)
     print(f"error: {one_line(err)} (this job failed; the sweep goes on)", file=sys.stderr)
+    hydra = HydraConfig.get()
+    folder = Path(hydra.runtime.output_dir) / (hydra.output_subdir or "")
+    write_text(folder / JOB_ERROR, one_line(err) + "\n")

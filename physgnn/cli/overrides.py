@@ -27,7 +27,8 @@ from pathlib import Path
 
 from hydra.compose import compose
 from hydra.core.global_hydra import GlobalHydra
-from hydra.errors import HydraException, MissingConfigException
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException, MissingConfigException, OverrideParseException
 from hydra.initialize import initialize_config_dir
 from hydra.utils import get_object
 from omegaconf import DictConfig, OmegaConf
@@ -50,6 +51,24 @@ def check_added_keys(cfg: DictConfig, overrides: list[str], command: str) -> Non
         problem = _unread(cfg, key, command)
         if problem:
             raise ConfigError(f"{override}: {problem}")
+
+
+def check_quoting(argv: list[str]) -> None:
+    """An override holding a character Hydra's grammar does not take unquoted (a path with
+    ``é``: Hydra says only ``LexerNoViableAltException``) is one line with the quoting fix."""
+    for arg in argv:
+        if arg.startswith("-") or "=" not in arg or arg.isascii():
+            continue
+        try:
+            OverridesParser.create().parse_overrides([arg])
+        except OverrideParseException:
+            key, _, value = arg.partition("=")
+            odd = next(c for c in arg if not c.isascii())
+            quoted = f"'{key}=\"{value}\"'"
+            raise ConfigError(
+                f"{key}: Hydra reads a value with {odd!r} only in quotes: write {quoted} (the "
+                "shell's quotes around Hydra's)"
+            ) from None
 
 
 def compose_config(name: str, overrides: list[str] | None = None) -> DictConfig:

@@ -18,13 +18,12 @@ A ``report_dir`` holding files physgnn did not write is refused unless ``overwri
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
 
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.data.dataset import write_split
-from physgnn.errors import ConfigError
+from physgnn.errors import ConfigError, check_flag
 from physgnn.evaluation import rerun_log, same_work
 from physgnn.evaluation.bounce import bounce_rows
 from physgnn.evaluation.freefall import freefall_rows
@@ -49,10 +48,13 @@ from physgnn.evaluation.runs import (
 )
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.files import claim_folder, staged_outputs
+from physgnn.metrics import check_tolerance
 from physgnn.report import bounce, figures, freefall, invariance, stability, table
 from physgnn.report.document import write_report
 
 # What an eval writes into its report_dir (replaced whole by the next eval).
+# The eval's switches: true or false (``save_rollouts=maybe`` is refused, not taken as true).
+FLAGS = ("overwrite", "videos", "save_rollouts", "sleeping_compare", "stability")
 REPORT_OUTPUTS = ("report.md", "metrics.csv", "stability.csv", "freefall.csv", "bounce.csv",
                   "invariance.csv", "figures", "videos", "rollouts")  # fmt: skip
 MATERIAL_KEYS = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
@@ -79,18 +81,17 @@ def evaluate(cfg: DictConfig) -> Path:
 
 def check_eval_values(cfg: DictConfig) -> None:
     """``max_frames`` is null or a whole number >= 2 (a rollout needs frames to predict);
-    ``tol`` a number >= 0; ``pybullet`` null or its substep counts and processes."""
-    frames, tol = cfg.get("max_frames"), cfg.get("tol")
+    ``tol`` a number >= 0; each switch true or false; ``pybullet`` null or its substep
+    counts and processes."""
+    frames = cfg.get("max_frames")
     if frames is not None and (not isinstance(frames, int) or isinstance(frames, bool)
                                or frames < 2):  # fmt: skip
         raise ConfigError(
             f"max_frames must be a whole number >= 2 or null (whole trajectories), got {frames!r}"
         )
-    if not isinstance(tol, int | float) or isinstance(tol, bool) or not 0 <= tol < math.inf:
-        raise ConfigError(
-            f"tol must be a number >= 0 (a fraction of the diameter; 0: any overlap counts), "
-            f"got {tol!r}"
-        )
+    check_tolerance(cfg.get("tol"), ConfigError)
+    for key in FLAGS:
+        check_flag(key, cfg.get(key))
     same_work.check_settings(cfg.get("pybullet"))
 
 

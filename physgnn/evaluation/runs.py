@@ -5,7 +5,6 @@ the test and OOD trajectories of their datasets."""
 from __future__ import annotations
 
 import dataclasses
-import socket
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,7 +14,6 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.data.dataset import DatasetError, read_split
 from physgnn.errors import PhysgnnError
-from physgnn.files import process_alive
 from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.trajectory import Trajectory
@@ -69,13 +67,7 @@ def find_runs(target: str | None, outputs: Path) -> list[Path]:
     if target is not None and not runs:
         folder = training_runs.resolve_run(target)
         status = training_runs.run_status(folder) if (folder / "run.json").exists() else None
-        info = training_runs.read_run_json(folder) if status == "running" else {}
-        if info.get("host") == socket.gethostname() and process_alive(info.get("pid")):
-            raise EvalError(
-                f"run {target} is still training (pid {info.get('pid')} on {info.get('host')}, "
-                f"started {info.get('started')}): its checkpoints are mid-run; evaluate it "
-                "when it has finished"
-            )
+        training_runs.check_not_training(folder, "evaluate it", EvalError)
         if status is not None:
             raise EvalError(f"run {target} has not finished (run.json status is '{status}')")
         raise EvalError(f"no finished run (run.json with status 'finished') under {target}")

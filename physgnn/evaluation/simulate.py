@@ -29,7 +29,6 @@ whole, and an interrupted run leaves it as it was.
 from __future__ import annotations
 
 import dataclasses
-import math
 import sys
 import time
 from pathlib import Path
@@ -41,7 +40,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from physgnn import metrics
 from physgnn.data.dataset import write_split
-from physgnn.errors import PhysgnnError
+from physgnn.errors import PhysgnnError, check_flag, check_whole
 from physgnn.evaluation import rerun_log
 from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.video3d import render_side_by_side
@@ -49,6 +48,8 @@ from physgnn.files import claim_folder, portable, staged_outputs, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.scenefile import load_scene, scene_file, scene_to_dict
+from physgnn.metrics import check_tolerance
+from physgnn.metrics.checks import frames as checked_frames
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.scene import Scene
 from physgnn.physics.trajectory import Trajectory
@@ -89,18 +90,12 @@ def scene_of(cfg: DictConfig) -> tuple[Scene, str]:
 
 def whole(cfg: DictConfig, key: str, least: int, what: str) -> int:
     """The whole number ``cfg[key]``, at least ``least``; else one line naming the key."""
-    value = cfg.get(key)
-    if isinstance(value, bool) or not isinstance(value, int) or value < least:
-        raise SimulateError(f"{key} must be a whole number >= {least} ({what}), got {value!r}")
-    return value
+    return check_whole(key, cfg.get(key), least, what, SimulateError)
 
 
 def flag(cfg: DictConfig, key: str) -> bool:
     """The argument ``key``: true or false."""
-    value = cfg.get(key)
-    if not isinstance(value, bool):
-        raise SimulateError(f"{key} must be true or false, got {value!r}")
-    return value
+    return check_flag(key, cfg.get(key), SimulateError)
 
 
 def rollout_prediction(simulator, truth: Trajectory) -> Trajectory:
@@ -135,6 +130,7 @@ def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dic
     """Prediction vs truth (``pred``), or the truth's own physics (``pred`` None). A diverged
     prediction has no metrics (None) but ``diverged_at``: its finite prefix would read as a
     good rollout."""
+    checked_frames(truth.pos, "truth pos")  # named as the truth's, before a copy of it is measured
     mine = pred if pred is not None else truth.with_finite_velocities()
     m = metrics.trajectory_metrics(mine, truth, tol=tol, horizon=20)
     keys = (*METRIC_KEYS, *metrics.PENETRATION_KEYS) if pred is not None else (
@@ -197,14 +193,7 @@ def _simulate_into(cfg, scene_text, folders: tuple[Path, Path], how: tuple) -> d
 
 def tolerance(cfg: DictConfig) -> float:
     """The argument ``tol``: a number >= 0 (a fraction of the diameter; 0: any overlap)."""
-    value = cfg.get("tol")
-    number = isinstance(value, int | float) and not isinstance(value, bool)
-    if not number or not math.isfinite(value) or value < 0:
-        raise SimulateError(
-            f"tol must be a number >= 0 (a fraction of the diameter; 0: any overlap counts), "
-            f"got {value!r}"
-        )
-    return float(value)
+    return check_tolerance(cfg.get("tol"), SimulateError)
 
 
 # Above this many sphere-frames a simulation shows its progress (it takes more than seconds).
@@ -212,9 +201,13 @@ LONG = 100_000
 
 
 def simulate_with_progress(scene) -> Trajectory:
-    """pybullet's run of ``scene``, with a progress bar on the terminal when it is long."""
+    """pybullet's run of ``scene``; when it is long, a line saying so and a progress bar on
+    the terminal."""
     if scene.n_spheres * scene.n_frames < LONG:
         return engine_simulate(scene)
+    # a line: the bar below shows on a terminal only
+    print(f"simulating with pybullet: {scene.n_spheres} spheres, {scene.n_frames} frames ...",
+          file=sys.stderr, flush=True)  # fmt: skip
     columns = (TextColumn("pybullet"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with Progress(*columns, transient=True) as bar:
         task = bar.add_task("frames", total=scene.n_frames)

@@ -30,10 +30,12 @@ import numpy as np
 import yaml
 
 from physgnn import SCENES_DIR
+from physgnn.errors import check_whole
 from physgnn.files import write_text
 from physgnn.groundtruth.layouts import check_above_ground, check_clear_of_planes, check_no_overlap
 from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
 from physgnn.groundtruth.scene_values import known_keys, number, restitution, unit, vector
+from physgnn.groundtruth.scene_yaml import SceneLoader
 from physgnn.physics.scene import (
     GRAVITY,
     GROUND,
@@ -47,20 +49,7 @@ from physgnn.physics.scene import (
 )
 
 DEFAULT_MATERIAL = "default"
-
-
-class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
-    """``yaml.safe_load`` (libyaml's parser where installed) that reads every number a person
-    writes as a number: YAML 1.1 (PyYAML) takes an exponent without a dot or without a sign
-    (``1e+01``, ``1e1``, ``1.0e5``) for a string; YAML 1.2 and JSON read a float, and so does
-    this loader."""
-
-
-_Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9][0-9_]*)[eE][-+]?[0-9]+$"),
-    list("-+0123456789."),
-)
+FRAMES = "frames to simulate, the first is the start"
 
 
 def _materials(where: str, d) -> tuple[list[str], np.ndarray]:
@@ -131,6 +120,19 @@ def _plane(where: str, d) -> tuple[np.ndarray, int, float]:
     return row, PLANE_KINDS.index(kind), e
 
 
+def check_placement(where: str, pos, radius, planes) -> None:
+    """No two spheres overlap, none reaches below the ground or into a plane's solid (pos
+    ``[N, 3]``, radius ``[N]``, planes ``[S, 11]``, row 0 the ground): a scene file's check,
+    and :func:`physgnn.api.scene_from_arrays`'s; one line naming ``where`` and the sphere."""
+    pos, radius = np.asarray(pos, np.float64), np.asarray(radius, np.float64)
+    check_no_overlap(where, pos, radius)
+    check_above_ground(where, pos, radius)
+    try:
+        check_clear_of_planes(where, pos, radius, np.asarray(planes, np.float64), depth=1.0)
+    except SceneError as e:  # depth: the engine's solid behind a plane
+        raise SceneError(str(e).replace(f"scene '{where}'", where)) from None
+
+
 def scene_from_dict(d, where: str = "scene") -> Scene:
     """A validated :class:`Scene` from a parsed scene file; ``where`` prefixes errors."""
     d = known_keys(where, d, SCHEMA)
@@ -143,13 +145,8 @@ def scene_from_dict(d, where: str = "scene") -> Scene:
     ground_e = restitution(f"{where}: ground_restitution", d.get("ground_restitution", 1.0))
     col = lambda k: np.stack([np.asarray(r[k]) for r in rows])  # noqa: E731
     pos, radius = col("pos"), col("radius")
-    check_no_overlap(where, pos, radius)
-    check_above_ground(where, pos, radius)
     plane_rows = np.stack([ground_plane().astype(np.float64), *[p for p, _, _ in planes]])
-    try:
-        check_clear_of_planes(where, pos, radius, plane_rows, depth=1.0)  # engine's solid
-    except SceneError as e:
-        raise SceneError(str(e).replace(f"scene '{where}'", where)) from None
+    check_placement(where, pos, radius, plane_rows)
     try:
         effects = Effects.from_dict(d.get("effects"))
     except (SceneError, TypeError) as e:
@@ -169,7 +166,7 @@ def scene_from_dict(d, where: str = "scene") -> Scene:
         plane_materials=_plane_materials([ground_e] + [e for *_, e in planes]),
         materials=f32(materials),
         dt=number(f"{where}: dt", d.get("dt", 0.1), positive=True),
-        n_frames=int(number(f"{where}: frames", d.get("frames", 100), positive=True)),
+        n_frames=check_whole(f"{where}: frames", d.get("frames", 100), 2, FRAMES, SceneError),
         effects=effects,
         gravity=tuple(vector(f"{where}: gravity", d.get("gravity", list(GRAVITY)), 3)),
     )
@@ -185,6 +182,8 @@ def scene_file(path: str | Path) -> Path:
     path = Path(path)
     if path.is_file():
         return path
+    if path.is_dir():
+        raise SceneError(f"scene file {path} is a folder; give a YAML scene file in it")
     example = Path(SCENES_DIR) / f"{path.stem}.yaml"
     if path.parent == Path(".") and example in example_scenes():
         return example
@@ -203,7 +202,7 @@ def load_scene(path: str | Path) -> Scene:
     one-line :class:`SceneError` on any problem."""
     path = scene_file(path)
     try:
-        d = yaml.load(path.read_text(), Loader=_Loader)
+        d = yaml.load(path.read_text(), Loader=SceneLoader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         at = f" (line {mark.line + 1})" if mark else ""

@@ -20,7 +20,7 @@ one :class:`MetricError` line instead of returning a silent NaN. Conventions:
 - accuracy metrics are averaged over all frames given (seed frames included, as the report).
 """
 
-from physgnn.metrics.checks import MetricError
+from physgnn.metrics.checks import MetricError, check_tolerance
 from physgnn.metrics.penetration import (
     PENETRATION_KEYS,
     max_penetration,
@@ -48,6 +48,7 @@ __all__ = [
     "PENETRATION_KEYS",
     "MetricError",
     "chamfer",
+    "check_tolerance",
     "drift_before_hit",
     "energy_gain",
     "energy_rise",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from physgnn.errors import PhysgnnError
+from physgnn.errors import PhysgnnError, check_number
 
 # Above this many pair distances (T·N·M) the per-frame k-d tree paths are used.
 BRUTE_FORCE_MAX = 2_000_000
@@ -12,6 +12,12 @@ BRUTE_FORCE_MAX = 2_000_000
 
 class MetricError(PhysgnnError, ValueError):
     """A metric cannot be computed from its input (one line naming the problem)."""
+
+
+def check_tolerance(tol, error: type = MetricError) -> float:
+    """The penetration tolerance ``tol``: a finite number >= 0, a fraction of the diameter
+    (``make eval``, ``simulate`` and ``api.score`` alike); else one line naming ``tol``."""
+    return check_number("tol", tol, 0, "a fraction of the diameter; 0: any overlap counts", error)
 
 
 def frames(x, name: str, width: int = 3) -> np.ndarray:

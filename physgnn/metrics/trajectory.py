@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from physgnn.metrics.checks import MetricError, frames
+from physgnn.metrics.checks import MetricError, check_tolerance, frames
 from physgnn.metrics.penetration import penetration
 from physgnn.metrics.series import (
     chamfer,
@@ -46,6 +46,7 @@ def trajectory_metrics(
     (:func:`drift_before_hit`) for those that rest until hit. Keys with nothing to measure
     are None.
     """
+    check_tolerance(tol)
     scene = {k: getattr(true if true is not None else pred, k) for k in _SCENE_KEYS}
     missing = [k for k in _SCENE_KEYS[:4] if scene[k] is None]
     if missing:

@@ -20,6 +20,9 @@ PLANE_DIM = 11
 PLANE_KINDS = ("ground", "wall", "static")
 GROUND, WALL, STATIC = 0, 1, 2
 GRAVITY = (0.0, 0.0, -9.81)
+# The most frames of one scene: 1e4 s at dt 0.1 (a rollout of the report is 1 000 frames at
+# most); more is a slip of the keyboard (1e9 frames: years of pybullet, and memory it lacks).
+MAX_FRAMES = 100_000
 EFFECT_NAMES = ("gravity", "sphere_contact", "surface_contact", "friction", "rotation")
 
 
@@ -46,7 +49,12 @@ class Effects:
         unknown = set(d) - set(EFFECT_NAMES)
         if unknown:
             raise SceneError(f"unknown effect(s) {sorted(unknown)}; known: {list(EFFECT_NAMES)}")
-        return cls(**{k: bool(v) for k, v in d.items()})
+        flags = {k: v.item() if isinstance(v, np.bool_) else v for k, v in d.items()}
+        wrong = {k: v for k, v in flags.items() if not isinstance(v, bool)}
+        if wrong:  # bool('no') is True: a word or a number is never taken for a switch
+            key, value = next(iter(wrong.items()))
+            raise SceneError(f"effect {key} must be true or false, got {value!r}")
+        return cls(**flags)
 
 
 @dataclass(frozen=True)
@@ -154,6 +162,12 @@ class Scene:
             raise SceneError(f"scene '{self.name}': plane_kind must have one entry per plane")
         if self.dt <= 0 or self.n_frames < 2:
             raise SceneError(f"scene '{self.name}': need dt > 0 and n_frames >= 2")
+        if self.n_frames > MAX_FRAMES:
+            raise SceneError(
+                f"scene '{self.name}': {self.n_frames} frames is more than {MAX_FRAMES} (a "
+                "trajectory is kept whole in memory; 1e9 frames of pybullet would run for years):"
+                f" simulate at most {MAX_FRAMES} frames, or a longer dt"
+            )
         if self.material.min() < 0 or self.material.max() >= len(self.materials):
             raise SceneError(
                 f"scene '{self.name}': material id out of range [0, {len(self.materials)})"
@@ -164,6 +178,7 @@ class Scene:
         if self.plane_materials is not None:
             check_plane_materials(self.name, self.plane_materials, len(self.planes))
         check_float32_scale(self.name, self.pos, self.radius)
+        check_speeds(self.name, self.pos, self.vel, self.radius, self.dt * (self.n_frames - 1))
         return self
 
 
@@ -197,4 +212,21 @@ def check_float32_scale(name: str, pos: np.ndarray, radius: np.ndarray) -> None:
             f"scene '{name}': sphere {i} has radius {float(radius[i]):g} m in a scene reaching "
             f"{extent:g} m from the origin, finer than float32 resolves there: bring the scene "
             f"near the origin (metres), or give radii >= {extent * MIN_RADIUS_PER_EXTENT:g} m"
+        )
+
+
+def check_speeds(name: str, pos: np.ndarray, vel: np.ndarray, radius: np.ndarray,
+                 duration: float) -> None:  # fmt: skip
+    """Starting speeds whose straight flight over the scene's ``duration`` (s) stays where
+    float32 resolves the smallest radius (:data:`MIN_RADIUS_PER_EXTENT`): pybullet froze a
+    sphere thrown at 1e30 m/s (it did not even fall) instead of failing."""
+    speed = np.linalg.norm(np.asarray(vel, np.float64), axis=1)
+    start = float(np.abs(np.asarray(pos, np.float64)).max())
+    limit = max(1.0, float(radius.min()) / MIN_RADIUS_PER_EXTENT) - start
+    i = int(np.argmax(speed))
+    if speed[i] * duration > limit:
+        raise SceneError(
+            f"scene '{name}': sphere {i} starts at {speed[i]:g} m/s, which carries it farther "
+            f"in the scene's {duration:g} s than float32 resolves a radius of "
+            f"{float(radius.min()):g} m: give speeds below {max(limit, 0) / duration:g} m/s"
         )

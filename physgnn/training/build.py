@@ -11,10 +11,12 @@ into that strategy; a DDP strategy that does not look for them is refused in one
 from __future__ import annotations
 
 import logging
+import typing
 
 import lightning as L
 import torch
 from hydra.utils import instantiate
+from lightning.fabric.plugins.precision.precision import _PRECISION_INPUT
 from lightning.pytorch.strategies import DDPStrategy
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import InterpolationResolutionError
@@ -31,6 +33,8 @@ from physgnn.training.schedule import check_scheduler
 
 NUMERIC_TRAINER_KEYS = ("max_epochs", "max_steps", "gradient_clip_val", "log_every_n_steps")
 FINDS_UNUSED = "_find_unused_parameters_true"
+# What Lightning's Trainer takes for precision (it fails deep inside, wrapped by Hydra, else)
+PRECISIONS = [v for part in typing.get_args(_PRECISION_INPUT) for v in typing.get_args(part)]
 
 
 log = logging.getLogger(__name__)
@@ -48,6 +52,10 @@ def check_trainer_config(trainer_cfg: DictConfig) -> None:
             "none (torch.cuda.is_available() is False): train on the CPU (trainer=cpu, the "
             "default), or on a machine with a GPU and a CUDA build of torch"
         )
+    precision = trainer_cfg.get("precision")
+    if precision is not None and precision not in PRECISIONS:
+        words = ", ".join(p for p in PRECISIONS if isinstance(p, str) and "-" in p)
+        raise ConfigError(f"trainer.precision must be one of {words}, got {precision!r}")
     strategy = trainer_cfg.get("strategy")
     if isinstance(strategy, str) and strategy.startswith("ddp"):
         if not strategy.endswith(FINDS_UNUSED):

@@ -13,6 +13,7 @@ gathers into the split's stacked tables (:class:`physgnn.data.pairs.PairDataset`
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
 import lightning as L
@@ -59,6 +60,21 @@ def check_training_data(data_dir: str | Path, preset: str) -> None:
     for name in TRAINING_FILES:
         dataset_file(data_dir, preset, name)
     check_preset(data_dir, preset)
+
+
+def dataset_identity(data_dir: str | Path, preset: str) -> dict:
+    """Which dataset a run trains on, beyond its path (run.json ``dataset``): ``preset``,
+    ``dir`` and ``sha256``, a hash of stats.json's bytes and of the sizes of the files training
+    reads (the splits are not read whole: gigabytes). Another dataset at the same path, or the
+    same one regenerated with another seed, has another hash; a file missing, None."""
+    digest, folder = hashlib.sha256(), Path(data_dir)
+    try:
+        digest.update((folder / "stats.json").read_bytes())
+        for name in TRAINING_FILES:
+            digest.update(f"{name}:{(folder / name).stat().st_size};".encode())
+    except OSError:
+        return {"preset": preset, "dir": str(data_dir), "sha256": None}
+    return {"preset": preset, "dir": str(data_dir), "sha256": digest.hexdigest()}
 
 
 class StatePairDataModule(L.LightningDataModule):

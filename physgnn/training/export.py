@@ -36,7 +36,7 @@ from physgnn.training.runs import (
     write_run_json,
 )
 
-KEPT = ("experiment", "overrides", "seed", "epochs", "max_epochs", "global_step",
+KEPT = ("experiment", "overrides", "seed", "dataset", "epochs", "max_epochs", "global_step",
         "train_time_s", "sessions", "threads", "host", "pairs_seen")  # fmt: skip
 
 
@@ -53,7 +53,7 @@ def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path |
                            weights_only=True)  # fmt: skip
     weights = {k: v for k, v in full["state_dict"].items() if k.startswith("simulator.")}
     step = int(full.get("global_step", 0))
-    claim_folder(out_dir, "OUT_DIR")
+    claim_folder(out_dir, "OUT_DIR", overwrite=None)  # ship takes no overwrite=true
     for old in (out_dir / "checkpoints").glob("*.ckpt"):
         old.unlink()  # one set of weights per folder
     target = out_dir / "checkpoints" / f"best-step{step:06d}.ckpt"

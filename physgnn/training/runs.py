@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import json
+import socket
 import zipfile
 from pathlib import Path
 
@@ -16,7 +17,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import PhysgnnError, one_line
-from physgnn.files import write_json
+from physgnn.files import process_alive, write_json
 from physgnn.models.learned import LearnedSimulator
 from physgnn.training.layout import model_of_today
 
@@ -65,6 +66,26 @@ def run_status(run_dir: Path) -> str:
         return "unreadable"
 
 
+def training_now(run_dir: Path) -> dict:
+    """run.json of a run whose training is alive on this host now (status ``running``, its
+    process alive), else ``{}``: its checkpoints are mid-run."""
+    info = read_run_json(run_dir) if run_status(run_dir) == "running" else {}
+    alive = info.get("host") == socket.gethostname() and process_alive(info.get("pid"))
+    return info if alive else {}
+
+
+def check_not_training(run_dir: Path, what: str, error: type = None) -> None:
+    """A run still training is refused in one line (``what``: what waits for it to end;
+    ``error``: the class raised, :class:`RunError` by default)."""
+    info = training_now(run_dir)
+    if info:
+        raise (error or RunError)(
+            f"run {run_dir} is still training (pid {info.get('pid')} on {info.get('host')}, "
+            f"started {info.get('started')}): its checkpoints are mid-run; {what} when it has "
+            "finished"
+        )
+
+
 def checkpoint_of(run_dir: Path) -> Path:
     """The best checkpoint of a run, else its last one. Several ``best-*`` files (a run
     resumed after its folder moved: Lightning then forgets the best score so far and keeps
@@ -108,6 +129,7 @@ def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
     config = run_dir / ".hydra" / "config.yaml"
     if not config.exists():
         raise FileNotFoundError(f"{run_dir} is not a training run (no .hydra/config.yaml)")
+    check_not_training(run_dir, "load it")
     info = read_run_json(run_dir)
     _check_format(run_dir, info.get("weights_format", WEIGHTS_FORMAT))
     cfg = read_run_config(config)

@@ -28,6 +28,7 @@ from physgnn.errors import ConfigError, Interrupted, check_seed, one_line, signa
 from physgnn.files import write_text
 from physgnn.training.build import build
 from physgnn.training.checks import check_checkpoint, check_run_dir, resume_from
+from physgnn.training.datamodule import dataset_identity
 from physgnn.training.lit import NonFiniteLossError
 from physgnn.training.progress import RunProgress, StopOnSignal, StopTraining, save_last
 from physgnn.training.runlog import run_log
@@ -89,6 +90,10 @@ def _start(cfg: DictConfig, run_dir: Path) -> dict:
         "experiment": cfg.experiment_name,
         "overrides": _overrides(),
         "seed": cfg.seed,
+        "dataset": dataset_identity(
+            str(OmegaConf.select(cfg, "datamodule.data_dir")),
+            str(OmegaConf.select(cfg, "datamodule.preset")),
+        ),
         "run_dir": str(run_dir),
         "resumed_from": None,
         "started": datetime.now().isoformat(timespec="seconds"),
