@@ -42,7 +42,7 @@ from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.metrics import check_tolerance
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.scene import Scene, SceneError
-from physgnn.physics.trajectory import Trajectory
+from physgnn.physics.trajectory import Trajectory, scene_at
 from physgnn.rollout import rollout
 from physgnn.training.runs import load_run
 
@@ -108,13 +108,9 @@ def scene_from_arrays(pos, radius, *, frames: int = 100, dt: float = 0.1, name: 
 
 
 def scene_of(traj: Trajectory) -> Scene:
-    """The scene a trajectory starts from (its frame 0, its length)."""
-    static = ("radius", "mass", "material", "planes", "plane_kind", "materials")
-    return Scene(
-        name=traj.name, n_frames=traj.n_frames, dt=traj.dt, effects=traj.effects,
-        **{k: getattr(traj, k)[0] for k in ("pos", "quat", "vel", "angvel")},
-        **{k: getattr(traj, k) for k in static},
-    )  # fmt: skip
+    """The scene a trajectory starts from (its frame 0, its length, its planes' materials):
+    :func:`~physgnn.physics.trajectory.scene_at` of frame 0."""
+    return scene_at(traj, 0)
 
 
 def simulate(scene: Scene, frames: int | None = None) -> Trajectory:
