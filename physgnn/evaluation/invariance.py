@@ -20,8 +20,8 @@ passed. Checks (``kind`` of a row):
 - ``collision``: a frictionless head-on collision in the air of spheres of radius 0.5 and
   1.0 m (mass ratio 1 : 8), closing at 5 m/s: the momentum along the impact line (x) must be
   kept. ``value``: ``|P_x(end) − P_x(0)| / Σ m |v_x(0)|`` (limit 1 %).
-- ``bounce``: rows of :func:`physgnn.evaluation.bounce.bounce_rows` for restitutions 0.3–0.9
-  and masses 1 kg, the training density's and 10 t: ``value`` the apex over ``e²·H`` (limit:
+- ``bounce``: rows of :func:`physgnn.evaluation.bounce.bounce_rows` for restitutions 0.1–0.9
+  at one friction and masses 1 kg, the training density's and 10 t: ``value`` the apex over ``e²·H`` (limit:
   within 10 % of 1).
 
 A diverged rollout fails its check (``value`` NaN).
@@ -45,12 +45,9 @@ MOMENTUM_LIMIT = 0.01
 ROW_LIMIT = 0.1  # radii
 BOUNCE_LIMIT = 0.10
 BOUNCE_MASSES = (1.0, None, 10_000.0)  # kg; None: density 1 000 (the training density)
-BOUNCE_MATERIALS = (
-    (0.3, 0.9, 0.02, 0.02),
-    (0.5, 0.7, 0.01, 0.01),
-    (0.7, 0.5, 0.005, 0.005),
-    (0.9, 0.5, 0.005, 0.005),
-)
+# restitution 0.1-0.9 at one friction: what the restitution alone does (the training data
+# draws them independently)
+BOUNCE_MATERIALS = tuple((e, 0.5, 0.01, 0.01) for e in (0.1, 0.3, 0.5, 0.7, 0.9))
 
 
 def flying_block(frames: int = 30, dt: float = 0.1) -> Trajectory:
