@@ -169,7 +169,7 @@ def section(result: dict) -> list[str]:
                          "–" if r["ratio"] is None else f"{r['ratio']:.2f}×", note,
                          f"{size['loadavg_start']:.1f} → {size['loadavg_end']:.1f}"])  # fmt: skip
     header = ["spheres", "simulator", "MSE20", "Chamfer", "depth sphere", "FPS (median)",
-              "learned FPS / its (median of rounds)", "", "1-min load average"]  # fmt: skip
+              "learned FPS / this FPS (median of rounds)", "", "1-min load average"]  # fmt: skip
     return [
         "## Crossover: the trained model against pybullet on the same work",
         "Piles in motion after the spheres have landed; every simulator from the same start (the "
