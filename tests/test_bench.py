@@ -13,8 +13,8 @@ import torch
 from hydra import compose, initialize_config_dir
 from torch.utils.flop_counter import FlopCounterMode
 
+from physgnn.benchmark import crossover, interleaved
 from physgnn.benchmark import gpu as gpu_module
-from physgnn.benchmark import interleaved
 from physgnn.benchmark import scenes as bench_scenes
 from physgnn.benchmark.gpu import gpu_section
 from physgnn.benchmark.learned import frame_states, make_simulator, time_learned
@@ -49,7 +49,8 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
     data = json.loads((out / "bench.json").read_text())
     assert data == json.loads(json.dumps(result))
     assert set(data) == {
-        "machine", "learned", "pybullet", "interleaved", "training", "gpu_readiness", "gpu"
+        "machine", "learned", "pybullet", "interleaved", "crossover", "training",
+        "gpu_readiness", "gpu"
     }  # fmt: skip
     parts = {"train_step", "rollout_frame"}
     kinds = ("", "_fixed_capacity", "_compiled")
@@ -250,8 +251,8 @@ def _learned(n, fps, graph, network, share):
     }
 
 
-def _turns(config, n, ratio, load):
-    return {"config": config, "n_spheres": n, "substeps": 10, "median_ratio": ratio,
+def _size(n, substeps, ratio, load):
+    return {"n_spheres": n, "matched_substeps": substeps, "matched_ratio": ratio,
             "loadavg_start": load}  # fmt: skip
 
 
@@ -265,27 +266,27 @@ def test_targets_table_met_and_not_met():
         ],
         "training": {"share_of_matmul": 0.65, "gflops": 100.0, "nodes_per_s": 30_000.0},
     }
-    result = {
-        "interleaved": [
-            _turns("baseline", 154, 3.0, 0.5),
-            _turns("baseline", 1000, 1.25, 2.5),
-            _turns("baseline", 10000, 0.5, 2.5),  # not a size of the target
-        ]
-    }
+    result = {"crossover": {"sizes": [_size(154, 5, 3.0, 0.5), _size(1000, 5, 4.0, 2.5),
+                                      _size(10000, 2, 0.5, 2.5)]}}  # fmt: skip
     fps154, fps1000, share, graph, linear, pybullet, train_share, nodes = targets(result, extra)
     assert fps154[1:] == ["450.0 FPS", "met"]
     assert fps1000[1:] == ["50.0 FPS (needs ×2.4)", "not met"]
     assert share[2] == "met"  # 40 % at 154 spheres is not judged: from 300 up
     assert graph[2] == "not met"  # 30 % at 1000 spheres
     assert linear[1:] == ["1.25", "met"]  # (250 ms / 10 000) / (20 ms / 1000)
-    assert pybullet[0].startswith("learned FPS over pybullet's (10 substeps, same frames; median")
-    assert pybullet[1] == "154: 3.00× (load 0.5), 1000: 1.25× (load 2.5)"
-    assert pybullet[2] == "not met"  # 1.25 < 3 at 1 000 spheres
-    # the compiled baseline counts too
-    compiled = [_turns("compiled", 154, 3.0, 0.5), _turns("compiled", 1000, 3.25, 0.5)]
-    pybullet = targets({"interleaved": result["interleaved"] + compiled}, extra)[5]
-    assert pybullet[1].endswith("; compiled: 154: 3.00× (load 0.5), 1000: 3.25× (load 0.5)")
-    assert pybullet[2] == "met"
+    assert pybullet[0].startswith("learned FPS over the fastest pybullet setting at least as")
+    assert pybullet[1] == (
+        "154: 3.00× against 5 substeps (load 0.5); 1000: 4.00× against 5 substeps (load 2.5)"
+    )
+    assert pybullet[2] == "not met"  # 4 < 5 at 1 000 spheres
+    result["crossover"]["sizes"][1] = _size(1000, 10, 5.5, 0.5)
+    assert targets(result, extra)[5][2] == "met"
+    result["crossover"]["sizes"][1] = _size(1000, None, None, 0.5)  # none as accurate
+    assert targets(result, extra)[5][1:] == [
+        "154: 3.00× against 5 substeps (load 0.5); 1000: no setting tried is as accurate",
+        "not met",
+    ]
+    assert targets({"crossover": None}, extra)[5][1:] == ["–", "not met"]
     assert train_share[1:] == ["65% (100.0 GFLOP/s)", "met"]
     assert nodes[1:] == ["30.0 k nodes/s", "not met (needs ×1.3)"]
     # the graph share is judged from 154 spheres up: 50 % at 10 spheres does not count
@@ -338,6 +339,47 @@ def test_interleaved_configs_must_be_learned_configs(tmp_path):
     cfg = _cfg("threads=1", f"out_dir={tmp_path}", "interleaved.configs=[nope]")
     with pytest.raises(BenchError, match="interleaved.configs names nope, not among"):
         bench(cfg)
+
+
+# -------------------------------------------------------------------------------- crossover
+def _sim(name, mse20, fps, ratio=None, diverged=None):
+    substeps = None if name == "learned" else int(name.split("-")[1])
+    return {"simulator": name, "substeps": substeps, "mse20": mse20, "fps": fps, "ratio": ratio,
+            "diverged_at": diverged}  # fmt: skip
+
+
+def test_crossover_judges_the_front_and_the_matched_setting():
+    engine = [_sim("pybullet-1", 1.0, 400.0, 0.25), _sim("pybullet-5", 0.1, 100.0, 1.0),
+              _sim("pybullet-20", 0.01, 25.0, 4.0)]  # fmt: skip
+    # 100 FPS at 0.5: pybullet-5 is as fast and more accurate -> off; matched: pybullet-5
+    assert crossover.judged([_sim("learned", 0.5, 100.0), *engine]) == {
+        "on_front": False, "matched_substeps": 5, "matched_ratio": 1.0}  # fmt: skip
+    # 200 FPS at 0.05: nothing as fast is as accurate -> on; the fastest as accurate: 20 substeps
+    assert crossover.judged([_sim("learned", 0.05, 200.0), *engine]) == {
+        "on_front": True, "matched_substeps": 20, "matched_ratio": 4.0}  # fmt: skip
+    # more accurate than every setting tried: on the front, no matched setting
+    assert crossover.judged([_sim("learned", 0.001, 1.0), *engine])["matched_substeps"] is None
+    # a diverged rollout is never on the front
+    assert not crossover.judged([_sim("learned", 0.05, 200.0, diverged=9), *engine])["on_front"]
+    on = lambda n, front: {"n_spheres": n, "on_front": front}  # noqa: E731
+    assert crossover.front_from([on(154, False), on(1000, True), on(3000, True)]) == 1000
+    assert crossover.front_from([on(154, True), on(1000, False), on(3000, True)]) == 3000
+    assert crossover.front_from([on(154, True), on(1000, True), on(3000, False)]) is None
+
+
+def test_quick_bench_runs_the_crossover_on_landed_piles(quick):
+    out, result = quick
+    cross = result["crossover"]
+    assert cross["run"] == "random weights"
+    assert [s["n_spheres"] for s in cross["sizes"]] == [10, 30]
+    for size in cross["sizes"]:
+        assert [r["simulator"] for r in size["rows"]] == ["learned", "pybullet-1", "pybullet-2"]
+        assert all(r["fps"] > 0 and r["mse20"] is not None for r in size["rows"])
+        assert size == {**size, **crossover.judged(size["rows"])}
+    assert cross["front_from"] == crossover.front_from(cross["sizes"])
+    md = (out / "bench.md").read_text()
+    assert "## Crossover: the trained model against pybullet on the same work" in md
+    assert crossover.headline(cross) in md
 
 
 # ------------------------------------------------------------------- pybullet's bench curve

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import os
 
+from physgnn.benchmark import crossover
 from physgnn.benchmark.interleaved import interleaved_section
 from physgnn.benchmark.targets import targets
 from physgnn.benchmark.training_tables import (
@@ -246,6 +247,7 @@ def write_markdown(result: dict, extra: dict) -> str:
         rollout_table(extra),
         "### Batching scenes (baseline, copies of the same scene in one graph)",
         batched_table(extra),
+        *crossover.section(result),
         *interleaved_section(result),
         "## pybullet frame rate",
         pybullet_table(result),

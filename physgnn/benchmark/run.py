@@ -5,7 +5,9 @@ and scene size (ms per frame split into graph / network / integration, FPS, FLOP
 of the matmul rate), pybullet on the same scenes (FPS at 10 substeps; at one size, FPS and
 accuracy against a fine reference for several substep counts), the training throughput of the
 baseline and the cost of idle spheres, contacts and walls, and the speed ratio of learned steps
-to pybullet on the same frames in interleaved rounds (:mod:`.interleaved`). Writes
+to pybullet on the same frames in interleaved rounds (:mod:`.interleaved`), and the crossover:
+a trained model against pybullet at several substep counts on landed piles of growing size,
+the speed target judged against the setting of matched accuracy (:mod:`.crossover`). Writes
 ``bench.json`` (the headline numbers), ``bench_extra.json`` (everything else), pybullet's
 accuracy-versus-time curve on the bench pile (``pybullet_accuracy.png``) and ``bench.md``.
 
@@ -25,6 +27,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.benchmark import activity, machine, profile, scenes
+from physgnn.benchmark.crossover import crossover
 from physgnn.benchmark.gpu import gpu_section
 from physgnn.benchmark.gpu_readiness import gpu_readiness
 from physgnn.benchmark.interleaved import interleaved_rows
@@ -68,6 +71,7 @@ def bench(cfg: DictConfig) -> dict:
         "learned": [{k: r[k] for k in LEARNED_KEYS} for r in m["learned"]],
         "pybullet": pybullet_rows(cfg, m["runs"], m["pybullet_accuracy"]),
         "interleaved": m["interleaved"],
+        "crossover": m["crossover"],
         "training": {
             k: m["training"][k] for k in ("pairs_per_s", "nodes_per_s", "share_of_matmul")
         },
@@ -79,7 +83,7 @@ def bench(cfg: DictConfig) -> dict:
     }
     extra = {
         "machine": info,
-        **{k: v for k, v in m.items() if k not in ("runs", "interleaved")},
+        **{k: v for k, v in m.items() if k not in ("runs", "interleaved", "crossover")},
         "settings": OmegaConf.to_container(cfg, resolve=True),
         "wall_s": time.perf_counter() - start,
         "phase_s": phases,
@@ -116,6 +120,7 @@ def measure(cfg: DictConfig, rng: np.random.Generator, matmul: float, phases: di
     moving = runs[cfg.gpu_readiness.rollout_size]["traj"]
     m["gpu_readiness"] = timed("gpu readiness", gpu_readiness, cfg, train_trajs, stats, moving)
     m["gpu"] = timed("gpu", gpu_section, cfg, train_trajs, stats, runs)
+    m["crossover"] = timed("crossover", crossover, cfg, rng, stats)
     return m
 
 

@@ -22,6 +22,7 @@ from physgnn.report.table import SPLITS  # noqa: E402
 
 PARETO_METRICS = ("mse20", "chamfer", "energy_gain", "depth_sphere", "depth_ground")
 METRIC_NAMES = {
+    "mse": "position MSE over all frames (m²)",
     "mse20": "position MSE over the first 20 predicted frames (m²)",
     "chamfer": "Chamfer distance (m², squared, per frame)",
     "energy_gain": "normalised cumulative energy gain",

@@ -108,7 +108,7 @@ def split_table(rows: list[dict], split: str) -> str:
 def section(rows: list[dict]) -> str:
     """report.md's same-work section: one table per split, or why there is none."""
     if not engine_groups(rows):
-        return "No pybullet rows (the eval's `pybullet` config is null)."
+        return "No pybullet rows (no learned run was evaluated, or the eval's `pybullet` is null)."
     parts = []
     for split in SPLITS:
         if select(rows, split):
