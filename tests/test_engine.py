@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from truthkit import DT, flight_apexes, spheres
+from truthkit import DT, G, flight_apexes, spheres
 
 from physgnn.groundtruth.engine import as_stored, simulate
 from physgnn.groundtruth.settings import EngineSettings
@@ -13,7 +13,6 @@ from physgnn.physics import quaternion as Q
 from physgnn.physics.kinematics import finite_difference_velocities
 from physgnn.physics.scene import Effects, SceneError
 
-G = 9.81
 SUBSTEPS = EngineSettings().substeps
 H = DT / SUBSTEPS  # physics step
 

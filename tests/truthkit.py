@@ -13,9 +13,7 @@ from physgnn import SCENES_DIR
 from physgnn.physics.scene import Effects, Scene, ground_plane
 
 G = 9.81
-
-
-DT = 0.1
+DT = 0.1  # s per frame
 
 
 def spheres(
