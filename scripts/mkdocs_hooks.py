@@ -39,7 +39,7 @@ def site_link(match: re.Match) -> str:
         return match.group(0)
     if target.startswith("docs/"):
         return f"[{text}]({target.removeprefix('docs/')})"
-    return text if text.strip("`") == target else f"{text} (`{target}`)"
+    return f"`{target}`" if text.strip("`") == target else f"{text} (`{target}`)"
 
 
 def readme_page(page: str, readme: str) -> str:
