@@ -13,7 +13,7 @@ import pytest
 import torch
 from hydra.core.hydra_config import HydraConfig
 
-CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+from physgnn import CONF_DIR
 
 
 def compose_generate(overrides: list[str]):

@@ -13,6 +13,7 @@ import h5py
 import pytest
 from hydra import compose, initialize_config_dir
 
+from physgnn import CONF_DIR
 from physgnn import simulate as simulate_command
 from physgnn.data.dataset import DatasetError, read_split
 from physgnn.errors import ConfigError
@@ -79,7 +80,7 @@ def test_an_added_key_nothing_reads_is_refused(tmp_path, monkeypatch, capsys, co
     ],
 )  # fmt: skip
 def test_bad_simulate_values_are_one_line(tmp_path, capsys, arg, message):
-    scene = ROOT / "conf" / "scene" / "head_on.yaml"
+    scene = Path(CONF_DIR) / "scene" / "head_on.yaml"
     with pytest.raises(SystemExit) as exit_info:
         simulate_command.main([f"scene_file={scene}", "video=false", f"out={tmp_path / 'o'}", arg])
     err = capsys.readouterr().err
@@ -98,7 +99,7 @@ def test_bad_simulate_values_are_one_line(tmp_path, capsys, arg, message):
     ],
 )  # fmt: skip
 def test_bad_eval_values_are_refused(tmp_path, override, message):
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose("eval", overrides=[f"paths.outputs={tmp_path}", override])
     with pytest.raises(ConfigError, match=f"^{re.escape(message)}"):
         evaluate(cfg)

@@ -215,3 +215,33 @@ def test_modules_and_functions_are_of_a_readable_size():
                 if size > MAX_FUNCTION_LINES:
                     long.append(f"{module}.{node.name}: {size} lines")
     assert not long, "\n".join(long)
+
+
+def reads_from_the_working_dir(node: ast.AST) -> bool:
+    """``OmegaConf.load("conf/...")``, ``Path("conf")``, ``open("conf/...")``."""
+    if not isinstance(node, ast.Call) or not node.args:
+        return False
+    func = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+    first = node.args[0]
+    return (
+        func in {"load", "Path", "open"}
+        and isinstance(first, ast.Constant)
+        and str(first.value).split("/")[0] == "conf"
+    )
+
+
+def test_no_test_module_imports_another_and_configs_come_from_conf_dir():
+    """Helpers shared by test modules live in modules that are not test modules (conftest.py,
+    simdata.py, ...), and configs are read from ``physgnn.CONF_DIR``, whatever the working
+    directory."""
+    wrong = []
+    for path in sorted(PACKAGE.parent.joinpath("tests").glob("*.py")):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
+            if isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [node.module or ""]
+            wrong += [f"{path.name} imports {n}" for n in names if n.startswith("test_")]
+            if reads_from_the_working_dir(node):
+                wrong.append(f"{path.name}:{node.lineno} reads conf/ from the working directory")
+    assert not wrong, "\n".join(wrong)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -13,6 +12,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from torch.utils.flop_counter import FlopCounterMode
 
+from physgnn import CONF_DIR
 from physgnn.benchmark import crossover, interleaved
 from physgnn.benchmark import gpu as gpu_module
 from physgnn.benchmark import scenes as bench_scenes
@@ -28,7 +28,7 @@ from physgnn.models.profiling import StepTimer
 from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.report import pareto
 
-CONF = str((Path(__file__).parents[1] / "conf").resolve())
+CONF = CONF_DIR
 
 
 def _cfg(*overrides):

@@ -3,25 +3,25 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import pytest
 import torch
+from handmade import make_state
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from simdata import REPORT_MODEL, STATS, batch, learned, trajectory
-from test_graph import make_state
 from torch.testing import assert_close
 from torch_geometric.data import Batch
 
+from physgnn import CONF_DIR
 from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.scene import STATIC, WALL, make_plane
 from physgnn.training.checks import check_arguments
 from physgnn.training.runs import load_run
 
 R = 2.0  # boundary_radius of these tests (the config default)
-CONF = str(Path(__file__).resolve().parents[1] / "conf")
+CONF = CONF_DIR
 
 
 def make(**kwargs) -> LearnedSimulator:

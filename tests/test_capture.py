@@ -7,8 +7,8 @@ import warnings
 
 import pytest
 import torch
+from handmade import scene
 from simdata import learned
-from test_contacts import scene
 from torch.testing import assert_close
 
 from physgnn.models.capture import ShapeBoundCall, compile_in_place

@@ -8,12 +8,15 @@ The inductor backend is the slow test of tests/test_lit.py."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import torch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from simdata import trajectory
 from torch.testing import assert_close
 
+from physgnn import CONF_DIR
 from physgnn.benchmark.gpu_readiness import training_step_counts
 from physgnn.benchmark.syncs import profiling_ops
 from physgnn.models.capture import ShapeBoundCall, compile_simulator
@@ -25,7 +28,7 @@ OPS_PER_TRAINING_STEP = 1500  # the budget of aten ops dispatched outside the co
 
 def default_pair(stats):
     """The default model twice with the same random weights."""
-    model = OmegaConf.load("conf/model/baseline.yaml")
+    model = OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml")
     eager, other = (instantiate(model, stats=stats) for _ in range(2))
     other.load_state_dict(eager.state_dict())
     return eager, other
@@ -52,7 +55,7 @@ def test_a_compiled_simulator_rolls_out_as_the_eager_one(tiny):  # noqa: F811
 
 def test_compiled_regions_give_the_eager_losses_and_gradients(tiny):  # noqa: F811
     trajectories, stats = tiny
-    recipe = OmegaConf.load("conf/bench.yaml").gpu_readiness.lit
+    recipe = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness.lit
     eager, compiled = default_pair(stats)
     lits = [instantiate(recipe, simulator=s) for s in (eager, compiled)]
     lits[1].compile_regions(backend="aot_eager")
@@ -77,8 +80,8 @@ def test_a_compiled_training_step_dispatches_at_most_the_budget(tiny):  # noqa: 
     """The default recipe through Lightning (noise, contact noise, push-forward up to 2, the
     loss, backward, clipping, Adam): eager it dispatches far more than the budget."""
     trajectories, stats = tiny
-    cfg = OmegaConf.load("conf/bench.yaml").gpu_readiness
-    model = OmegaConf.merge(OmegaConf.load("conf/model/baseline.yaml"), cfg.model)
+    cfg = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness
+    model = OmegaConf.merge(OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml"), cfg.model)
     c = OmegaConf.create({"steps": 4, "warmup_steps": 2, "batch_size": 16})
     compiled = training_step_counts(model, cfg.lit, trajectories, stats, c, compiled=True)
     eager = training_step_counts(model, cfg.lit, trajectories, stats, c)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from handmade import DT, ballistic, scene
 from simdata import learned
-from test_contacts import DT, ballistic, scene
 from torch.testing import assert_close
 
 from physgnn.models.constrained import ConstrainedSimulator

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from handmade import DT, make, scene
 from omegaconf import OmegaConf
-from test_contacts import DT, make, scene
 from torch.testing import assert_close
 from torch_geometric.data import Batch
 

@@ -6,58 +6,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from handmade import DT, ballistic, make, scene
 from simdata import REPORT_MODEL, learned
 from torch.testing import assert_close
-from torch_geometric.data import Batch
 
-from physgnn.data.state import TrajectoryFrames
 from physgnn.graph.builder import ballistic_velocity
 from physgnn.models.learned import LearnedSimulator
 from physgnn.nn.mlp import MLP
 from physgnn.physics.geometry import edge_plane_depth, plane_depth
-from physgnn.physics.scene import Effects, ground_plane, make_plane
-from physgnn.physics.trajectory import Trajectory
+from physgnn.physics.scene import ground_plane, make_plane
 from physgnn.training.contacts import contact_penalty, perturb_contacts
-
-DT = 0.1
-MATERIALS = np.array([[0.7, 0.5, 0.005, 0.005], [0.3, 0.9, 0.02, 0.02]], np.float32)
-
-
-def scene(pos, vel, radius, mass=None, material=None, planes=None, kinds=None, frames=4):
-    """The state at the last of ``frames`` frames of spheres moving at constant ``vel``, that
-    frame at ``pos`` (finite differences give exactly ``vel``)."""
-    pos, vel = np.asarray(pos, np.float64), np.asarray(vel, np.float64)
-    n = len(pos)
-    t = (np.arange(frames) - (frames - 1))[:, None, None] * DT
-    traj = Trajectory(
-        name="hand",
-        pos=(pos + vel * t).astype(np.float32),
-        quat=np.tile(np.array([1.0, 0, 0, 0], np.float32), (frames, n, 1)),
-        vel=np.broadcast_to(vel, (frames, n, 3)).astype(np.float32),
-        angvel=np.zeros((frames, n, 3), np.float32),
-        radius=np.asarray(radius, np.float32),
-        mass=np.asarray(mass if mass is not None else [1.0] * n, np.float32),
-        material=np.asarray(material if material is not None else [0] * n, np.int64),
-        planes=np.stack(planes) if planes is not None else ground_plane()[None],
-        plane_kind=np.asarray(kinds if kinds is not None else [0], np.int64),
-        materials=MATERIALS,
-        dt=DT,
-        effects=Effects(),
-    )
-    return Batch.from_data_list([TrajectoryFrames(traj).state(frames - 1, 2)])
-
-
-def ballistic(state):
-    """``state`` with velocity histories of free flight ending at its current ``v_t``."""
-    back = torch.arange(state.vel.shape[1], dtype=torch.float32)[None, :, None]
-    state.vel = state.vel[:, :1] + back * torch.tensor([0.0, 0.0, 9.81 * DT])
-    return state
-
-
-def make(**kwargs) -> LearnedSimulator:
-    torch.manual_seed(0)
-    args = dict(H=2, M=2, hidden=16, contact_features=True, material_features=True)
-    return learned(**(args | kwargs))
 
 
 @pytest.mark.parametrize("relative_pairs", [False, True])

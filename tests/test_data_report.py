@@ -3,18 +3,18 @@
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
+from physgnn import CONF_DIR
 from physgnn.data.dataset import DatasetError, write_split
 from physgnn.evaluation.data_report import KEYS, DataReportError, data_report
 from physgnn.physics.scene import Effects, ground_plane
 from physgnn.physics.trajectory import Trajectory
 
-CONF = str(Path(__file__).resolve().parents[1] / "conf")
+CONF = CONF_DIR
 G = 9.81
 
 

@@ -7,6 +7,7 @@ import json
 import h5py
 import numpy as np
 import pytest
+from handmade import linear_traj
 
 from physgnn import __version__
 from physgnn.data.dataset import (
@@ -19,39 +20,6 @@ from physgnn.data.dataset import (
     write_split,
     write_stats,
 )
-from physgnn.physics.scene import Effects, Material, ground_plane
-from physgnn.physics.trajectory import Trajectory
-
-
-def linear_traj(t=5, n=2, v=(1.0, -2.0, 0.5), dt=0.1, name="lin") -> Trajectory:
-    """Spheres moving at constant velocity ``v``, not rotating."""
-    v = np.asarray(v, dtype=np.float64)
-    p0 = np.arange(n * 3, dtype=np.float64).reshape(n, 3) + 5.0
-    pos = p0 + v * (np.arange(t) * dt)[:, None, None]
-    quat = np.tile([1.0, 0, 0, 0], (t, n, 1))
-    return Trajectory(
-        name=name,
-        pos=pos.astype(np.float32),
-        quat=quat.astype(np.float32),
-        vel=np.broadcast_to(v, (t, n, 3)).astype(np.float32),
-        angvel=np.zeros((t, n, 3), np.float32),
-        radius=np.full(n, 0.5, np.float32),
-        mass=np.array([1.0, 3.0][:n] + [1.0] * (n - 2), np.float32),
-        material=np.zeros(n, np.int64),
-        planes=ground_plane()[None],
-        plane_kind=np.array([0]),
-        materials=Material().as_array()[None],
-        dt=dt,
-        effects=Effects(rotation=False),
-        attrs={
-            "seed": 7,
-            "scene": "lin_scene",
-            "scene_config": "name: lin_scene\n",
-            "substeps": 20,
-            "engine": "pybullet test",
-            "gravity": [0.0, 0.0, -9.81],
-        },
-    )
 
 
 def test_round_trip_schema_and_attributes(tmp_path):

@@ -11,12 +11,13 @@ from pathlib import Path
 import pytest
 from omegaconf import OmegaConf
 
+from physgnn import CONF_DIR
 from physgnn.training.callbacks import RolloutCallback
 from physgnn.training.datamodule import StatePairDataModule
 from physgnn.training.lit import LitSimulator
 from physgnn.training.schedule import RunLengthDecay
 
-TRAIN = Path(__file__).resolve().parents[1] / "conf" / "train.yaml"
+TRAIN = Path(CONF_DIR) / "train.yaml"
 
 
 def literal_values(node) -> dict:

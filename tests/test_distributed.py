@@ -22,7 +22,7 @@ import torch
 from conftest import compose_generate
 from lightning.pytorch.strategies import DDPStrategy, SingleDeviceStrategy
 from omegaconf import OmegaConf
-from test_train import SHORT, config, outputs_of
+from trainkit import SHORT, config, outputs_of
 
 from physgnn.data.pairs import EpochSampler
 from physgnn.groundtruth.generate import generate

@@ -4,6 +4,7 @@ is installed (the ``docs`` extra), the site builds with ``mkdocs build --strict`
 
 from __future__ import annotations
 
+import importlib.util
 import re
 import shutil
 import subprocess
@@ -14,6 +15,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+HOOKS = importlib.util.spec_from_file_location("mkdocs_hooks", ROOT / "scripts/mkdocs_hooks.py")
+mkdocs_hooks = importlib.util.module_from_spec(HOOKS)  # mkdocs loads the hooks by path too
+HOOKS.loader.exec_module(mkdocs_hooks)
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 # [text](target) and ![alt](target), not inside code; <a href> is not used in these pages
 LINK = re.compile(r"!?\[(?:[^\[\]]|\[[^\[\]]*\])*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
@@ -97,6 +101,40 @@ def test_readme_is_short_and_names_no_machine_path():
     for page in PAGES:
         body = page.read_text(encoding="utf-8")
         assert "/work/" not in body and "/home/" not in body, page
+
+
+def test_the_site_shows_sphinx_roles_as_code():
+    html = (
+        "<p>see :class:<code>~physgnn.physics.trajectory.Trajectory</code> and "
+        ":func:<code>roll_out</code>, :mod:<code>physgnn.data.exports</code></p>"
+    )
+    assert mkdocs_hooks.render_roles(html) == (
+        "<p>see <code>Trajectory</code> and <code>roll_out</code>, "
+        "<code>physgnn.data.exports</code></p>"
+    )
+
+
+def test_the_site_pages_from_the_readme_link_within_the_site():
+    readme = (
+        "# physgnn\n\n## Install\n\nRead [Model](docs/MODEL.md), [below](#on-a-gpu), "
+        "[the weights](physgnn/pretrained/README.md), [`LICENSE`](LICENSE), "
+        "[web](https://pyg.org).\n\n## On a GPU\n\nMore.\n\n## Results\n\nNot here.\n"
+    )
+    pages = {"install.md": ["Install", "On a GPU"]}
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(mkdocs_hooks, "README_PAGES", pages)
+        page = mkdocs_hooks.readme_page("install.md", readme)
+    assert page == (
+        "# Install\n\nRead [Model](MODEL.md), [below](#on-a-gpu), the weights "
+        "(`physgnn/pretrained/README.md`), `LICENSE`, [web](https://pyg.org).\n\n"
+        "## On a GPU\n\nMore.\n\n"
+    )
+
+
+def test_every_readme_section_the_site_shows_exists():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    for page in mkdocs_hooks.README_PAGES:
+        assert mkdocs_hooks.readme_page(page, readme).startswith("# ")
 
 
 @pytest.mark.slow

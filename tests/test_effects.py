@@ -13,6 +13,7 @@ import torch
 from omegaconf import OmegaConf
 from simdata import batch, learned, trajectory
 
+from physgnn import CONF_DIR
 from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.scene import EFFECT_NAMES, GROUND, Effects
 from physgnn.rollout import rollout
@@ -20,7 +21,7 @@ from physgnn.training.lit import LitSimulator
 from physgnn.training.runs import load_run
 
 MODEL = dict(H=1, M=2, hidden=16, epsilon=0.05)
-CONF = Path(__file__).resolve().parents[1] / "conf"
+CONF = Path(CONF_DIR)
 
 
 def make() -> LearnedSimulator:

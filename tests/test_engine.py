@@ -5,50 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from truthkit import DT, G, flight_apexes, spheres
 
 from physgnn.groundtruth.engine import as_stored, simulate
 from physgnn.groundtruth.settings import EngineSettings
 from physgnn.physics import quaternion as Q
 from physgnn.physics.kinematics import finite_difference_velocities
-from physgnn.physics.scene import Effects, Scene, SceneError, ground_plane
+from physgnn.physics.scene import Effects, SceneError
 
-G = 9.81
-DT = 0.1
 SUBSTEPS = EngineSettings().substeps
 H = DT / SUBSTEPS  # physics step
-
-
-def spheres(
-    pos,
-    vel=None,
-    angvel=None,
-    quat=None,
-    radius=0.5,
-    material=(0.5, 0.5, 0.0, 0.0),
-    n_frames=20,
-    effects: Effects | None = None,
-) -> Scene:
-    """A scene of spheres (one material) over the ground; pos ``[N, 3]``."""
-    pos = np.asarray(pos, dtype=np.float32).reshape(-1, 3)
-    n = len(pos)
-    zeros = np.zeros((n, 3), np.float32)
-    q = np.tile([1.0, 0, 0, 0], (n, 1)) if quat is None else np.asarray(quat).reshape(n, 4)
-    return Scene(
-        name="test",
-        radius=np.full(n, radius, np.float32),
-        mass=np.ones(n, np.float32),
-        material=np.zeros(n, np.int64),
-        pos=pos,
-        quat=q.astype(np.float32),
-        vel=zeros if vel is None else np.asarray(vel, np.float32).reshape(n, 3),
-        angvel=zeros if angvel is None else np.asarray(angvel, np.float32).reshape(n, 3),
-        planes=ground_plane()[None],
-        plane_kind=np.array([0]),
-        materials=np.array([material], np.float32),
-        dt=DT,
-        n_frames=n_frames,
-        effects=effects or Effects(),
-    )
 
 
 def test_the_start_simulated_is_the_start_stored():
@@ -80,19 +46,11 @@ def test_free_fall_matches_analytic_and_discrete_formulas():
     np.testing.assert_allclose(traj.pos[:, 0, :2], 0.0, atol=1e-6)
 
 
-def _apexes(traj, r):
-    """Apex height above the contact height of each flight after a bounce (engine states)."""
-    z, vz = traj.pos[:, 0, 2] - r, traj.vel[:, 0, 2]
-    apex = z + vz**2 / (2 * G)  # ballistic invariant: the apex of the current flight
-    bounces = np.nonzero((vz[:-1] < 0) & (vz[1:] > 0))[0]
-    return [apex[b + 2] for b in bounces]
-
-
 @pytest.mark.parametrize("e", [0.3, 0.8])
 def test_bounce_apex_ratio_is_restitution_squared(e):
     h0 = 10.0
     traj = simulate(spheres([0, 0, h0 + 0.5], material=(e, 0.5, 0.0, 0.0), n_frames=80))
-    apexes = _apexes(traj, 0.5)
+    apexes = flight_apexes(traj, 0.5)
     assert len(apexes) >= 2
     # Tolerance 10 %: contact ERP 0.01 adds a little energy at impact (measured ≤ 4 %).
     assert apexes[0] / h0 == pytest.approx(e**2, rel=0.1)

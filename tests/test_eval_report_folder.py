@@ -7,8 +7,8 @@ import json
 from pathlib import Path
 
 import pytest
+from fakeruns import Exploding, Falling, eval_cfg, evaluate_fake_runs
 from omegaconf import OmegaConf
-from test_eval import Exploding, Falling, eval_cfg, evaluate_fake_runs
 
 import physgnn.evaluation.evaluate as ev
 import physgnn.training.runs

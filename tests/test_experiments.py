@@ -7,16 +7,17 @@ import itertools
 from pathlib import Path
 
 import pytest
-from hydra import compose, initialize_config_dir
 from hydra.types import RunMode
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from simdata import REPORT_MODEL
+from trainkit import compose_train
 
+from physgnn import CONF_DIR
 from physgnn.training.build import build, strategy_of
 from physgnn.training.layout import dotted_model, key_of_today
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+CONF = Path(CONF_DIR)
 # Experiments of one run (not sweeps), with their optimiser-step budget.
 SINGLE = {"long": 22_500}
 EXPERIMENTS = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml") if p.stem not in SINGLE)
@@ -28,11 +29,6 @@ RUNS = {
     "ablation_components": 24,
     "ablation_contacts": 42,
 }
-
-
-def compose_train(overrides: list[str]):
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return compose("train", overrides=overrides, return_hydra_config=True)
 
 
 def parse(value: str):

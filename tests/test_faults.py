@@ -22,9 +22,11 @@ import torch
 from conftest import compose_generate
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
-from test_train import CONF, SHORT, config, outputs_of, run_main
+from processes import start, wait_for
+from trainkit import SHORT, config, outputs_of, run_main
 
 import physgnn.groundtruth.generate as gen
+from physgnn import CONF_DIR
 from physgnn import eval as eval_command
 from physgnn import generate as generate_command
 from physgnn import simulate as simulate_command
@@ -259,7 +261,7 @@ def test_debug_fast_leaves_nothing_eval_takes_for_a_model(tiny_dataset, tmp_path
 
 
 def compose_eval(outputs, *overrides):
-    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         return compose(
             "eval", overrides=[f"paths.outputs={outputs}", "invariance.rest_frames=4", *overrides]
         )
@@ -270,7 +272,7 @@ def compose_eval(outputs, *overrides):
 
 def test_data_report_follows_physgnn_outputs_with_the_right_hint(tmp_path, monkeypatch):
     monkeypatch.setenv("PHYSGNN_OUTPUTS", str(tmp_path))
-    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose("data_report", overrides=["preset=tiny"])
     assert cfg.dataset == f"{tmp_path}/data/tiny"
     hint = "run `make data PRESET=tiny` or `python -m physgnn.generate data=tiny`"
@@ -539,30 +541,12 @@ def test_a_full_disk_keeps_the_last_good_checkpoint_and_says_failed(tiny_dataset
 # --- killed in a subprocess ----------------------------------------------------------------------
 
 
-def start(args: list[str]) -> subprocess.Popen:
-    """A ``python -m physgnn.X`` child in its own process group, taking Ctrl-C like a
-    terminal's command (SIGINT not ignored, as it is for a background job)."""
-    return subprocess.Popen(
-        [sys.executable, "-m", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE, text=True, start_new_session=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )  # fmt: skip
-
-
 def interrupt(proc: subprocess.Popen, signum: int) -> None:
     """Ctrl-C reaches the whole process group (workers too); ``kill`` one process."""
     if signum == signal.SIGINT:
         os.killpg(proc.pid, signum)
     else:
         proc.send_signal(signum)
-
-
-def wait_for(path: Path, proc: subprocess.Popen, timeout: float = 120) -> None:
-    end = time.monotonic() + timeout
-    while not path.exists():
-        assert proc.poll() is None, proc.communicate()[1][-3000:]
-        assert time.monotonic() < end, f"{path} never appeared"
-        time.sleep(0.05)
 
 
 def children(pid: int) -> list[int]:

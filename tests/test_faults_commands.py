@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 from lightning.fabric.strategies.launchers import subprocess_script
-from test_train import SHORT, outputs_of, run_main
+from trainkit import SHORT, outputs_of, run_main
 
 import physgnn
 import physgnn.__main__ as console_module

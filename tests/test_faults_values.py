@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
-from test_train import SHORT, outputs_of, run_main
+from trainkit import SHORT, outputs_of, run_main
 
+from physgnn import CONF_DIR
 from physgnn.errors import ConfigError
 from physgnn.evaluation import simulate as simulate_module
 from physgnn.evaluation.evaluate import evaluate
@@ -61,7 +62,7 @@ def test_effects_read_from_a_file_take_numpy_booleans():
 
 @pytest.mark.parametrize("key", ["save_rollouts", "overwrite", "videos", "stability"])
 def test_an_eval_switch_that_is_not_true_or_false_is_refused(tmp_path, key):
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose("eval", overrides=[f"paths.outputs={tmp_path}", f"{key}=maybe"])
     message = f"{key} must be true or false, got 'maybe'"
     with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):

@@ -24,7 +24,7 @@ from pathlib import Path
 import lightning as L
 import numpy as np
 import torch
-from test_train import config
+from trainkit import config
 
 from physgnn.data.dataset import read_split
 from physgnn.rollout import rollout

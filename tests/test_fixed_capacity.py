@@ -4,6 +4,7 @@ same edges, predictions and losses as the counted graph, and nothing read back."
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 import torch
@@ -11,6 +12,7 @@ from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from torch.testing import assert_close
 
+from physgnn import CONF_DIR
 from physgnn.benchmark.gpu_readiness import training_step_counts
 from physgnn.benchmark.syncs import counting
 from physgnn.data.dataset import read_split
@@ -98,7 +100,7 @@ def tiny(tiny_dataset):
 
 def simulators(stats, **overrides):
     """The default model twice with the same random weights: counted and fixed capacity."""
-    model = OmegaConf.load("conf/model/baseline.yaml")
+    model = OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml")
     out = []
     for fixed in (False, True):
         torch.manual_seed(0)
@@ -110,7 +112,7 @@ def simulators(stats, **overrides):
 def test_predictions_and_losses_equal_the_counted_graphs(tiny):
     trajectories, stats = tiny
     counted, fixed = simulators(stats)
-    recipe = OmegaConf.load("conf/bench.yaml").gpu_readiness.lit
+    recipe = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness.lit
     lit = [instantiate(recipe, simulator=s) for s in (counted, fixed)]
     batch = training_batch(trajectories, counted.H)
     with torch.no_grad():
@@ -134,8 +136,8 @@ def test_contact_noise_pushes_only_the_accepted_contacts():
 
 def test_a_training_step_on_fixed_capacity_graphs_reads_back_at_most_the_finiteness(tiny):
     trajectories, stats = tiny
-    cfg = OmegaConf.load("conf/bench.yaml").gpu_readiness
-    model = OmegaConf.merge(OmegaConf.load("conf/model/baseline.yaml"), cfg.model)
+    cfg = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness
+    model = OmegaConf.merge(OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml"), cfg.model)
     model.graph.fixed_capacity = True
     c = OmegaConf.create({"steps": 6, "warmup_steps": 1, "batch_size": 16})
     counts = training_step_counts(model, cfg.lit, trajectories, stats, c)

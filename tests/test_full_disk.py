@@ -13,6 +13,7 @@ import pytest
 from conftest import mounted_tmpfs
 from omegaconf import OmegaConf
 
+from physgnn import CONF_DIR
 from physgnn import simulate as simulate_command
 from physgnn.cli import command
 
@@ -56,7 +57,7 @@ def full_tmpfs(tmp_path):
 
 def test_simulate_onto_a_real_full_disk_is_one_line_and_leaves_nothing(full_tmpfs, capsys):
     out = full_tmpfs / "sim"
-    scene = ROOT / "conf" / "scene" / "throw.yaml"
+    scene = Path(CONF_DIR) / "scene" / "throw.yaml"
     with pytest.raises(SystemExit) as exit_info:
         simulate_command.main([f"scene_file={scene}", "frames=1000", "video=false", f"out={out}"])
     err = capsys.readouterr().err

@@ -4,6 +4,7 @@ build, and the sync budgets of a training step and a rollout frame."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 import torch
@@ -13,6 +14,7 @@ from torch.testing import assert_close
 from torch_geometric.data import Batch
 
 import physgnn.graph.builder as builder_module
+from physgnn import CONF_DIR
 from physgnn.benchmark.gpu_readiness import rollout_frame_counts, training_step_counts
 from physgnn.benchmark.syncs import counting
 from physgnn.data.dataset import read_split
@@ -156,8 +158,8 @@ def test_the_finite_watch_names_the_first_bad_step_in_time():
 
 @pytest.fixture(scope="module")
 def bench_cfg():
-    cfg = OmegaConf.load("conf/bench.yaml").gpu_readiness
-    model = OmegaConf.merge(OmegaConf.load("conf/model/baseline.yaml"), cfg.model)
+    cfg = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness
+    model = OmegaConf.merge(OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml"), cfg.model)
     model.pop("defaults", None)
     return cfg, model
 

@@ -4,38 +4,14 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 import torch
+from handmade import make_state
 from torch_geometric.data import Batch
 
 from physgnn.data.state import SceneState
 from physgnn.graph.builder import Graph, GraphBuilder, build_graph
-from physgnn.physics.scene import GROUND, STATIC, WALL, ground_plane, make_plane
-
-
-def make_state(pos, vel=None, radius=0.5, planes=(), kinds=(), dt=0.125, effects=None):
-    """One SceneState: ground (row 0) + the given plane rows; vel ``[N, 3]`` (H = 0)."""
-    pos = torch.as_tensor(pos, dtype=torch.float32).reshape(-1, 3)
-    n = pos.shape[0]
-    vel = torch.zeros(n, 3) if vel is None else torch.as_tensor(vel, dtype=torch.float32)
-    radius = torch.as_tensor(radius, dtype=torch.float32).expand(n).clone()
-    rows = np.stack([ground_plane(), *planes]) if len(planes) else ground_plane()[None]
-    effects = [True] * 5 if effects is None else effects
-    return SceneState(
-        pos=pos,
-        quat=torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1),
-        vel=vel.reshape(n, 1, 3),
-        angvel=torch.zeros(n, 1, 3),
-        radius=radius,
-        mass=torch.ones(n),
-        material=torch.zeros(n, dtype=torch.long),
-        planes=torch.as_tensor(rows, dtype=torch.float32),
-        plane_kind=torch.tensor([GROUND, *kinds], dtype=torch.long),
-        plane_batch=torch.zeros(len(rows), dtype=torch.long),
-        dt=torch.tensor([dt]),
-        effects=torch.tensor([effects], dtype=torch.bool),
-    )
+from physgnn.physics.scene import GROUND, STATIC, WALL, make_plane
 
 
 def pairs_of(g: Graph) -> list[tuple[int, int]]:

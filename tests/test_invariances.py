@@ -11,11 +11,10 @@ import itertools
 import numpy as np
 import pytest
 import torch
+from handmade import MATERIALS, make_state, scene
 from simdata import REPORT_MODEL, learned
-from test_contacts import MATERIALS, scene
-from test_graph import make_state
-from test_scenes import scene_cfg
 from torch.testing import assert_close
+from truthkit import scene_cfg
 
 from physgnn.graph.builder import GraphBuilder
 from physgnn.groundtruth.families import dense_contact

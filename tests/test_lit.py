@@ -7,9 +7,9 @@ import functools
 import lightning as L
 import pytest
 import torch
+from handmade import scene
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint
 from simdata import REPORT_MODEL, batch, learned, trajectory
-from test_contacts import scene
 from torch.testing import assert_close
 from torch_geometric.data import Batch
 from torch_geometric.loader import DataLoader

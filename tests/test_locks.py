@@ -12,7 +12,7 @@ import subprocess
 import sys
 
 import pytest
-from test_faults import ROOT, start, wait_for
+from processes import ROOT, start, wait_for
 
 import physgnn.train as train_command
 from physgnn.evaluation.runs import EvalError, find_runs

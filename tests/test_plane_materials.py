@@ -10,8 +10,8 @@ import h5py
 import numpy as np
 import pytest
 import torch
-from test_dataset import linear_traj
-from test_engine import _apexes, spheres
+from handmade import linear_traj
+from truthkit import flight_apexes, spheres
 
 from physgnn.data.dataset import read_split, write_split
 from physgnn.data.pairs import PairDataset
@@ -27,7 +27,7 @@ def test_a_bounce_off_a_plane_has_the_product_of_restitutions(e, e_plane):
     scene.plane_materials = np.array([[e_plane, 1.0, 0.0, 0.0]], np.float32)
     traj = simulate(scene)
     np.testing.assert_array_equal(traj.plane_materials, scene.plane_materials)
-    assert _apexes(traj, 0.5)[0] / h0 == pytest.approx((e * e_plane) ** 2, rel=0.1)
+    assert flight_apexes(traj, 0.5)[0] / h0 == pytest.approx((e * e_plane) ** 2, rel=0.1)
 
 
 def test_plane_materials_must_match_the_planes():
@@ -70,7 +70,7 @@ def test_states_and_batches_carry_plane_materials():
 
 
 def test_scene_files_keep_plane_restitutions(tmp_path):
-    from test_rest_scenes import family
+    from truthkit import family
 
     from physgnn.groundtruth.families import build_scene
     from physgnn.groundtruth.scenefile import load_scene, scene_to_dict, write_scene

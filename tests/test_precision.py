@@ -7,7 +7,7 @@ import math
 
 import pytest
 import torch
-from test_train import SHORT, config
+from trainkit import SHORT, config
 
 from physgnn.errors import ConfigError
 from physgnn.training.train import train

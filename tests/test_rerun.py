@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from simdata import trajectory
 
-from physgnn import metrics
+from physgnn import CONF_DIR, metrics
 from physgnn.evaluation.rerun_log import RerunMissing, log_rerun
 from physgnn.simulate import main
 
-SCENE = Path(__file__).resolve().parents[1] / "conf" / "scene" / "head_on.yaml"
+SCENE = Path(CONF_DIR) / "scene" / "head_on.yaml"
 
 
 def read_back(path) -> dict:

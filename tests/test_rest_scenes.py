@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import compose_generate
-from omegaconf import OmegaConf
+from truthkit import family
 
+from physgnn import CONF_DIR
 from physgnn.groundtruth import resting
 from physgnn.groundtruth.assemble import draw_materials, draw_plane_materials
 from physgnn.groundtruth.families import build_scene, resting_contact
@@ -17,13 +18,8 @@ from physgnn.groundtruth.jobs import plan
 from physgnn.groundtruth.layouts import cube_positions
 from physgnn.physics.scene import SceneError
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+CONF = Path(CONF_DIR)
 GAP = 0.01
-
-
-def family(**overrides) -> dict:
-    cfg = OmegaConf.to_container(OmegaConf.load(CONF / "scene" / "random_box.yaml"))
-    return cfg | overrides
 
 
 def bonds(pos: np.ndarray, radius: np.ndarray, max_gap: float):

@@ -6,19 +6,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from omegaconf import OmegaConf
+from truthkit import scene_cfg
 
+from physgnn import CONF_DIR
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import BUILDERS, build_scene
 from physgnn.physics.scene import GROUND, STATIC, WALL, SceneError
 
-SCENE_DIR = Path(__file__).resolve().parents[1] / "conf" / "scene"
-
-
-def scene_cfg(name: str, **overrides) -> dict:
-    cfg = OmegaConf.to_container(OmegaConf.load(SCENE_DIR / f"{name}.yaml"))
-    cfg.update(overrides)
-    return cfg
+SCENE_DIR = Path(CONF_DIR) / "scene"
 
 
 def pair_gaps(pos: np.ndarray, radius: np.ndarray) -> np.ndarray:

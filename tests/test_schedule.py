@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import pytest
 import torch
 from hydra.utils import instantiate
-from test_experiments import compose_train
+from trainkit import compose_train
 
 from physgnn.errors import ConfigError
 from physgnn.training.checks import check_arguments

@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 import yaml
 from simdata import learned
+from truthkit import SCENE
 
 import physgnn.evaluation.simulate as S
-from physgnn import metrics
+from physgnn import CONF_DIR, metrics
 from physgnn.cli import compose_config
 from physgnn.data.dataset import read_split
 from physgnn.groundtruth.scenefile import scene_from_dict
@@ -22,15 +23,7 @@ from physgnn.rollout import rollout
 from physgnn.simulate import main
 from physgnn.training.runs import load_run
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "conf" / "scene" / "head_on.yaml"
-SCENE = """
-name: tiny
-dt: 0.1
-frames: 6
-spheres:
-  - {radius: 0.5, position: [0, 0, 2], velocity: [1, 0, 0]}
-  - {radius: 0.5, position: [1.5, 0, 0.5]}
-"""
+EXAMPLE = Path(CONF_DIR) / "scene" / "head_on.yaml"
 
 
 def load_scene_text(text: str):

@@ -7,7 +7,7 @@ import dataclasses
 import json
 
 import h5py
-from test_simulate import SCENE
+from truthkit import SCENE
 
 import physgnn.evaluation.simulate as S
 from physgnn.groundtruth.scenefile import load_scene

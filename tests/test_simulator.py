@@ -12,6 +12,7 @@ from omegaconf import OmegaConf
 from simdata import REPORT_MODEL, STATS, batch, learned, trajectory
 from torch.testing import assert_close
 
+from physgnn import CONF_DIR
 from physgnn.graph.builder import GraphBuilder
 from physgnn.models.learned import LearnedSimulator, StatsError
 from physgnn.models.profiling import StepTimer
@@ -19,7 +20,7 @@ from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.physics.scene import Effects
 from physgnn.training.layout import FLAT_KEYS, dotted_model
 
-MODEL_CONF = Path(__file__).resolve().parents[1] / "conf" / "model"
+MODEL_CONF = Path(CONF_DIR) / "model"
 
 
 def make(**kwargs) -> LearnedSimulator:

@@ -16,7 +16,7 @@ from simdata import learned, trajectory
 from torch import nn
 
 import physgnn.evaluation.stability as S
-from physgnn import metrics
+from physgnn import CONF_DIR, metrics
 from physgnn import train as train_command
 from physgnn.groundtruth import hard
 from physgnn.groundtruth.engine import simulate
@@ -32,7 +32,7 @@ from physgnn.rollout import rollout
 from physgnn.training.build import build
 
 ROOT = Path(__file__).resolve().parents[1]
-SCENE_DIR = ROOT / "conf" / "scene"
+SCENE_DIR = Path(CONF_DIR) / "scene"
 G, DT, R = 9.81, 0.1, 0.5
 
 
@@ -251,7 +251,7 @@ def test_float32_and_float64_rollouts_agree_over_the_first_frames(one_thread):
 
 def train_cfg(tiny_dataset, run_dir, *overrides):
     base = ["data=tiny", f"paths.outputs={Path(tiny_dataset).parents[1]}", f"run_dir={run_dir}"]
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         return compose("train", overrides=base + list(overrides))
 
 
@@ -362,7 +362,7 @@ def fake_eval(tmp_path, monkeypatch, *overrides, entry=None):
         return sims[Path(run_dir).parent.name], cfg, {}
 
     monkeypatch.setattr(physgnn.training.runs, "load_run", fake_load_run)
-    with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+    with initialize_config_dir(CONF_DIR, version_base="1.3"):
         cfg = compose(
             "eval",
             [f"paths.outputs={outputs}", "videos=false", "sleeping_compare=false", *TINY_HARD]

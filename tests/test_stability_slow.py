@@ -14,6 +14,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 import physgnn.evaluation.stability as S
+from physgnn import CONF_DIR
 from physgnn.groundtruth import hard
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
@@ -25,7 +26,7 @@ pytestmark = pytest.mark.slow
 
 
 def scene_cfg(name: str, **overrides) -> dict:
-    cfg = OmegaConf.to_container(OmegaConf.load(ROOT / "conf" / "scene" / f"{name}.yaml"))
+    cfg = OmegaConf.to_container(OmegaConf.load(Path(CONF_DIR) / "scene" / f"{name}.yaml"))
     cfg.update(overrides)
     return cfg
 
@@ -68,7 +69,7 @@ def test_trained_model_on_the_resting_pile_reports_a_finite_drift(
 ):
     run_dir = tmp_path / "run"
     outputs = Path(tiny_dataset).parents[1]
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose("train", [*TRAIN, f"paths.outputs={outputs}", f"run_dir={run_dir}"])
     assert train(cfg)["status"] == "finished"
     simulator, _, _ = load_run(run_dir)

@@ -12,36 +12,12 @@ from signal import SIGTERM
 import lightning as L
 import pytest
 import torch
-from hydra import compose, initialize_config_dir
+from trainkit import SHORT, config, outputs_of, run_main
 
-from physgnn import train as train_command
 from physgnn.training.build import build
 from physgnn.training.progress import RunProgress
 from physgnn.training.runs import checkpoint_of, load_run, read_run_json
 from physgnn.training.train import TrainingInterrupted, train
-
-CONF = str(Path(__file__).resolve().parents[1] / "conf")
-SHORT = [
-    "model.network.M=1",
-    "model.network.hidden=16",
-    "trainer.max_epochs=1",
-    "trainer.max_time=null",
-    "trainer.enable_progress_bar=false",
-    "trainer.enable_model_summary=false",
-    "datamodule.batch_size=4",
-    "datamodule.pairs_per_epoch=8",
-    "datamodule.val_pairs=8",
-]
-
-
-def outputs_of(tiny_dataset) -> Path:
-    return Path(tiny_dataset).parents[1]  # <outputs>/data/tiny
-
-
-def config(tiny_dataset, run_dir, *overrides):
-    base = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={run_dir}"]
-    with initialize_config_dir(config_dir=CONF, version_base="1.3"):
-        return compose("train", overrides=base + list(overrides))
 
 
 def weights(path) -> dict:
@@ -145,13 +121,6 @@ def test_load_run_without_checkpoint_is_clear(tmp_path):
         load_run(tmp_path)
     with pytest.raises(FileNotFoundError, match="not a training run"):
         load_run(tmp_path / "nothing")
-
-
-def run_main(monkeypatch, capsys, *args) -> tuple[int, str]:
-    monkeypatch.setattr(sys, "argv", ["physgnn.train", *args])
-    with pytest.raises(SystemExit) as info:
-        train_command.main()
-    return info.value.code, capsys.readouterr().err.strip().splitlines()[-1]
 
 
 def test_missing_dataset_is_one_line(monkeypatch, capsys, tmp_path):

@@ -12,8 +12,9 @@ from pathlib import Path
 
 import h5py
 import pytest
-from test_train import SHORT, config, outputs_of, run_main
+from trainkit import SHORT, config, outputs_of, run_main
 
+from physgnn import CONF_DIR
 from physgnn import eval as eval_command
 from physgnn import simulate as simulate_command
 from physgnn import train as train_command
@@ -25,7 +26,7 @@ from physgnn.training.runs import PRETRAINED_DIR, read_run_json
 from physgnn.training.train import train
 
 ROOT = Path(__file__).resolve().parents[1]
-SCENES = ROOT / "conf" / "scene"
+SCENES = Path(CONF_DIR) / "scene"
 
 
 @pytest.fixture
@@ -92,7 +93,7 @@ def test_two_evals_into_one_report_dir_the_second_is_refused(tmp_path, live_pid,
 def eval_config(outputs: Path, *overrides):
     from hydra import compose, initialize_config_dir
 
-    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         return compose(
             "eval", overrides=[f"paths.outputs={outputs}", "invariance.rest_frames=4", *overrides]
         )
