@@ -21,8 +21,8 @@ passed. Checks (``kind`` of a row):
   1.0 m (mass ratio 1 : 8), closing at 5 m/s: the momentum along the impact line (x) must be
   kept. ``value``: ``|P_x(end) − P_x(0)| / Σ m |v_x(0)|`` (limit 1 %).
 - ``bounce``: rows of :func:`physgnn.evaluation.bounce.bounce_rows` for restitutions 0.1–0.9
-  at one friction and masses 1 kg, the training density's and 10 t: ``value`` the apex over ``e²·H`` (limit:
-  within 10 % of 1).
+  at one friction and masses 1 kg, the training density's and 10 t: ``value`` the apex over
+  ``e²·H`` (limit: within 10 % of 1).
 
 A diverged rollout fails its check (``value`` NaN).
 """
