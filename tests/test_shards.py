@@ -243,3 +243,14 @@ def test_shards_started_together_share_their_folder_a_foreign_one_is_refused(tmp
     with pytest.raises(FileExistsError, match=r"holds files that physgnn did not write \(notes"):
         gen.generate(cfg(tmp_path / "b", "shard=0", "num_shards=2"))
     assert [p.name for p in foreign.iterdir()] == ["notes.txt"]
+
+
+def test_a_killed_shards_lock_and_staging_folder_are_not_taken_for_shards(tmp_path):
+    gen.generate(cfg(tmp_path, "shard=0", "num_shards=2"))
+    root = tmp_path / "data" / "tiny.shards"
+    (root / "shard-1-of-2.lock").write_text("pid 1 on a host that died")  # a killed shard's
+    (root / "shard-1-of-2.staging-123").mkdir()
+    with pytest.raises(ShardError, match=f"shard 1 of 2 missing in {root} .*then merge again$"):
+        gen.generate(cfg(tmp_path, "merge=true", "num_shards=2"))
+    with pytest.raises(ShardError, match="holds shards of num_shards=2$"):
+        gen.generate(cfg(tmp_path, "merge=true", "num_shards=3"))

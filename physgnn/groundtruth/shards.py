@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import shutil
 from collections.abc import Callable
 from pathlib import Path
@@ -43,6 +44,7 @@ from physgnn.groundtruth.jobs import Job, progress_bar
 from physgnn.physics.trajectory import Trajectory
 
 MANIFEST = "shard.json"
+SHARD_NAME = re.compile(r"shard-(\d+)-of-(\d+)")
 
 
 class ShardError(PhysgnnError, RuntimeError):
@@ -213,9 +215,16 @@ def check_shards(cfg: DictConfig, jobs: list[Job], n: int) -> None:
         raise ShardError(_missing_line(out, missing, n))
 
 
+def shard_counts(root: Path) -> set[str]:
+    """The ``num_shards`` of the shard folders in ``root`` (``shard-<i>-of-<n>``; a shard's
+    lock file and a staging folder left by a killed shard are not shards)."""
+    found = (SHARD_NAME.fullmatch(p.name) for p in root.glob("shard-*-of-*") if p.is_dir())
+    return {m.group(2) for m in found if m is not None}
+
+
 def _missing_line(out: Path, missing: list[int], n: int) -> str:
     root = shards_root(out)
-    counts = sorted({p.name.rsplit("-of-", 1)[-1] for p in root.glob("shard-*-of-*")} - {str(n)})
+    counts = sorted(shard_counts(root) - {str(n)})
     held = f"; {root} holds shards of num_shards={', '.join(counts)}" if counts else ""
     which = ", ".join(map(str, missing))
     return (
