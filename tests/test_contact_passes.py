@@ -208,3 +208,21 @@ def test_once_apart_two_spheres_fly_ballistically_with_constant_momentum_and_ene
     assert_close(momentum, momentum[:1].expand_as(momentum), rtol=0, atol=1e-4)
     assert_close(energy, energy[:1].expand_as(energy), rtol=1e-4, atol=0)
     assert float(vels.abs().max()) > 0.1  # still moving
+
+
+def test_contact_memory_keeps_a_contact_of_the_last_frame_in_reach_for_one_frame():
+    # rising at 5 m/s, 0.3 m above the ground: it moved 0.5 m in the last frame, so it may have
+    # bounced within it; 0.8 m above it it cannot have
+    state = scene([[0, 0, 0.8], [5, 0, 1.3]], [[0, 0, 5.0], [0, 0, 5.0]], [0.5, 0.5])
+    plain, memory = make(gravity_prior=True), make(gravity_prior=True, contact_memory=True)
+    assert plain.reach(state, plain.graph_builder(state)).spheres.tolist() == [False, False]
+    recalled = memory.recalled(state)
+    graph = memory.graph_builder(state, recalled)
+    assert memory.reach(state, graph, recalled).planes.tolist() == [True, False]
+    # a pair parting at 2 m/s: linked while its gap is within the last frame's travel
+    near = scene([[0, 0, 50.0], [1.15, 0, 50.0]], [[-1, 0, 0], [1, 0, 0]], [0.5, 0.5])
+    far = scene([[0, 0, 50.0], [1.3, 0, 50.0]], [[-1, 0, 0], [1, 0, 0]], [0.5, 0.5])
+    for state, linked in ((near, True), (far, False)):
+        graph = memory.graph_builder(state, memory.recalled(state))
+        assert (graph.pp_index.shape[1] > 0) == linked
+        assert plain.graph_builder(state).pp_index.shape[1] == 0

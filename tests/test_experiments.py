@@ -27,7 +27,7 @@ RUNS = {
     "ablation_connectivity": 12,
     "ablation_lambda": 12,
     "ablation_components": 24,
-    "ablation_contacts": 42,
+    "ablation_contacts": 45,
 }
 
 

@@ -51,6 +51,7 @@ def test_the_default_study_adds_the_contact_switches_to_the_reports_sweeps(tmp_p
                      "model.contact_features=False", "model.material_features=False",
                      "model.gravity_prior=False", "lit.lambda_contact=0",
                      "lit.contact_noise_depth=0", "model.network.layer_norm=True",
+                     "model.contact_memory=True",
                      "lit.pushforward_steps=0",
                      "lit.pushforward_growth=450 lit.pushforward_steps=4"]  # fmt: skip
 

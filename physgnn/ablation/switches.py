@@ -31,6 +31,7 @@ LABELS = {
     "no_contact_penalty": "without the contact penalty",
     "no_contact_noise": "without the contact noise",
     "layer_norm": "with LayerNorm",
+    "contact_memory": "with the contact memory",
     "no_pushforward": "push-forward off",
     "pushforward_growing": "push-forward growing from 1 to 4 steps",
 }

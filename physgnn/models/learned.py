@@ -30,6 +30,13 @@ only a sphere near a plane takes a change of its own from the node decoder (plan
 are external), so linear and angular momentum are conserved exactly for any weights. Without it
 (the previous default, ``model=report``) every sphere decodes its own Δv.
 
+**Contact memory** (``contact_memory=True``, opt-in): the rules also link by the last frame's
+motion reversed (``−v_t``: since ``p_t − p_{t−1} = dt·v_t``, a pair or a plane that could have
+touched during the last frame), so a contact keeps its edges one frame after it parts. The
+finite-difference velocity of a frame that held a bounce is the frame's mean, not the physical
+velocity after the bounce; with the memory the network may correct it the frame after, where
+without it the sphere is already ballistic. Unlike the latch, input noise does not trip it.
+
 **Reach, the latch and support**: :mod:`physgnn.models.reach` (``recent_contact`` turns the
 previous default's latch back on).
 
@@ -80,8 +87,8 @@ class LearnedSimulator(nn.Module):
     absolute position and orientation are masked. ``contact_features``, ``gravity_prior``: see
     the module doc; ``pad_to_buckets``: the network sees graphs padded to capacity buckets
     (opt-in capture path, :mod:`physgnn.nn.padding`). ``contact_passes``, ``pair_impulses``,
-    ``recent_contact``: the module doc; ``plane_materials``: ps edges also carry the contact's
-    restitution and lateral friction, the sphere's times the plane's (needs
+    ``recent_contact``, ``contact_memory``: the module doc; ``plane_materials``: ps edges also
+    carry the contact's restitution and lateral friction, the sphere's times the plane's (needs
     ``material_features``).
     """
 
@@ -106,6 +113,7 @@ class LearnedSimulator(nn.Module):
         pair_impulses: bool = True,
         recent_contact: bool = False,
         plane_materials: bool = True,
+        contact_memory: bool = False,
     ):
         super().__init__()
         _check_sizes(H, boundary_radius, rest_speed, contact_passes)
@@ -117,7 +125,7 @@ class LearnedSimulator(nn.Module):
         self.relative_pairs, self.mass_ratio = bool(relative_pairs), bool(mass_ratio)
         self.rest_decision, self.rest_speed = bool(rest_decision), float(rest_speed)
         self.contact_passes, self.pair_impulses = int(contact_passes), bool(pair_impulses)
-        self.latch = bool(recent_contact)
+        self.latch, self.contact_memory = bool(recent_contact), bool(contact_memory)
         self.plane_materials = bool(plane_materials) and self.material_features
         self._register_stats(stats, length_scale)
         self.graph_builder = GraphBuilder() if graph is None else graph
@@ -328,9 +336,9 @@ class LearnedSimulator(nn.Module):
         was computed on (for a constraint stage, :mod:`physgnn.models.constrained`): passes
         while a rebuild on the provisional velocities adds edges, at most ``contact_passes``
         rebuilds (module doc)."""
-        graph = self.graph_builder(state)
-        vel, angvel = self.head(state, graph)
-        provisional = []
+        provisional = list(self.recalled(state))
+        graph = self.graph_builder(state, provisional)
+        vel, angvel = self.head(state, graph, tuple(provisional))
         for _ in range(self.contact_passes):
             provisional.append(vel)
             wider = self.graph_builder(state, provisional)
@@ -339,6 +347,12 @@ class LearnedSimulator(nn.Module):
             graph = wider
             vel, angvel = self.head(state, graph, tuple(provisional))
         return vel, angvel, graph
+
+    def recalled(self, state) -> tuple[torch.Tensor, ...]:
+        """With ``contact_memory``, ``(−v_t,)``: the last frame's motion reversed, as a velocity
+        the rules also link by, so that a contact of the last frame keeps its edges for one
+        more frame (module doc); else ``()``."""
+        return (-state.vel[:, 0],) if self.contact_memory else ()
 
     def head(self, state, graph, provisional: Sequence = ()) -> tuple[torch.Tensor, torch.Tensor]:
         """``(vel_next [N, 3], angvel_next [N, 3])`` on ``graph`` (built with

@@ -31,6 +31,7 @@ PREVIOUS_MODEL = {
     "pair_impulses": False,
     "recent_contact": True,
     "plane_materials": False,
+    "contact_memory": False,
 }
 LEARNED = "physgnn.models.learned.LearnedSimulator"
 # The nodes of today's layout, with the Hydra keys that build them.

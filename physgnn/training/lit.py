@@ -182,7 +182,8 @@ class LitSimulator(L.LightningModule):
         of a batch (no noise added here); ``energy_share`` = ``λ·energy / loss``, the part of
         the loss the energy term is (logged, so that a λ sweep shows whether the term mattered
         at all). With ``truth_contacts`` the graph is also built on the target velocities."""
-        provisional = (state.target_vel,) if self.truth_contacts else ()
+        provisional = self.simulator.recalled(state)
+        provisional += (state.target_vel,) if self.truth_contacts else ()
         graph = self.simulator.graph_builder(state, provisional)
         return self.graph_losses(state, graph, provisional)
 
