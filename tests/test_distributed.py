@@ -101,6 +101,7 @@ def three_sphere_dataset(tmp_path_factory) -> Path:
     outputs = tmp_path_factory.mktemp("outputs")
     cfg = compose_generate(["data=tiny", f"paths.outputs={outputs}", "workers=1",
                             "progress=false", "data.scene.n_min=3", "data.scene.n_max=3",
+                            "data.fit_scene.rest_fraction=0",  # rest scenes have their own sizes
                             "data.splits.train=4", "data.splits.val=2"])  # fmt: skip
     return generate(cfg)
 
