@@ -200,7 +200,10 @@ def test_two_ddp_processes_match_one_on_the_same_global_batch(three_sphere_datas
     w1 = torch.load(one["checkpoints"]["last"], weights_only=True)["state_dict"]
     w2 = torch.load(two["checkpoints"]["last"], weights_only=True)["state_dict"]
     for key, value in w1.items():
-        torch.testing.assert_close(w2[key], value, rtol=1e-5, atol=1e-6)
+        # the pair decoder's first bias enters both directions of a pair and cancels in
+        # h_ij − h_ji to first order: its gradient is mostly rounding, which Adam scales up
+        atol = 1e-4 if key.endswith("pair_decoder.mlp.lin1.bias") else 1e-6
+        torch.testing.assert_close(w2[key], value, rtol=1e-5, atol=atol)
 
 
 @pytest.mark.parametrize("accelerator", ["cpu", "gpu"])
