@@ -24,8 +24,11 @@ COMMANDS = {
 
 
 def usage() -> str:
-    lines = ["usage: physgnn <command> [arguments]   (physgnn <command> --help; physgnn --version)",
-             "", "commands:"]  # fmt: skip
+    lines = [
+        "usage: physgnn <command> [arguments]   (physgnn <command> --help; physgnn --version)",
+        "",
+        "commands:",
+    ]
     lines += [f"  {name:<12} {text}" for name, (_, text) in COMMANDS.items()]
     return "\n".join(lines)
 

@@ -118,8 +118,9 @@ def simulate(scene: Scene, frames: int | None = None) -> Trajectory:
     _of_type("scene", scene, Scene, "a Scene: load_scene('throw'), scene_from_arrays(...)")
     if frames is not None:
         what = "the first frame is the start; e.g. frames=100"
-        scene = dataclasses.replace(scene, n_frames=check_whole("frames", frames, 2, what,
-                                                                ArgumentError))  # fmt: skip
+        scene = dataclasses.replace(
+            scene, n_frames=check_whole("frames", frames, 2, what, ArgumentError)
+        )
     return engine_simulate(scene)
 
 

@@ -106,8 +106,9 @@ def read_rows(path: str | Path, floats: Iterable[str], ints: Iterable[str]) -> l
     return rows
 
 
-def claim_folder(folder: str | Path, key: str, overwrite: bool | None = False,
-                 ours: bool = False) -> Path:  # fmt: skip
+def claim_folder(
+    folder: str | Path, key: str, overwrite: bool | None = False, ours: bool = False
+) -> Path:
     """Make ``folder`` (if needed) for physgnn to write into, once it may: an absent or empty
     folder, one marked with :data:`OUTPUT_MARKER` or ``ours`` (the command's default folder
     under ``paths.outputs``) gets the marker; any other folder is written into only with

@@ -34,8 +34,18 @@ from physgnn.physics.scene import EFFECT_NAMES
 from physgnn.physics.trajectory import Trajectory
 
 ROTATION = EFFECT_NAMES.index("rotation")
-_FLOAT_KEYS = ("pos", "quat", "vel", "angvel", "radius", "mass", "material_params", "planes",
-               "plane_materials", "dt")  # fmt: skip
+_FLOAT_KEYS = (
+    "pos",
+    "quat",
+    "vel",
+    "angvel",
+    "radius",
+    "mass",
+    "material_params",
+    "planes",
+    "plane_materials",
+    "dt",
+)
 _RECORDED = {"pos": 3, "quat": 4, "vel": 3, "angvel": 3}
 
 

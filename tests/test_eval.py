@@ -11,6 +11,7 @@ import torch
 from fakeruns import Falling, eval_cfg, evaluate_fake_runs, fake_outputs, make_run, write_dataset
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
+from trainkit import SHORT
 
 import physgnn.training.runs
 import physgnn.training.train
@@ -207,15 +208,7 @@ def test_ground_truth_rows_equal_the_data_report_measured_as_rollouts_are(evalua
 
 TINY_TRAIN = [
     "data=tiny",
-    "model.network.M=1",
-    "model.network.hidden=16",
-    "trainer.max_epochs=1",
-    "trainer.max_time=null",
-    "trainer.enable_progress_bar=false",
-    "trainer.enable_model_summary=false",
-    "datamodule.batch_size=4",
-    "datamodule.pairs_per_epoch=8",
-    "datamodule.val_pairs=8",
+    *SHORT,
     "++callbacks.rollout._target_=physgnn.training.callbacks.RolloutCallback",
     "++callbacks.rollout.every_n_epochs=1",
     "++callbacks.rollout.n_val_trajectories=1",

@@ -77,12 +77,28 @@ def taking_turns(sim, window, engine: dict, substeps: list[int], rounds: int) ->
             if k not in preds:
                 preds[k] = continued(window, run, H, fps)
     first = preds["learned"]
-    rows = [{"simulator": "learned", "substeps": None, "fps": median(learned), "ratio": None,
-             "diverged_at": first.diverged_at, **_scores(first, window)}]  # fmt: skip
+    rows = [
+        {
+            "simulator": "learned",
+            "substeps": None,
+            "fps": median(learned),
+            "ratio": None,
+            "diverged_at": first.diverged_at,
+            **_scores(first, window),
+        }
+    ]
     for k in substeps:
         ratio = median(a / b for a, b in zip(learned, engine_fps[k], strict=True))
-        rows.append({"simulator": f"pybullet-{k}", "substeps": k, "fps": median(engine_fps[k]),
-                     "ratio": ratio, "diverged_at": None, **_scores(preds[k], window)})  # fmt: skip
+        rows.append(
+            {
+                "simulator": f"pybullet-{k}",
+                "substeps": k,
+                "fps": median(engine_fps[k]),
+                "ratio": ratio,
+                "diverged_at": None,
+                **_scores(preds[k], window),
+            }
+        )
     return rows
 
 
@@ -100,8 +116,11 @@ def judged(rows: list[dict]) -> dict:
         r for r in engine if ok and r["mse20"] is not None and r["mse20"] <= learned["mse20"]
     ]
     best = max(matched, key=lambda r: r["fps"], default=None)
-    return {"on_front": on_front, "matched_substeps": best and best["substeps"],
-            "matched_ratio": best and best["ratio"]}  # fmt: skip
+    return {
+        "on_front": on_front,
+        "matched_substeps": best and best["substeps"],
+        "matched_ratio": best and best["ratio"],
+    }
 
 
 def front_from(sizes: list[dict]) -> int | None:
@@ -129,11 +148,19 @@ def crossover(cfg: DictConfig, rng, stats: dict) -> dict | None:
         window = landed_window(cfg, int(n), rng, int(sim.H), engine)
         load = os.getloadavg()[0]
         rows = taking_turns(sim, window, engine, list(c.substeps), int(c.rounds))
-        size = {"n_spheres": int(n), "rows": rows, **judged(rows), "loadavg_start": load,
-                "loadavg_end": os.getloadavg()[0]}  # fmt: skip
+        size = {
+            "n_spheres": int(n),
+            "rows": rows,
+            **judged(rows),
+            "loadavg_start": load,
+            "loadavg_end": os.getloadavg()[0],
+        }
         sizes.append(size)
-        print(f"crossover n={n:6d}: learned MSE20 {rows[0]['mse20']}, on the front: "
-              f"{size['on_front']}, matched: {size['matched_substeps']}", flush=True)  # fmt: skip
+        print(
+            f"crossover n={n:6d}: learned MSE20 {rows[0]['mse20']}, on the front: "
+            f"{size['on_front']}, matched: {size['matched_substeps']}",
+            flush=True,
+        )
     run = "random weights" if c.run is None else str(c.run)
     return {"run": run, "sizes": sizes, "front_from": front_from(sizes)}
 
@@ -142,10 +169,14 @@ def headline(cross: dict) -> str:
     """One sentence: from which size the learned simulator is on the MSE20 front."""
     sizes = ", ".join(str(s["n_spheres"]) for s in cross["sizes"])
     if cross["front_from"] is None:
-        return (f"The learned simulator ({cross['run']}) is not on the MSE20 front at the "
-                f"largest size measured (sizes: {sizes}).")  # fmt: skip
-    return (f"The learned simulator ({cross['run']}) is on the MSE20 front from "
-            f"**{cross['front_from']} spheres** up (sizes measured: {sizes}).")  # fmt: skip
+        return (
+            f"The learned simulator ({cross['run']}) is not on the MSE20 front at the "
+            f"largest size measured (sizes: {sizes})."
+        )
+    return (
+        f"The learned simulator ({cross['run']}) is on the MSE20 front from "
+        f"**{cross['front_from']} spheres** up (sizes measured: {sizes})."
+    )
 
 
 def section(result: dict) -> list[str]:
@@ -164,12 +195,30 @@ def section(result: dict) -> list[str]:
                 if r["substeps"] is None
                 else ("matched" if r["substeps"] == size["matched_substeps"] else "")
             )
-            body.append([str(size["n_spheres"]), r["simulator"], fmt(r["mse20"]), fmt(r["chamfer"]),
-                         fmt(r["depth_sphere"]), f"{r['fps']:.1f}",
-                         "–" if r["ratio"] is None else f"{r['ratio']:.2f}×", note,
-                         f"{size['loadavg_start']:.1f} → {size['loadavg_end']:.1f}"])  # fmt: skip
-    header = ["spheres", "simulator", "MSE20", "Chamfer", "depth sphere", "FPS (median)",
-              "learned FPS / this FPS (median of rounds)", "", "1-min load average"]  # fmt: skip
+            body.append(
+                [
+                    str(size["n_spheres"]),
+                    r["simulator"],
+                    fmt(r["mse20"]),
+                    fmt(r["chamfer"]),
+                    fmt(r["depth_sphere"]),
+                    f"{r['fps']:.1f}",
+                    "–" if r["ratio"] is None else f"{r['ratio']:.2f}×",
+                    note,
+                    f"{size['loadavg_start']:.1f} → {size['loadavg_end']:.1f}",
+                ]
+            )
+    header = [
+        "spheres",
+        "simulator",
+        "MSE20",
+        "Chamfer",
+        "depth sphere",
+        "FPS (median)",
+        "learned FPS / this FPS (median of rounds)",
+        "",
+        "1-min load average",
+    ]
     return [
         "## Crossover: the trained model against pybullet on the same work",
         "Piles in motion after the spheres have landed; every simulator from the same start (the "

@@ -64,8 +64,15 @@ def interleaved_rows(cfg: DictConfig, runs: dict, sims: dict) -> list[dict]:
         for n in cfg.interleaved.sizes:
             states = frame_states(runs[n]["traj"], sim.H)
             turns = taking_turns(sim, states, runs[n]["start"], engine, int(cfg.interleaved.rounds))
-            rows.append({"config": name, "n_spheres": n, "substeps": int(engine["substeps"]),
-                         "frames": len(states), **turns})  # fmt: skip
+            rows.append(
+                {
+                    "config": name,
+                    "n_spheres": n,
+                    "substeps": int(engine["substeps"]),
+                    "frames": len(states),
+                    **turns,
+                }
+            )
             print(
                 f"interleaved {name:9s} n={n:6d}: median ratio {turns['median_ratio']:.2f} "
                 f"over {len(turns['ratios'])} rounds (load {turns['loadavg_start']:.1f} -> "
@@ -91,9 +98,17 @@ def interleaved_table(result: dict) -> str:
         ]
         for r in result.get("interleaved", [])
     ]
-    header = ["config", "spheres", "pybullet substeps", "rounds", "ratio per round",
-              "median ratio", "learned FPS (median)", "pybullet FPS (median)",
-              "1-min load average"]  # fmt: skip
+    header = [
+        "config",
+        "spheres",
+        "pybullet substeps",
+        "rounds",
+        "ratio per round",
+        "median ratio",
+        "learned FPS (median)",
+        "pybullet FPS (median)",
+        "1-min load average",
+    ]
     return md_table(header, body)
 
 

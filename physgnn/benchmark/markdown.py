@@ -217,8 +217,10 @@ def targets_heading(settings: dict) -> str:
     """``## Targets (baseline M=.. H=.. <connectivity> h=..)`` from the bench's model config."""
     model = settings.get("model", {})
     net, graph = model.get("network", {}), model.get("graph", {})
-    return (f"## Targets (baseline M={net.get('M', '?')} H={model.get('H', '?')} "
-            f"{graph.get('connectivity', '?')} h={net.get('hidden', '?')})")  # fmt: skip
+    return (
+        f"## Targets (baseline M={net.get('M', '?')} H={model.get('H', '?')} "
+        f"{graph.get('connectivity', '?')} h={net.get('hidden', '?')})"
+    )
 
 
 def write_markdown(result: dict, extra: dict) -> str:

@@ -106,8 +106,11 @@ def _matched(result: dict) -> list[str]:
     frames, :mod:`physgnn.benchmark.crossover`), median of the interleaved rounds, against
     :data:`MATCHED_RATIO` at each of its sizes the crossover measured; a size where no setting
     tried is as accurate is not judged (not met)."""
-    sizes = [s for s in (result.get("crossover") or {}).get("sizes", [])
-             if s["n_spheres"] in MATCHED_RATIO]  # fmt: skip
+    sizes = [
+        s
+        for s in (result.get("crossover") or {}).get("sizes", [])
+        if s["n_spheres"] in MATCHED_RATIO
+    ]
     texts = [
         f"{s['n_spheres']}: no setting tried is as accurate"
         if s["matched_substeps"] is None

@@ -40,8 +40,10 @@ def failed_jobs(sweep_dir: Path) -> dict[str, str]:
     found = sorted(Path(sweep_dir).glob(f"*/{JOB_ERROR}")) + sorted(
         Path(sweep_dir).glob(f"*/.hydra/{JOB_ERROR}")
     )
-    return {p.parent.name if p.parent.name != ".hydra" else p.parent.parent.name:
-            p.read_text().strip() for p in found}  # fmt: skip
+    return {
+        p.parent.name if p.parent.name != ".hydra" else p.parent.parent.name: p.read_text().strip()
+        for p in found
+    }
 
 
 def exit_if_a_job_failed(sweep_dir: Path) -> None:
@@ -50,8 +52,11 @@ def exit_if_a_job_failed(sweep_dir: Path) -> None:
     for job, error in failed.items():
         print(f"  job {job}: {error}", file=sys.stderr)
     if failed:
-        print(f"error: {len(failed)} job(s) of the sweep failed (their errors above; logs in "
-              f"{sweep_dir})", file=sys.stderr)  # fmt: skip
+        print(
+            f"error: {len(failed)} job(s) of the sweep failed (their errors above; logs in "
+            f"{sweep_dir})",
+            file=sys.stderr,
+        )
         sys.exit(1)
 
 

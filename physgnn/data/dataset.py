@@ -152,8 +152,15 @@ def _read_traj(path: Path, name: str, g: h5py.Group) -> Trajectory:
     data = {k: g[k][()] for k in FRAME_FIELDS + STATIC_FIELDS}
     data |= {k: g[k][()] if k in g else None for k in OPTIONAL_FIELDS}
     t, n = data["pos"].shape[:2]
-    shapes = {"pos": (t, n, 3), "quat": (t, n, 4), "vel": (t, n, 3), "angvel": (t, n, 3),
-              "radius": (n,), "mass": (n,), "material": (n,)}  # fmt: skip
+    shapes = {
+        "pos": (t, n, 3),
+        "quat": (t, n, 4),
+        "vel": (t, n, 3),
+        "angvel": (t, n, 3),
+        "radius": (n,),
+        "mass": (n,),
+        "material": (n,),
+    }
     if data["plane_materials"] is not None:
         shapes["plane_materials"] = (*data["planes"].shape[:1], 4)
     for key, shape in shapes.items():

@@ -65,8 +65,10 @@ def check_exportable(trajs: list, what: str) -> list[Trajectory]:
 
 def _check_finite(traj: Trajectory, what: str) -> None:
     """A trajectory with NaN or inf (a diverged rollout) is refused, with its finite prefix."""
-    bad = {key: np.argwhere(~np.isfinite(np.asarray(getattr(traj, key))))
-           for key in ("radius", "mass", *FRAME_KEYS)}  # fmt: skip
+    bad = {
+        key: np.argwhere(~np.isfinite(np.asarray(getattr(traj, key))))
+        for key in ("radius", "mass", *FRAME_KEYS)
+    }
     bad = {key: where[0] for key, where in bad.items() if len(where)}
     if bad:
         key = min(bad, key=lambda k: bad[k][0] if k in FRAME_KEYS else -1)
@@ -74,8 +76,9 @@ def _check_finite(traj: Trajectory, what: str) -> None:
         frame = int(bad[key][0]) if key in FRAME_KEYS else 0
         where = f" at frame {frame}" if key in FRAME_KEYS else ""
         fix = f"export its finite frames: traj.truncated({frame})" if frame else "give finite ones"
-        raise ExportError(f"{what}: trajectory '{traj.name}' holds {value} in {key}{where} "
-                          f"(not finite): {fix}")  # fmt: skip
+        raise ExportError(
+            f"{what}: trajectory '{traj.name}' holds {value} in {key}{where} (not finite): {fix}"
+        )
     if not np.isfinite(traj.dt) or traj.dt <= 0:
         raise ExportError(f"{what}: trajectory '{traj.name}' has dt {traj.dt}: give dt > 0")
 
@@ -158,8 +161,9 @@ def _remove_leftovers(folder: Path) -> None:
 def write_hdf5(folder: str | Path, trajs: list[Trajectory]) -> Path:
     """``<folder>/trajectories.h5`` in physgnn's dataset schema, written whole; each group
     named as its trajectory (a ``/`` becomes ``_``), unless its ``attrs`` name a group."""
-    named = [dataclasses.replace(t, attrs={"group": t.name.replace("/", "_")} | t.attrs)
-             for t in trajs]  # fmt: skip
+    named = [
+        dataclasses.replace(t, attrs={"group": t.name.replace("/", "_")} | t.attrs) for t in trajs
+    ]
     with staged_folder(folder, "hdf5") as staging:
         write_split(staging / HDF5_FILE, named, {"split": "export", "preset": "api"})
     return Path(folder) / HDF5_FILE
@@ -173,9 +177,12 @@ def load_trajectories(path: str | Path) -> list[Trajectory]:
     fmt = export_marker(folder).get("export")
     if fmt and not (fmt == "hdf5" and path.is_file()):
         reader = READERS[fmt].format(folder=folder)
-        raise DatasetError(f"{path} is a {fmt} export, not a physgnn HDF5 file: read it with "
-                           f"{reader}")  # fmt: skip
+        raise DatasetError(
+            f"{path} is a {fmt} export, not a physgnn HDF5 file: read it with {reader}"
+        )
     if path.is_dir():
-        raise DatasetError(f"{path} is a folder: give a physgnn HDF5 file (a dataset's test.h5, "
-                           f"simulate's simulate.h5, an hdf5 export's {HDF5_FILE})")  # fmt: skip
+        raise DatasetError(
+            f"{path} is a folder: give a physgnn HDF5 file (a dataset's test.h5, "
+            f"simulate's simulate.h5, an hdf5 export's {HDF5_FILE})"
+        )
     return read_split(path)

@@ -213,7 +213,8 @@ def _from_arrays(path: Path, pos, radius, dt, material, table, name: str) -> Tra
     if table is None:  # a dataset not of physgnn: default materials, one per id
         table = np.tile(Material().as_array(), (int(np.max(material, initial=0)) + 1, 1))
     try:
-        return Trajectory.from_arrays(pos, radius, dt, material=material, name=name,
-                                      materials=np.asarray(table, np.float32))  # fmt: skip
+        return Trajectory.from_arrays(
+            pos, radius, dt, material=material, name=name, materials=np.asarray(table, np.float32)
+        )
     except ValueError as e:
         raise DatasetError(f"{path}: {e}") from None

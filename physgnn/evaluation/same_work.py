@@ -83,8 +83,15 @@ def engine_jobs(runs: list[RunInfo], several: bool) -> list[RunInfo]:
     for dataset, H in found:
         suffix = f" (H={H})" if len(histories[dataset]) > 1 else ""
         suffix += f"[{dataset.name}]" if several else ""
-        jobs.append(RunInfo(name=suffix, experiment=ENGINE, overrides=f"dataset={dataset}",
-                            dataset=dataset, extra={"H": H}))  # fmt: skip
+        jobs.append(
+            RunInfo(
+                name=suffix,
+                experiment=ENGINE,
+                overrides=f"dataset={dataset}",
+                dataset=dataset,
+                extra={"H": H},
+            )
+        )
     return jobs
 
 

@@ -206,8 +206,11 @@ def simulate_with_progress(scene) -> Trajectory:
     if scene.n_spheres * scene.n_frames < LONG:
         return engine_simulate(scene)
     # a line: the bar below shows on a terminal only
-    print(f"simulating with pybullet: {scene.n_spheres} spheres, {scene.n_frames} frames ...",
-          file=sys.stderr, flush=True)  # fmt: skip
+    print(
+        f"simulating with pybullet: {scene.n_spheres} spheres, {scene.n_frames} frames ...",
+        file=sys.stderr,
+        flush=True,
+    )
     columns = (TextColumn("pybullet"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     with Progress(*columns, transient=True) as bar:
         task = bar.add_task("frames", total=scene.n_frames)

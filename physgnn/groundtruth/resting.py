@@ -46,8 +46,9 @@ def column_positions(rng, n: int, r_min: float, r_max: float, max_gap: float):
     pos, start, axes, widths = np.zeros((n, 3)), 0, [], []
     for size in sizes:
         r = radius[start : start + size]
-        z = np.cumsum(np.r_[r[0], [r[k] + r[k + 1] + contact_gap(rng, max_gap)
-                                   for k in range(size - 1)]])  # fmt: skip
+        z = np.cumsum(
+            np.r_[r[0], [r[k] + r[k + 1] + contact_gap(rng, max_gap) for k in range(size - 1)]]
+        )
         width = float(r.max())
         x = _column_axis(rng, axes, widths, width)
         pos[start : start + size] = np.c_[np.tile(x, (size, 1)), z]

@@ -215,8 +215,9 @@ def check_float32_scale(name: str, pos: np.ndarray, radius: np.ndarray) -> None:
         )
 
 
-def check_speeds(name: str, pos: np.ndarray, vel: np.ndarray, radius: np.ndarray,
-                 duration: float) -> None:  # fmt: skip
+def check_speeds(
+    name: str, pos: np.ndarray, vel: np.ndarray, radius: np.ndarray, duration: float
+) -> None:
     """Starting speeds whose straight flight over the scene's ``duration`` (s) stays where
     float32 resolves the smallest radius (:data:`MIN_RADIUS_PER_EXTENT`): pybullet froze a
     sphere thrown at 1e30 m/s (it did not even fall) instead of failing."""

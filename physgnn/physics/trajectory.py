@@ -150,19 +150,23 @@ def scene_at(traj: Trajectory, t: int) -> Scene:
     """The scene of ``traj`` from its frame ``t`` (positions, orientations, velocities) to its
     last frame (``T - t`` frames), at its gravity."""
     return Scene(
-        name=traj.name, n_frames=traj.n_frames - t, dt=traj.dt, effects=traj.effects,
+        name=traj.name,
+        n_frames=traj.n_frames - t,
+        dt=traj.dt,
+        effects=traj.effects,
         gravity=tuple(traj.attrs.get("gravity", GRAVITY)),
         **{k: getattr(traj, k)[t] for k in FRAME_KEYS},
         **{k: getattr(traj, k) for k in STATIC_KEYS},
-    )  # fmt: skip
+    )
 
 
 def continued(truth: Trajectory, run: Trajectory, start: int, fps: float) -> Trajectory:
     """``truth``'s frames ``0..start``, then ``run`` (an engine run of :func:`scene_at` of
     ``truth`` at ``start``) from its frame 1 on, with finite-difference velocities: a
     prediction recorded as a rollout is (``start``, ``fps``)."""
-    frames = {k: np.concatenate([getattr(truth, k)[: start + 1], getattr(run, k)[1:]])
-              for k in FRAME_KEYS}  # fmt: skip
+    frames = {
+        k: np.concatenate([getattr(truth, k)[: start + 1], getattr(run, k)[1:]]) for k in FRAME_KEYS
+    }
     pred = dataclasses.replace(truth, **frames, attrs=dict(truth.attrs), start=start, fps=fps)
     return pred.with_finite_velocities()
 
@@ -194,8 +198,10 @@ def _finite(key: str, arr: np.ndarray) -> np.ndarray:
     if len(bad):
         index = bad[0].tolist()
         where = f"frame {index[0]}, sphere {index[1]}" if arr.ndim >= 3 else f"index {index}"
-        raise SceneError(f"Trajectory.from_arrays: {key} holds {arr[tuple(index)]} at {where} "
-                         f"({len(bad)} values not finite): give finite numbers")  # fmt: skip
+        raise SceneError(
+            f"Trajectory.from_arrays: {key} holds {arr[tuple(index)]} at {where} "
+            f"({len(bad)} values not finite): give finite numbers"
+        )
     return arr
 
 
@@ -210,8 +216,9 @@ def _positive(key: str, value, unit: str):
     if not good.all():
         first = int(np.flatnonzero(~good)[0])
         got = value if arr.ndim == 0 else f"{arr.flat[first]:g} (sphere {first})"
-        raise SceneError(f"Trajectory.from_arrays: {key} must be a number > 0 ({unit}), "
-                         f"got {got!s}")  # fmt: skip
+        raise SceneError(
+            f"Trajectory.from_arrays: {key} must be a number > 0 ({unit}), got {got!s}"
+        )
     return float(arr) if arr.ndim == 0 else np.asarray(value)
 
 

@@ -80,8 +80,9 @@ def points(rows: list[dict], split: str, metric: str) -> list[Point]:
 def front(pts: list[Point]) -> list[Point]:
     """The points of ``pts`` on the Pareto front (valid ones only), cheapest first."""
     valid = [p for p in pts if p.valid]
-    return [valid[i] for i in pareto_frontier([p.ms_per_frame for p in valid],
-                                              [p.error for p in valid])]  # fmt: skip
+    return [
+        valid[i] for i in pareto_frontier([p.ms_per_frame for p in valid], [p.error for p in valid])
+    ]
 
 
 def split_table(rows: list[dict], split: str) -> str:
@@ -100,8 +101,14 @@ def split_table(rows: list[dict], split: str) -> str:
         ms = fmt(1000.0 / fps) if fps else "–"
         note = diverged_note(sel)
         body.append([name, *cells, ms, "✓" if name in on_front else "", note or ""])
-    header = ["simulator", *TABLE_METRICS, "frames/s", "ms/frame", f"on the {FRONT_METRIC} front",
-              "diverged"]  # fmt: skip
+    header = [
+        "simulator",
+        *TABLE_METRICS,
+        "frames/s",
+        "ms/frame",
+        f"on the {FRONT_METRIC} front",
+        "diverged",
+    ]
     return md_table(header, body)
 
 

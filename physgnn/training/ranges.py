@@ -33,7 +33,7 @@ RANGES = {
     "lit.contact_noise_prob": (0, True, 1, "a probability; 0: off"),
     "lit.noise_rest_scale": (0, False, 1, "a factor; 1: full noise at rest"),
     "lit.compile_shapes": (1, True, None, "input shapes to compile"),
-}  # fmt: skip
+}
 # The words a string argument takes (torch.compile's modes): checked whether or not it is used
 # now (lit.compile=false), so that a run does not fail the day it is switched on.
 CHOICES = {
