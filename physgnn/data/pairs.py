@@ -49,8 +49,16 @@ class PairDataset(Dataset):
         self.device = torch.device("cpu")
         self.host = {"pairs": self.pairs, "n_spheres": self.n_spheres, "n_planes": self.n_planes}
 
-    _ON_DEVICE = ("pairs", "n_spheres", "n_planes", "frame_start", "sphere_start", "plane_start",
-                  "dt", "effects")  # fmt: skip
+    _ON_DEVICE = (
+        "pairs",
+        "n_spheres",
+        "n_planes",
+        "frame_start",
+        "sphere_start",
+        "plane_start",
+        "dt",
+        "effects",
+    )
 
     def to(self, device) -> PairDataset:
         """Keep the tables on ``device`` (in place): a batch is then a few gathers there, with

@@ -21,9 +21,18 @@ from physgnn.physics.trajectory import Trajectory
 
 # Per-sphere fields of a SceneState (first dimension N); the rest are per plane or per scene.
 NODE_KEYS = (
-    "pos", "quat", "vel", "angvel", "radius", "mass", "material", "material_params", "batch",
-    "target_vel", "target_angvel",
-)  # fmt: skip
+    "pos",
+    "quat",
+    "vel",
+    "angvel",
+    "radius",
+    "mass",
+    "material",
+    "material_params",
+    "batch",
+    "target_vel",
+    "target_angvel",
+)
 SCENE_KEYS = ("planes", "plane_kind", "plane_materials", "plane_batch", "dt", "effects", "ptr")
 
 

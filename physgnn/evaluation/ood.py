@@ -68,5 +68,7 @@ def outside(scene, cfg) -> list[str]:
 def warning_text(name: str, found: list[str]) -> str:
     """The one line that says ``name`` lies outside the training ranges (``found``: what
     :func:`outside` returned)."""
-    return (f"{name} lies outside what the run was trained on: {'; '.join(found)}; its rollout "
-            "is extrapolation")  # fmt: skip
+    return (
+        f"{name} lies outside what the run was trained on: {'; '.join(found)}; its rollout "
+        "is extrapolation"
+    )

@@ -127,20 +127,18 @@ class Trajectory:
         radius = _array("radius", radius if radius.ndim else np.full(n, radius), np.float32, (n,))
         quat = _frames("quat", quat, (t, n, 4), _identity(t, n))
         vel_fd, angvel_fd = _finite_velocities(pos, quat, dt)
-        volume = 4 / 3 * np.pi * radius.astype(np.float64) ** 3
-        static = {
-            "radius": radius,
-            "mass": _frames("mass", mass, (n,), DEFAULT_DENSITY * volume),
-            "material": _frames("material", material, (n,), np.zeros(n), np.int64),
-            "materials": _frames("materials", materials, (None, 4), Material().as_array()[None]),
-            "planes": _frames("planes", planes, (None, 11), ground_plane()[None]),
-            "plane_kind": _frames("plane_kind", plane_kind, (None,), [GROUND], np.int64),
-        }
+        static = _static_fields(radius, mass, material, materials, planes, plane_kind)
         return cls(
-            name=name, pos=pos, quat=quat, dt=float(dt), effects=effects or Effects(),
-            vel=_frames("vel", vel, (t, n, 3), vel_fd), attrs=dict(attrs or {}),
-            angvel=_frames("angvel", angvel, (t, n, 3), angvel_fd), **static,
-        )  # fmt: skip
+            name=name,
+            pos=pos,
+            quat=quat,
+            dt=float(dt),
+            effects=effects or Effects(),
+            vel=_frames("vel", vel, (t, n, 3), vel_fd),
+            attrs=dict(attrs or {}),
+            angvel=_frames("angvel", angvel, (t, n, 3), angvel_fd),
+            **static,
+        )
 
 
 STATIC_KEYS = ("radius", "mass", "material", "planes", "plane_kind", "materials", "plane_materials")
@@ -171,6 +169,21 @@ def continued(truth: Trajectory, run: Trajectory, start: int, fps: float) -> Tra
     return pred.with_finite_velocities()
 
 
+def _static_fields(radius: np.ndarray, mass, material, materials, planes, plane_kind) -> dict:
+    """The arrays of :meth:`Trajectory.from_arrays` that do not change over frames, checked,
+    with their defaults (``radius`` ``[N]``, already checked)."""
+    n = len(radius)
+    volume = 4 / 3 * np.pi * radius.astype(np.float64) ** 3
+    return {
+        "radius": radius,
+        "mass": _frames("mass", mass, (n,), DEFAULT_DENSITY * volume),
+        "material": _frames("material", material, (n,), np.zeros(n), np.int64),
+        "materials": _frames("materials", materials, (None, 4), Material().as_array()[None]),
+        "planes": _frames("planes", planes, (None, 11), ground_plane()[None]),
+        "plane_kind": _frames("plane_kind", plane_kind, (None,), [GROUND], np.int64),
+    }
+
+
 def _array(key: str, value, dtype, shape: tuple) -> np.ndarray:
     """``value`` as a ``dtype`` array of ``shape`` (None: any size); else a ``SceneError``."""
     arr = np.asarray(value, dtype=dtype)
@@ -179,8 +192,9 @@ def _array(key: str, value, dtype, shape: tuple) -> np.ndarray:
     )
     if not fits:
         want = "[" + ", ".join("*" if s is None else str(s) for s in shape) + "]"
-        raise SceneError(f"Trajectory.from_arrays: {key} has shape {list(arr.shape)}, "
-                         f"expected {want}")  # fmt: skip
+        raise SceneError(
+            f"Trajectory.from_arrays: {key} has shape {list(arr.shape)}, expected {want}"
+        )
     return arr
 
 
