@@ -237,8 +237,10 @@ class _Record:
         counts = [f.pos.shape[1] for f in frames]
         self.offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         n, self.device = int(self.offsets[-1]), device
-        zeros = lambda w: torch.zeros(t_max, n, w, dtype=torch.float32, device=device)  # noqa: E731
-        self.arrays = {k: zeros(w) for k, w in _RECORDED.items()}
+        self.arrays = {
+            k: torch.zeros(t_max, n, w, dtype=torch.float32, device=device)
+            for k, w in _RECORDED.items()
+        }
         for f, lo, hi in zip(frames, self.offsets[:-1], self.offsets[1:], strict=True):
             for key, array in self.arrays.items():
                 array[: h + 1, lo:hi] = getattr(f, key)[: h + 1].to(device)

@@ -118,16 +118,15 @@ def read_vtk(folder: str | Path, name: str = "vtk") -> Trajectory:
         ) from None
     frames = [_read(folder / f["name"]) for f in files]
     dt = times[1] - times[0] if len(files) > 1 else 0.1
-    stack = lambda key: np.stack([f.point_data[key] for f in frames])  # noqa: E731
     planes, kinds = read_planes(folder / PLANES)
     first = frames[0].point_data
     return Trajectory.from_arrays(
         np.stack([f.points for f in frames]),
         first["radius"],
         dt,
-        quat=stack("orientation"),
-        vel=stack("velocity"),
-        angvel=stack("angular_velocity"),
+        quat=_stacked(frames, "orientation"),
+        vel=_stacked(frames, "velocity"),
+        angvel=_stacked(frames, "angular_velocity"),
         mass=first["mass"],
         material=first["material"],
         planes=planes,
@@ -135,6 +134,11 @@ def read_vtk(folder: str | Path, name: str = "vtk") -> Trajectory:
         name=name,
         effects=Effects(),
     )
+
+
+def _stacked(frames: list, key: str) -> np.ndarray:
+    """The point data ``key`` of every frame, ``[T, N, ·]``."""
+    return np.stack([f.point_data[key] for f in frames])
 
 
 def read_planes(path: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -85,9 +85,12 @@ class Trajectory:
         """The same frames with ``v_k = (p_k − p_{k−1})/dt`` (``v_0`` kept), what a rollout
         records. At dt = 0.1 s a bounce inside a frame interval makes this kinetic energy dip
         and recover, which the energy gain counts: the gain a perfect rollout would show."""
-        f64 = lambda a: torch.as_tensor(np.asarray(a, np.float64))  # noqa: E731
         vel, _ = finite_difference_velocities(
-            f64(self.pos), f64(self.quat), f64(self.vel[0]), f64(self.angvel[0]), self.dt
+            _float64(self.pos),
+            _float64(self.quat),
+            _float64(self.vel[0]),
+            _float64(self.angvel[0]),
+            self.dt,
         )
         return dataclasses.replace(self, vel=vel.numpy())
 
@@ -242,11 +245,14 @@ def _identity(t: int, n: int) -> np.ndarray:
     return quat
 
 
+def _float64(a) -> torch.Tensor:
+    return torch.as_tensor(np.asarray(a, np.float64))
+
+
 def _finite_velocities(pos: np.ndarray, quat: np.ndarray, dt: float):
     """vel, angvel ``[T, N, 3]`` by finite differences, frame 0 a copy of frame 1."""
     zeros = torch.zeros(pos.shape[1:], dtype=torch.float64)
-    f64 = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
-    vel, angvel = finite_difference_velocities(f64(pos), f64(quat), zeros, zeros, dt)
+    vel, angvel = finite_difference_velocities(_float64(pos), _float64(quat), zeros, zeros, dt)
     if pos.shape[0] > 1:
         vel[0], angvel[0] = vel[1], angvel[1]
     return vel.float().numpy(), angvel.float().numpy()
