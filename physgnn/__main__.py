@@ -44,8 +44,9 @@ def main(argv: list[str] | None = None) -> object:
         return 0
     name, rest = argv[0], argv[1:]
     if name not in COMMANDS:
-        print(f"error: unknown command '{name}'; choose one of {', '.join(COMMANDS)}",
-              file=sys.stderr)  # fmt: skip
+        print(
+            f"error: unknown command '{name}'; choose one of {', '.join(COMMANDS)}", file=sys.stderr
+        )
         sys.exit(2)
     module = importlib.import_module(COMMANDS[name][0])
     sys.argv = [f"physgnn {name}", *rest]  # what the command parses, and its help's name

@@ -93,8 +93,9 @@ def load_scene(path: str | Path) -> Scene:
     return scenefile.load_scene(path)
 
 
-def scene_from_arrays(pos, radius, *, frames: int = 100, dt: float = 0.1, name: str = "arrays",
-                      **fields) -> Scene:  # fmt: skip
+def scene_from_arrays(
+    pos, radius, *, frames: int = 100, dt: float = 0.1, name: str = "arrays", **fields
+) -> Scene:
     """A scene from its start: pos ``[N, 3]``, radius ``[N]`` (or one number), ``frames`` to
     simulate at interval ``dt``; ``fields``: vel, angvel ``[N, 3]``, quat ``[N, 4]``, and
     mass, material, materials, planes, plane_kind, effects as in
@@ -151,8 +152,12 @@ def score(pred: Trajectory | None, truth: Trajectory, tol: float = 0.0) -> dict:
     return scene_metrics(truth, pred, check_tolerance(tol, ArgumentError))
 
 
-def animate(truth: Trajectory, pred: Trajectory | None = None, stem: str | Path = "video",
-            max_frames: int = 80) -> dict:  # fmt: skip
+def animate(
+    truth: Trajectory,
+    pred: Trajectory | None = None,
+    stem: str | Path = "video",
+    max_frames: int = 80,
+) -> dict:
     """The shaded 3-D film of ``truth`` (left) beside ``pred`` (right; the truth again without
     one): ``stem.gif``, ``stem.mp4`` and ``stem_frame.png``; returns their paths by kind."""
     _of_type("truth", truth, Trajectory, "a Trajectory: simulate(scene) gives a scene's truth")

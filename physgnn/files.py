@@ -156,8 +156,11 @@ def exclusive(lock: str | Path, what: str, way_out: str) -> Iterator[Path]:
     lock is removed at the end, whatever happened."""
     lock = Path(lock)
     lock.parent.mkdir(parents=True, exist_ok=True)
-    mine = {"pid": os.getpid(), "host": socket.gethostname(),
-            "since": datetime.now().isoformat(timespec="seconds")}  # fmt: skip
+    mine = {
+        "pid": os.getpid(),
+        "host": socket.gethostname(),
+        "since": datetime.now().isoformat(timespec="seconds"),
+    }
     for _ in range(3):
         try:
             fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)

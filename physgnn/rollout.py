@@ -195,11 +195,22 @@ class _Batch:
         Returns None when every scene is fine, else a per-scene list: diverged?
         """
         pos_next, quat_next, vel, angvel = integrator.step(
-            self.pos, self.quat, self.vel, self.angvel, vel_next, angvel_next,
-            self.dt, self.rotate, hold,
-        )  # fmt: skip
-        for own, new in ((self.pos, pos_next), (self.quat, quat_next), (self.vel, vel),
-                         (self.angvel, angvel)):  # fmt: skip
+            self.pos,
+            self.quat,
+            self.vel,
+            self.angvel,
+            vel_next,
+            angvel_next,
+            self.dt,
+            self.rotate,
+            hold,
+        )
+        for own, new in (
+            (self.pos, pos_next),
+            (self.quat, quat_next),
+            (self.vel, vel),
+            (self.angvel, angvel),
+        ):
             own.copy_(new)
         # One reduction: a NaN or inf anywhere in a row makes its sum non-finite.
         finite = (pos_next.sum(1) + quat_next.sum(1) + angvel[:, 0].sum(1)).isfinite()
@@ -226,8 +237,10 @@ class _Record:
         counts = [f.pos.shape[1] for f in frames]
         self.offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         n, self.device = int(self.offsets[-1]), device
-        zeros = lambda w: torch.zeros(t_max, n, w, dtype=torch.float32, device=device)  # noqa: E731
-        self.arrays = {k: zeros(w) for k, w in _RECORDED.items()}
+        self.arrays = {
+            k: torch.zeros(t_max, n, w, dtype=torch.float32, device=device)
+            for k, w in _RECORDED.items()
+        }
         for f, lo, hi in zip(frames, self.offsets[:-1], self.offsets[1:], strict=True):
             for key, array in self.arrays.items():
                 array[: h + 1, lo:hi] = getattr(f, key)[: h + 1].to(device)
@@ -295,7 +308,7 @@ def _rollout_batch(simulator, trajs, lengths, *, h, bounds, max_pos, device, dty
             start=h,
             diverged_at=diverged[i],
             fps=fps,
-        )  # fmt: skip
+        )
         for i, traj in enumerate(trajs)
     ]
 

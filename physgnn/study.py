@@ -6,11 +6,10 @@ The work is :func:`physgnn.ablation.study.run_study`; config ``conf/study.yaml``
 
 import sys
 
-from physgnn.ablation.study import run_study
+from physgnn.ablation.study import run_study, written
 from physgnn.cli import command
 
-_main = command("study", run_study, done=lambda path: f"study report written to {path}"
-                if path is not None else "dry run: nothing trained")  # fmt: skip
+_main = command("study", run_study, done=written)
 
 
 def main():

@@ -69,8 +69,9 @@ def truth_floor(records: list[dict], split: str) -> float | None:
 
 def mean_checkpoint(records: list[dict], name: str) -> float | None:
     """Mean over seeds of the measured checkpoint's ``name`` (``step``, ``val_loss``)."""
-    values = [r["checkpoint"][name] for r in records
-              if (r.get("checkpoint") or {}).get(name) is not None]  # fmt: skip
+    values = [
+        r["checkpoint"][name] for r in records if (r.get("checkpoint") or {}).get(name) is not None
+    ]
     return float(np.mean(values)) if values else None
 
 

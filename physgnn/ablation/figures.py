@@ -59,8 +59,14 @@ def _metric_panel(ax, pos: np.ndarray, values: list[list[float | None]]) -> None
         gone = sum(v is not None and not math.isfinite(v) for v in vals)
         if gone:
             ax.plot(x, 1.0, "x", color="red", ms=8, mew=2, transform=ax.get_xaxis_transform())
-            ax.annotate(f"{gone}/{len(vals)} div.", (x, 0.93), xycoords=("data", "axes fraction"),
-                        ha="center", fontsize=6, color="red")  # fmt: skip
+            ax.annotate(
+                f"{gone}/{len(vals)} div.",
+                (x, 0.93),
+                xycoords=("data", "axes fraction"),
+                ha="center",
+                fontsize=6,
+                color="red",
+            )
     ax.plot(pos, means, "o-", color="tab:blue", ms=4)
     finite_all = [v for vals in values for v in vals if v is not None and math.isfinite(v)]
     if finite_all and min(finite_all) > 0 and max(finite_all) / min(finite_all) > 100:
@@ -72,8 +78,11 @@ def _share_panel(ax, pos: np.ndarray, groups: list[list[dict]], show: bool) -> N
         ax.axis("off")
         return
     for x, group in zip(pos, groups, strict=True):
-        shares = [r["logged"]["train/energy_share"] for r in group
-                  if "train/energy_share" in (r.get("logged") or {})]  # fmt: skip
+        shares = [
+            r["logged"]["train/energy_share"]
+            for r in group
+            if "train/energy_share" in (r.get("logged") or {})
+        ]
         ax.plot([x] * len(shares), [100 * s for s in shares], "o", color="tab:green", ms=4)
     ax.set_ylabel("% of the loss (last epoch)", fontsize=7)
 
@@ -90,8 +99,11 @@ def plot_study_fps(path: Path, labels: list[str], stats: list[Stat], note: str) 
     )
 
 
-CURVE_PANELS = (("mse", "validation rollout MSE (m²)"), ("max_depth", "max depth (d)"),
-                ("energy_gain", "energy gain"))  # fmt: skip
+CURVE_PANELS = (
+    ("mse", "validation rollout MSE (m²)"),
+    ("max_depth", "max depth (d)"),
+    ("energy_gain", "energy gain"),
+)
 
 
 def plot_study_curves(path: Path, title: str, curves: list[tuple[str, list[dict]]]) -> Path:

@@ -136,8 +136,9 @@ def study_jobs(configs: list[Config], seeds: list[int]) -> list[Job]:
         if config.key != BASELINE:
             order.setdefault(next(iter(config.points), ""), []).append(config)
     baseline = [Job(c, int(seed)) for seed in seeds for c in configs if c.key == BASELINE]
-    return baseline + [Job(config, int(seed)) for group in order.values() for seed in seeds
-                       for config in group]  # fmt: skip
+    return baseline + [
+        Job(config, int(seed)) for group in order.values() for seed in seeds for config in group
+    ]
 
 
 def defaults_fingerprint(train_cfg: DictConfig) -> str:

@@ -33,9 +33,18 @@ from physgnn.training.runs import load_run
 
 SPLITS = ("test", "ood")
 FIGURES = (
-    "mse", "chamfer", "energy_gain", "energy_error", "depth_sphere", "depth_ground",
-    "depth_static", "pct_sphere", "max_depth_sphere", "max_depth_plane", "tunnelled",
-)  # fmt: skip
+    "mse",
+    "chamfer",
+    "energy_gain",
+    "energy_error",
+    "depth_sphere",
+    "depth_ground",
+    "depth_static",
+    "pct_sphere",
+    "max_depth_sphere",
+    "max_depth_plane",
+    "tunnelled",
+)
 
 
 def measure_trajectory(simulator, traj: Trajectory, speed_factor: float) -> dict:

@@ -31,13 +31,20 @@ FIGURE_SWEEPS = {  # sweep → (figure title, metrics)
     "ablation_M": (
         "Message-passing blocks M (report Fig. 16)",
         ["mse", "chamfer", "energy_gain", "depth_sphere"],
-    ),  # fmt: skip
+    ),
     "ablation_connectivity": ("Connectivity (report Fig. 17)", ["chamfer", "energy_gain"]),
     "ablation_lambda": ("Energy-term weight λ", ["mse", "energy_gain", "energy_share"]),
 }
 FPS_SWEEPS = ("ablation_H", "ablation_M", "ablation_connectivity")
-COLUMNS = ["mse", "chamfer", "energy_error", "pct_sphere", "max_depth_sphere", "max_depth_plane",
-           "tunnelled"]  # fmt: skip
+COLUMNS = [
+    "mse",
+    "chamfer",
+    "energy_error",
+    "pct_sphere",
+    "max_depth_sphere",
+    "max_depth_plane",
+    "tunnelled",
+]
 TABLE2 = ["mse", "chamfer", "energy_gain", "energy_error", "max_depth_sphere", "tunnelled"]
 # The report's budget: 500 epochs of its ≈ 200 000 training pairs in batches of 256.
 REPORT_STEPS = "≈ 390 000"
@@ -92,12 +99,16 @@ def write_study_report(records: list[dict], configs: list[Config], cfg) -> Path:
     return write_text(out / "README.md", "\n\n".join(p for p in parts if p) + "\n")
 
 
+def _machine(machine: dict) -> str:
+    """``cpu`` or ``cpu + gpu`` of a record's machine."""
+    return f"{machine['cpu']}" + (f" + {machine['gpu']}" if machine.get("gpu") else "")
+
+
 def _header(records, configs, cfg, budget) -> str:
     planned = len(configs) * len(cfg.seeds)
     done = [r for r in records if r.get("status") in DONE]
     failed = [r for r in records if r.get("status") == "failed"]
-    machines = sorted({f"{r['machine']['cpu']}" + (f" + {r['machine']['gpu']}" if r[
-        "machine"].get("gpu") else "") for r in records if r.get("machine")})  # fmt: skip
+    machines = sorted({_machine(r["machine"]) for r in records if r.get("machine")})
     commits = sorted({str(r.get("commit")) for r in records})
     lines = [
         "# The ablation study: results",
@@ -130,8 +141,10 @@ def _header(records, configs, cfg, budget) -> str:
         f"- **Wall time:** {_wall(records)}. Code: commit {', '.join(commits) or '–'}.",
     ]
     if failed:
-        lines.append("- **Failed runs:** " + "; ".join(
-            f"`{r['key']}` seed {r['seed']}: {r.get('reason')}" for r in failed))  # fmt: skip
+        lines.append(
+            "- **Failed runs:** "
+            + "; ".join(f"`{r['key']}` seed {r['seed']}: {r.get('reason')}" for r in failed)
+        )
     return "\n".join(lines)
 
 
@@ -151,44 +164,64 @@ def _wall(records) -> str:
     if not ends:
         return "–"
     elapsed = (max(ends) - min(spans)).total_seconds()
-    return (f"{elapsed / 60:.0f} min from the first run's start to the last run's end "
-            f"({total / 60:.0f} min of runs, trained and measured)")  # fmt: skip
+    return (
+        f"{elapsed / 60:.0f} min from the first run's start to the last run's end "
+        f"({total / 60:.0f} min of runs, trained and measured)"
+    )
 
 
 def _table2(groups, configs) -> str:
-    header = ["experiment", "report: MSE", "report: Chamfer", "report: energy gain",
-              "ours: MSE", "ours: Chamfer", "ours: energy gain", "ours: energy error",
-              "ours: max depth (d)", "ours: tunnelled", "OOD rollouts diverged",
-              "MSE − baseline's (Welch p)", "the report's finding", "verdict"]  # fmt: skip
+    header = [
+        "experiment",
+        "report: MSE",
+        "report: Chamfer",
+        "report: energy gain",
+        "ours: MSE",
+        "ours: Chamfer",
+        "ours: energy gain",
+        "ours: energy error",
+        "ours: max depth (d)",
+        "ours: tunnelled",
+        "OOD rollouts diverged",
+        "MSE − baseline's (Welch p)",
+        "the report's finding",
+        "verdict",
+    ]
 
     def cells(records):
         return [cell(over_seeds(records, "ood", m)) for m in TABLE2] + [div_cell(records, "ood")]
 
     rows = table2(groups, configs, cells)
     truth = truth_floor([r for g in groups.values() for r in g], "ood")
-    return "\n".join([
-        "## Table 2: OOD, ours beside the report's",
-        "",
-        md_table(header, rows),
-        "",
-        f"**Rules.** {RULES}",
-        "",
-        f"The ground truth's own OOD energy gain, measured the same way, is {fmt(truth)}: the "
-        "target, not a floor (a model that never moves gains nothing), so the energy error "
-        "|gain − truth's gain| is what is compared. Max depth: the deepest sphere–sphere "
-        "overlap of a rollout over the diameter; tunnelled: spheres whose centre crossed a "
-        "plane, per rollout. *learned + constraints* is the baseline's own runs rolled out "
-        "with the constraint stage. The report's figures are copied from its Table 2 (its own "
-        "data, budget and units), so only the findings compare, not the numbers.",
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            "## Table 2: OOD, ours beside the report's",
+            "",
+            md_table(header, rows),
+            "",
+            f"**Rules.** {RULES}",
+            "",
+            f"The ground truth's own OOD energy gain, measured the same way, is {fmt(truth)}: the "
+            "target, not a floor (a model that never moves gains nothing), so the energy error "
+            "|gain − truth's gain| is what is compared. Max depth: the deepest sphere–sphere "
+            "overlap of a rollout over the diameter; tunnelled: spheres whose centre crossed a "
+            "plane, per rollout. *learned + constraints* is the baseline's own runs rolled out "
+            "with the constraint stage. The report's figures are copied from its Table 2 (its own "
+            "data, budget and units), so only the findings compare, not the numbers.",
+        ]
+    )
 
 
 def _all_configs(groups, configs) -> str:
-    out = ["## Every configuration", "",
-           "`energy_error` is |energy gain − the truth's|; `pct_sphere` the % of spheres "
-           "intersecting another; `max_depth_*` the deepest overlap (d); `checkpoint` the "
-           "validation loss of the checkpoint measured and its step (means over seeds; chosen "
-           "on the validation rollout score).", ""]  # fmt: skip
+    out = [
+        "## Every configuration",
+        "",
+        "`energy_error` is |energy gain − the truth's|; `pct_sphere` the % of spheres "
+        "intersecting another; `max_depth_*` the deepest overlap (d); `checkpoint` the "
+        "validation loss of the checkpoint measured and its step (means over seeds; chosen "
+        "on the validation rollout score).",
+        "",
+    ]
     truth = {s: truth_floor([r for g in groups.values() for r in g], s) for s in ("test", "ood")}
     for split in ("test", "ood"):
         header = ["configuration", "seeds", *COLUMNS, "rollouts diverged", "checkpoint"]
@@ -198,34 +231,54 @@ def _all_configs(groups, configs) -> str:
             if not recs:
                 continue
             stats = [cell(over_seeds(recs, split, m)) for m in COLUMNS]
-            body.append([f"`{config.key}`", str(len(recs)), *stats, div_cell(recs, split),
-                         checkpoint_text(recs, "val_loss")])  # fmt: skip
-        out += [f"### {split} (ground truth's energy gain: {fmt(truth[split])})", "",
-                md_table(header, body), ""]  # fmt: skip
+            body.append(
+                [
+                    f"`{config.key}`",
+                    str(len(recs)),
+                    *stats,
+                    div_cell(recs, split),
+                    checkpoint_text(recs, "val_loss"),
+                ]
+            )
+        out += [
+            f"### {split} (ground truth's energy gain: {fmt(truth[split])})",
+            "",
+            md_table(header, body),
+            "",
+        ]
     return "\n".join(out)
 
 
 def _figures(out: Path, groups, configs) -> str:
     lines = ["## Sweeps", ""]
     for sweep, (title, metrics) in FIGURE_SWEEPS.items():
-        points = sorted(((c.points[sweep], c) for c in configs if sweep in c.points),
-                        key=lambda p: _num(p[0]))  # fmt: skip
+        points = sorted(
+            ((c.points[sweep], c) for c in configs if sweep in c.points), key=lambda p: _num(p[0])
+        )
         if not points or not any(groups.get(c.key) for _, c in points):
             continue
         name = f"sweep_{sweep.removeprefix('ablation_')}.png"
-        plot_study_sweep(out / name, title, [x for x, _ in points],
-                         [groups.get(c.key, []) for _, c in points], metrics)  # fmt: skip
+        plot_study_sweep(
+            out / name,
+            title,
+            [x for x, _ in points],
+            [groups.get(c.key, []) for _, c in points],
+            metrics,
+        )
         lines += [f"![{title}]({name})", ""]
         curves = [(x, groups.get(c.key, [])) for x, c in points]
         if any(r.get("curve") for _, recs in curves for r in recs):
             curve = f"curve_{sweep.removeprefix('ablation_')}.png"
-            plot_study_curves(out / curve, f"{title}: validation rollouts during training",
-                              curves)  # fmt: skip
+            plot_study_curves(out / curve, f"{title}: validation rollouts during training", curves)
             lines += [f"![{title}: learning curves]({curve})", ""]
         if sweep == "ablation_lambda":
             lines += [_energy_shares(points, groups), ""]
-    fps = [(f"{s.removeprefix('ablation_')}={c.points[s]}", mean_fps(groups.get(c.key, [])))
-           for s in FPS_SWEEPS for c in configs if s in c.points]  # fmt: skip
+    fps = [
+        (f"{s.removeprefix('ablation_')}={c.points[s]}", mean_fps(groups.get(c.key, [])))
+        for s in FPS_SWEEPS
+        for c in configs
+        if s in c.points
+    ]
     if any(stat.mean is not None for _, stat in fps):
         note = "per run on its own thread, two runs at a time"
         plot_study_fps(out / "fps.png", [k for k, _ in fps], [s for _, s in fps], note)
@@ -252,13 +305,19 @@ def _energy_shares(points, groups) -> str:
         parts.append(f"| {x} | {100 * designed:.2g} % | {fell} | {shown} |")
     if not parts:
         return ""
-    return "\n".join([
-        "The energy term's share of the loss, per λ: *as designed* is λ × the penalty of the "
-        "model trained without it (λ = 0) ÷ (its loss + that), the share the term would have if "
-        "the model did not learn to avoid it; *penalty cut* is λ = 0's penalty over this λ's; "
-        "*logged* the last epoch's mean of per-batch shares (small once the penalty is cut).",
-        "", "| λ | share as designed | penalty cut | logged share |", "|---|---|---|---|",
-        *parts])  # fmt: skip
+    return "\n".join(
+        [
+            "The energy term's share of the loss, per λ: *as designed* is λ × the penalty of the "
+            "model trained without it (λ = 0) ÷ (its loss + that), the share the term would have "
+            "if the model did not learn to avoid it; *penalty cut* is λ = 0's penalty over this "
+            "λ's; *logged* the last epoch's mean of per-batch shares (small once the penalty is "
+            "cut).",
+            "",
+            "| λ | share as designed | penalty cut | logged share |",
+            "|---|---|---|---|",
+            *parts,
+        ]
+    )
 
 
 def _num(x: str):
@@ -274,11 +333,19 @@ def _done(records: list[dict]) -> int:
 
 def _footer(out: Path, cfg, left: int) -> str:
     trains = "nothing" if left <= 0 else f"only the {left} runs it lacks"
-    lines = ["## Reproduce", "", "```bash", "make install", "make study   # = python -m "
-             "physgnn.study; --dry-run lists the jobs and the time they will take", "```", "",
-             f"A clean checkout has this registry, so `make study` trains {trains} and rewrites "
-             "this page; to run the study again from scratch, move `registry.jsonl` away "
-             f"(runs train under `{portable(cfg.runs_dir)}`)."]  # fmt: skip
+    lines = [
+        "## Reproduce",
+        "",
+        "```bash",
+        "make install",
+        "make study   # = python -m physgnn.study; "
+        "--dry-run lists the jobs and the time they will take",
+        "```",
+        "",
+        f"A clean checkout has this registry, so `make study` trains {trains} and rewrites "
+        "this page; to run the study again from scratch, move `registry.jsonl` away "
+        f"(runs train under `{portable(cfg.runs_dir)}`).",
+    ]
     if (out / "discussion.md").exists():
         lines += ["", "The discussion of these results: [discussion.md](discussion.md)."]
     return "\n".join(lines)

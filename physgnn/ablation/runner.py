@@ -32,7 +32,9 @@ TRAINED = ("finished", "truncated")
 def train_command(spec: dict) -> list[str]:
     """``python -m physgnn.train`` with the job's folder, seed, budget and configuration."""
     return [
-        sys.executable, "-m", "physgnn.train",
+        sys.executable,
+        "-m",
+        "physgnn.train",
         f"hydra.run.dir={spec['run_dir']}",
         "experiment_name=study",
         f"seed={spec['seed']}",
@@ -40,7 +42,7 @@ def train_command(spec: dict) -> list[str]:
         "trainer.enable_model_summary=false",
         *spec["common"],
         *spec["overrides"],
-    ]  # fmt: skip
+    ]
 
 
 def _status(run_dir: Path) -> dict:
@@ -74,8 +76,13 @@ def _finite(value):
 
 LOGGED = ("train/loss", "train/loss_mse", "train/loss_energy", "train/energy_share", "val/loss")
 # Validation rollout metrics logged every callbacks.rollout.every_n_epochs: the learning curve.
-CURVE = {"mse": "val/rollout_mse", "max_depth": "val/max_depth", "tunnelled": "val/tunnelled",
-         "energy_gain": "val/energy_gain", "score": "val/rollout_score"}  # fmt: skip
+CURVE = {
+    "mse": "val/rollout_mse",
+    "max_depth": "val/max_depth",
+    "tunnelled": "val/tunnelled",
+    "energy_gain": "val/energy_gain",
+    "score": "val/rollout_score",
+}
 _BEST = re.compile(r"epoch(\d+)")
 
 
@@ -84,8 +91,10 @@ def _log_rows(run_dir: Path) -> list[dict]:
     rows = []
     for path in sorted(run_dir.glob("csv/version_*/metrics.csv")):
         with open(path, newline="") as f:
-            rows += [{k: float(v) for k, v in row.items() if v not in (None, "")}
-                     for row in csv.DictReader(f)]  # fmt: skip
+            rows += [
+                {k: float(v) for k, v in row.items() if v not in (None, "")}
+                for row in csv.DictReader(f)
+            ]
     return rows
 
 
@@ -104,8 +113,11 @@ def logged(run_dir: Path) -> dict:
 def learning_curve(run_dir: Path) -> list[dict]:
     """``[{"step", "mse", "max_depth", "tunnelled", "energy_gain", "score"}]``: the validation
     rollouts of every evaluation during training (:data:`CURVE`; a metric not logged is None)."""
-    return [{"step": int(row["step"]) + 1} | {k: row.get(name) for k, name in CURVE.items()}
-            for row in _log_rows(run_dir) if "val/rollout_mse" in row]  # fmt: skip
+    return [
+        {"step": int(row["step"]) + 1} | {k: row.get(name) for k, name in CURVE.items()}
+        for row in _log_rows(run_dir)
+        if "val/rollout_mse" in row
+    ]
 
 
 def measured_checkpoint(run_dir: Path) -> dict:
@@ -119,8 +131,11 @@ def measured_checkpoint(run_dir: Path) -> dict:
     epoch = int(found.group(1))
     for row in _log_rows(run_dir):
         if int(row.get("epoch", -1)) == epoch and "val/loss" in row:
-            out |= {"step": int(row["step"]) + 1, "val_loss": row["val/loss"],
-                    "val_score": row.get("val/rollout_score")}  # fmt: skip
+            out |= {
+                "step": int(row["step"]) + 1,
+                "val_loss": row["val/loss"],
+                "val_score": row.get("val/rollout_score"),
+            }
     return out
 
 
@@ -177,10 +192,15 @@ def run_job(spec: dict) -> dict:
 def lost_job(spec: dict, err: BaseException) -> dict:
     """The record of a job whose process died before it could return one."""
     return {
-        "key": spec["key"], "overrides": spec["overrides"], "seed": spec["seed"],
-        "budget": spec["budget"], "status": "failed", "reason": f"job lost: {one_line(err)}",
-        "run_dir": portable(spec["run_dir"]), "commit": spec.get("commit"),
-    }  # fmt: skip
+        "key": spec["key"],
+        "overrides": spec["overrides"],
+        "seed": spec["seed"],
+        "budget": spec["budget"],
+        "status": "failed",
+        "reason": f"job lost: {one_line(err)}",
+        "run_dir": portable(spec["run_dir"]),
+        "commit": spec.get("commit"),
+    }
 
 
 def main(argv: list[str]) -> None:

@@ -31,10 +31,12 @@ class StudyFailed(PhysgnnError, RuntimeError):
 def commit() -> str | None:
     """The code's git commit (``+`` when the work tree has changes), None outside git."""
     try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, check=True).stdout.strip()  # fmt: skip
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True).stdout.strip()  # fmt: skip
+        rev = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return None
     return rev + ("+" if dirty else "")
@@ -69,8 +71,11 @@ def _cost(overrides: list[str]) -> float:
 
 def estimate_s(spec: dict, records: list[dict], cfg: DictConfig) -> float:
     """Seconds for one job: from this budget's runs in the registry, else ``cfg.estimate``."""
-    same = [r for r in records if r.get("wall_s") and budget_id(r["budget"]) == budget_id(
-        spec["budget"])]  # fmt: skip
+    same = [
+        r
+        for r in records
+        if r.get("wall_s") and budget_id(r["budget"]) == budget_id(spec["budget"])
+    ]
     mine = [r["wall_s"] for r in same if r["key"] == spec["key"]]
     if mine:
         return sum(mine) / len(mine)
@@ -92,8 +97,10 @@ def run_study(cfg: DictConfig) -> Path | None:
     console = Console(soft_wrap=True)
     configs = study_configs(list(cfg.sweeps))
     jobs = study_jobs(configs, list(cfg.seeds))
-    common = budget_overrides(cfg.budget) + [f"data={cfg.preset}",
-                                             f"paths.outputs={cfg.paths.outputs}"]  # fmt: skip
+    common = budget_overrides(cfg.budget) + [
+        f"data={cfg.preset}",
+        f"paths.outputs={cfg.paths.outputs}",
+    ]
     rev, budget = commit(), study_budget(cfg)
     specs = [job_spec(job, cfg, common, rev, budget) for job in jobs]
     records = read_registry(cfg.registry)
@@ -129,6 +136,11 @@ def run_study(cfg: DictConfig) -> Path | None:
     return report
 
 
+def written(report: Path | None) -> str:
+    """The line ``python -m physgnn.study`` prints."""
+    return "dry run: nothing trained" if report is None else f"study report written to {report}"
+
+
 def _print_plan(console, specs, pending, records, cfg) -> None:
     todo = {id(s) for s in pending}
     for s in specs:
@@ -151,8 +163,12 @@ def _run(console, pending, records, cfg, n_jobs, configs) -> list[str]:
     start = time.perf_counter()
     estimates = {id(s): estimate_s(s, records, cfg) for s in pending}
     left = sum(estimates.values())
-    columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-               TextColumn("{task.fields[status]}")]  # fmt: skip
+    columns = [
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[status]}"),
+    ]
     with Progress(*columns, console=console) as progress:
         task = progress.add_task("study", total=len(pending), status="")
         specs = {(s["key"], s["seed"]): s for s in pending}

@@ -49,8 +49,11 @@ FIGURES = [
 def paired(mine: list[dict], base: list[dict], split: str, metric: str) -> str:
     """``mean (Δ ±x, p = …)`` over the seeds both ``mine`` and ``base`` have (module doc)."""
     by_seed = {r["seed"]: r for r in base}
-    pairs = [(seed_value(r, split, metric), seed_value(by_seed[r["seed"]], split, metric))
-             for r in mine if r["seed"] in by_seed]  # fmt: skip
+    pairs = [
+        (seed_value(r, split, metric), seed_value(by_seed[r["seed"]], split, metric))
+        for r in mine
+        if r["seed"] in by_seed
+    ]
     pairs = [(a, b) for a, b in pairs if a is not None and b is not None]
     if not pairs:
         return "–"
@@ -86,15 +89,17 @@ def switches_section(groups: dict[str, list[dict]], configs: list[Config]) -> st
         return ""
     header = ["change", "seeds", *(title for _, _, title in FIGURES), "checkpoint score @ step"]
     header[-1] += f" (baseline, {len(base)} seeds: {_score(base)})"
-    return "\n".join([
-        "## The default's contact changes, each switched off alone",
-        "",
-        "Each row against the baseline on the same seeds: the row's mean over those seeds and "
-        "the paired difference Δ = row − baseline (seed by seed; the paired t-test's p where "
-        "two or more seeds match). A row that switches a change *off* with Δ > 0 on a depth, "
-        "error or tunnelling figure means the change lowers it. The checkpoint score is the "
-        "validation rollout score of the checkpoint measured (lower is better; the push-forward "
-        "schedule is chosen on it, never on test or OOD).",
-        "",
-        md_table(header, rows),
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            "## The default's contact changes, each switched off alone",
+            "",
+            "Each row against the baseline on the same seeds: the row's mean over those seeds and "
+            "the paired difference Δ = row − baseline (seed by seed; the paired t-test's p where "
+            "two or more seeds match). A row that switches a change *off* with Δ > 0 on a depth, "
+            "error or tunnelling figure means the change lowers it. The checkpoint score is the "
+            "validation rollout score of the checkpoint measured (lower is better; the "
+            "push-forward schedule is chosen on it, never on test or OOD).",
+            "",
+            md_table(header, rows),
+        ]
+    )

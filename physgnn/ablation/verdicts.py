@@ -90,8 +90,10 @@ def diverges(mine: list[dict], base: list[dict]) -> str:
     p = stats.fisher_exact([[gone, total - gone], [b_gone, b_total - b_gone]], "greater").pvalue
     if p < ALPHA:
         return f"reproduced ({gone}/{total} diverged vs {b_gone}/{b_total}, p = {p:.2g})"
-    return (f"inconclusive at this budget: {gone}/{total} diverged vs the baseline's "
-            f"{b_gone}/{b_total} (p = {p:.2g})")  # fmt: skip
+    return (
+        f"inconclusive at this budget: {gone}/{total} diverged vs the baseline's "
+        f"{b_gone}/{b_total} (p = {p:.2g})"
+    )
 
 
 def worse(mine: list[dict], base: list[dict]) -> str:
@@ -125,8 +127,9 @@ def table2(groups: dict[str, list[dict]], configs: list[Config], cells) -> list[
     """Rows of Table 2, our extra experiments and the baseline with the constraint stage:
     the report's three figures, ``cells(records)`` (ours), the OOD MSE difference to the
     baseline with its p, the report's finding and the verdict."""
-    keys = {c.points["ablation_components"]: c.key for c in configs
-            if "ablation_components" in c.points}  # fmt: skip
+    keys = {
+        c.points["ablation_components"]: c.key for c in configs if "ablation_components" in c.points
+    }
     base = groups.get(keys.get("baseline", ""), [])
     rows = []
     named = [(name, groups.get(key, [])) for name, key in keys.items()]

@@ -151,7 +151,10 @@ def rollout_frame(
     with torch.no_grad(), replayed_reads(None) as reads:
         _one_step(simulator, state, 1e3, None, None)
     mode = FakeTensorMode(allow_non_fake_inputs=False)
-    convert = lambda t: FakeTensor(mode, t.to("meta"), device)  # noqa: E731
+
+    def convert(t: torch.Tensor) -> FakeTensor:
+        return FakeTensor(mode, t.to("meta"), device)
+
     state.batch = _moved(simulator, state.batch, convert)
     for key in ("pos", "quat", "vel", "angvel"):
         setattr(state, key, state.batch[key])

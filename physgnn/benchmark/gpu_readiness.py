@@ -30,6 +30,7 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn.benchmark.syncs import counting, profiling_ops
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 from physgnn.models.capture import compile_simulator
+from physgnn.report.format import fmt_as
 from physgnn.rollout import rollout
 
 _COUNTS = ("syncs", "kernels", "copies")  # copies are counted in syncs too
@@ -97,10 +98,19 @@ def training_step_counts(
     loader = pair_loader(data, int(c.batch_size), EpochSampler(len(data), total * c.batch_size, 0))
     counter = StepCounter(int(c.warmup_steps), record_where=True, profile=compiled)
     trainer = L.Trainer(
-        accelerator="cpu", devices=1, max_steps=total, max_epochs=1, logger=False,
-        enable_checkpointing=False, enable_progress_bar=False, enable_model_summary=False,
-        num_sanity_val_steps=0, limit_val_batches=0, callbacks=[counter], gradient_clip_val=1.0,
-    )  # fmt: skip
+        accelerator="cpu",
+        devices=1,
+        max_steps=total,
+        max_epochs=1,
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        num_sanity_val_steps=0,
+        limit_val_batches=0,
+        callbacks=[counter],
+        gradient_clip_val=1.0,
+    )
     trainer.fit(lit, train_dataloaders=loader)
     after = counter.steps[int(c.warmup_steps) :]
     counted = [s for s in after if "kernels" in s]
@@ -120,7 +130,10 @@ def rollout_frame_counts(
     simulator = instantiate(model_cfg, stats=stats).eval()
     if compiled:
         compile_simulator(simulator, backend="aot_eager")
-    go = lambda n: rollout(simulator, [trajectory], n_frames=simulator.H + 1 + n)  # noqa: E731
+
+    def go(n: int) -> None:
+        rollout(simulator, [trajectory], n_frames=simulator.H + 1 + n)
+
     go(2 * frames)  # warm-up (compiled: the compiles of every region)
     counted = {}
     for n in (frames, 2 * frames):
@@ -162,12 +175,11 @@ def gpu_readiness(cfg: DictConfig, trajectories: list, stats: dict, start) -> di
         model = OmegaConf.merge(cfg.model, c.model, {"graph": {"fixed_capacity": fixed}})
         train = training_step_counts(model, c.lit, trajectories, stats, c, compiled)
         frame = rollout_frame_counts(model, stats, start, int(c.rollout_frames), compiled)
-        show = lambda x, f: "–" if x is None else f"{x:{f}}"  # noqa: E731
         print(
             f"gpu readiness{suffix.replace('_', ' ')}: training step "
-            f"{show(train['syncs'], '')} syncs, {show(train['kernels'], '')} kernels, "
-            f"{show(train['host_ms'], '.1f')} ms; rollout frame {show(frame['syncs'], '.1f')} "
-            f"syncs, {frame['kernels']:.0f} kernels, {show(frame['host_ms'], '.1f')} ms",
+            f"{fmt_as(train['syncs'], '')} syncs, {fmt_as(train['kernels'], '')} kernels, "
+            f"{fmt_as(train['host_ms'], '.1f')} ms; rollout frame {fmt_as(frame['syncs'], '.1f')} "
+            f"syncs, {frame['kernels']:.0f} kernels, {fmt_as(frame['host_ms'], '.1f')} ms",
             flush=True,
         )
         out |= {f"train_step{suffix}": train, f"rollout_frame{suffix}": frame}

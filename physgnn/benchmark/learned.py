@@ -49,8 +49,18 @@ def step_once(sim, state) -> tuple[dict, tuple | None]:
     with timer.watch(sim):
         vel, angvel = timer.predict(sim, state)
     rotate, hold = sim.rotating(state), getattr(sim, "hold", None)
-    timer.integrate(integrator.step, state.pos, state.quat, state.vel, state.angvel, vel, angvel,
-                    state.scene_dt, rotate, hold)  # fmt: skip
+    timer.integrate(
+        integrator.step,
+        state.pos,
+        state.quat,
+        state.vel,
+        state.angvel,
+        vel,
+        angvel,
+        state.scene_dt,
+        rotate,
+        hold,
+    )
     t = timer.timings
     secs = {"graph": t["graph"], "network": t["network"], "integrate": t["integration"]}
     return secs | {"total": time.perf_counter() - t0}, (timer.sizes[-1] if timer.sizes else None)

@@ -12,7 +12,7 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.layouts import arena_planes, materials_array
-from physgnn.physics.scene import GROUND, Effects, Scene
+from physgnn.physics.scene import GROUND, Effects, Scene, as_float32
 
 
 def bench_scene(
@@ -130,19 +130,18 @@ def resting_scene(scene_cfg: DictConfig, resting: int, moving: int, rng, n_frame
     vel = np.zeros((n, 3))
     vel[resting:, :2] = rng.normal(0, 3, (moving, 2))
     planes, kinds = arena_planes(side, c["wall_height"])
-    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     quat = np.zeros((n, 4))
     quat[:, 0] = 1
     return Scene(
         name="resting_plus_moving",
-        radius=f32(np.full(n, r)),
-        mass=f32(np.full(n, c["density"] * 4 / 3 * np.pi * r**3)),
+        radius=as_float32(np.full(n, r)),
+        mass=as_float32(np.full(n, c["density"] * 4 / 3 * np.pi * r**3)),
         material=np.zeros(n, dtype=np.int64),
-        pos=f32(np.concatenate([rest, fly])),
-        quat=f32(quat),
-        vel=f32(vel),
-        angvel=f32(np.zeros((n, 3))),
-        planes=f32(planes),
+        pos=as_float32(np.concatenate([rest, fly])),
+        quat=as_float32(quat),
+        vel=as_float32(vel),
+        angvel=as_float32(np.zeros((n, 3))),
+        planes=as_float32(planes),
         plane_kind=kinds,
         materials=materials_array(c["materials"]),
         dt=float(c["dt"]),

@@ -34,10 +34,19 @@ from torch.utils._python_dispatch import TorchDispatchMode
 
 aten = torch.ops.aten
 _ALWAYS = {
-    aten._local_scalar_dense, aten.nonzero, aten.argwhere, aten.masked_select,
-    aten._unique, aten._unique2, aten.unique_dim, aten.unique_consecutive,
-    aten.unique_dim_consecutive, aten.bincount, aten.equal, aten.is_nonzero,
-}  # fmt: skip
+    aten._local_scalar_dense,
+    aten.nonzero,
+    aten.argwhere,
+    aten.masked_select,
+    aten._unique,
+    aten._unique2,
+    aten.unique_dim,
+    aten.unique_consecutive,
+    aten.unique_dim_consecutive,
+    aten.bincount,
+    aten.equal,
+    aten.is_nonzero,
+}
 _MASK_INDEXING = {aten.index, aten.index_put, aten.index_put_, aten._index_put_impl_}
 _LIFTS = {aten.lift_fresh, aten.lift_fresh_copy}
 _COPIES = {aten._to_copy, aten.copy_}

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from physgnn.benchmark.profile import PARTS
-from physgnn.report.format import md_table
+from physgnn.report.format import fmt_as, md_table
 
 
 def training_table(extra: dict) -> str:
@@ -71,10 +71,9 @@ def gpu_readiness_section(result: dict) -> list[str]:
     g = result.get("gpu_readiness")
     if not g:
         return []
-    show = lambda x, f=".1f": "–" if x is None else f"{x:{f}}"  # noqa: E731 (not counted)
     body = [
-        [part.replace("_", " "), show(c["syncs"]), show(c.get("copies", 0))]
-        + [show(c["kernels"], ".0f"), show(c["host_ms"])]
+        [part.replace("_", " "), fmt_as(c["syncs"]), fmt_as(c.get("copies", 0))]
+        + [fmt_as(c["kernels"], ".0f"), fmt_as(c["host_ms"])]
         for part, c in g.items()
     ]
     return [
@@ -90,25 +89,32 @@ def gpu_readiness_section(result: dict) -> list[str]:
     ]
 
 
+def _failed(row: dict, cells: int) -> list[str]:
+    """``cells`` cells of a row whose measurement failed: the error, then dashes."""
+    return [f"failed: {row['error']}"] + ["–"] * (cells - 1)
+
+
 def gpu_section(result: dict) -> list[str]:
     """The GPU rows of ``make bench`` (physgnn/benchmark/gpu.py), or the line saying why none."""
     g = result.get("gpu")
     if not g:
         return ["## GPU", "Skipped: torch saw no CUDA device in this run."]
-    mib = lambda x: "–" if x is None else f"{x:.0f}"  # noqa: E731
-    failed = lambda r, n: [f"failed: {r['error']}"] + ["–"] * (n - 1)  # noqa: E731
     train = [
         [r["variant"]]
         + (
-            failed(r, 3)
+            _failed(r, 3)
             if "error" in r
-            else [f"{r['steps_per_s']:.1f}", f"{r['nodes_per_s']:.0f}", mib(r["peak_mib"])]
+            else [
+                f"{r['steps_per_s']:.1f}",
+                f"{r['nodes_per_s']:.0f}",
+                fmt_as(r["peak_mib"], ".0f"),
+            ]
         )
         for r in g["training"]
     ]
     frames = [
         [f"{r['n_spheres']}", r.get("variant", "eager")]
-        + (failed(r, 2) if "error" in r else [f"{r['fps']:.1f}", mib(r["peak_mib"])])
+        + (_failed(r, 2) if "error" in r else [f"{r['fps']:.1f}", fmt_as(r["peak_mib"], ".0f")])
         for r in g["rollout"]
     ]
     return [

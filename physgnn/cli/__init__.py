@@ -82,8 +82,12 @@ DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPER
 
 
 # What torch and h5py say (in a RuntimeError) when a write hit a full or read-only disk.
-DISK_WORDS = ("No space left on device", "Read-only file system", "file write failed",
-              "Disk quota exceeded")  # fmt: skip
+DISK_WORDS = (
+    "No space left on device",
+    "Read-only file system",
+    "file write failed",
+    "Disk quota exceeded",
+)
 
 
 def disk_problem(err: BaseException) -> bool:
@@ -218,8 +222,9 @@ def run_dir_is_hydras(argv: list[str]) -> list[str]:
     return argv
 
 
-def _outputs_checked(hydra_main: Callable, before: Callable | None = None,
-                     name: str = "") -> Callable:  # fmt: skip
+def _outputs_checked(
+    hydra_main: Callable, before: Callable | None = None, name: str = ""
+) -> Callable:
     """``hydra_main`` after :func:`check_outputs_env` (command ``name``) and ``before(argv)``
     (their errors printed as one line). ``main(argv)`` runs it as if ``argv`` followed the
     command on the command line (default: ``sys.argv[1:]`` as it is)."""

@@ -42,8 +42,11 @@ def check_outputs_env(argv: list[str] | None = None, own: str | None = "paths.ou
             f"PHYSGNN_OUTPUTS={outputs} is a file: set it to a folder (physgnn writes its data, "
             "runs and reports there), or unset it to write into ./outputs"
         )
-    given = dict(arg.lstrip("+").partition("=")[::2] for arg in (
-        sys.argv[1:] if argv is None else argv) if "=" in arg)  # fmt: skip
+    given = dict(
+        arg.lstrip("+").partition("=")[::2]
+        for arg in (sys.argv[1:] if argv is None else argv)
+        if "=" in arg
+    )
     value = given.get("paths.outputs")
     if value and os.path.exists(value) and not os.path.isdir(value):
         raise ConfigError(
@@ -53,8 +56,11 @@ def check_outputs_env(argv: list[str] | None = None, own: str | None = "paths.ou
     keys = [k for k in (*OUTPUT_KEYS, own) if k and k != "paths.outputs" and given.get(k)]
     named = {key: (key, given[key]) for key in keys}
     if own is not None and not named:  # the command's folder lies under paths.outputs
-        named["paths.outputs"] = ("paths.outputs", value) if value else (
-            ("PHYSGNN_OUTPUTS", outputs) if outputs else ("paths.outputs", "outputs"))  # fmt: skip
+        named["paths.outputs"] = (
+            ("paths.outputs", value)
+            if value
+            else (("PHYSGNN_OUTPUTS", outputs) if outputs else ("paths.outputs", "outputs"))
+        )
     for key, (name, folder) in named.items():
         why = unwritable(folder)
         if why:

@@ -124,10 +124,15 @@ def _unread(cfg: DictConfig, key: str, command: str) -> str | None:
         if isinstance(node, DictConfig) and "_target_" in node:
             return _not_an_argument(node, ".".join(parts[:depth]), parts[depth])
     like = _resembling(cfg, key)
-    hint = f"did you mean {' or '.join(like)}? (no '+': it is set like any key)" if like else (
-        "check the key's spelling")  # fmt: skip
-    return (f"{key} is not a key of the {command} config and nothing reads it ('+' adds a "
-            f"key that is not there): {hint}")  # fmt: skip
+    hint = (
+        f"did you mean {' or '.join(like)}? (no '+': it is set like any key)"
+        if like
+        else "check the key's spelling"
+    )
+    return (
+        f"{key} is not a key of the {command} config and nothing reads it ('+' adds a "
+        f"key that is not there): {hint}"
+    )
 
 
 def _is_group(key: str) -> bool:
@@ -150,8 +155,11 @@ def _not_an_argument(node: DictConfig, section: str, name: str) -> str | None:
     known = [k for k in params if k not in ("self", "args", "kwargs")]
     like = [f"{k}.{name}" for k in _nodes_taking(node, name)]  # model.M: model.network.M
     like = like or difflib.get_close_matches(name, known, n=2)
-    hint = f"did you mean {' or '.join(f'{section}.{k}' for k in like)}?" if like else (
-        f"known: {', '.join(known)}")  # fmt: skip
+    hint = (
+        f"did you mean {' or '.join(f'{section}.{k}' for k in like)}?"
+        if like
+        else f"known: {', '.join(known)}"
+    )
     return f"{section}.{name} is not an argument of {node._target_} ({hint})"
 
 

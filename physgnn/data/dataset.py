@@ -237,6 +237,10 @@ def _mean_std(x: np.ndarray, axis=0) -> dict:
     }
 
 
+def _float64(a) -> torch.Tensor:
+    return torch.as_tensor(np.asarray(a, dtype=np.float64))
+
+
 def compute_stats(trajectories: list[Trajectory]) -> dict:
     """Normalisation statistics (contract in ARCHITECTURE.md) from finite-difference
     velocities; ``n_pairs`` is the number of (frame t, frame t+1) state pairs."""
@@ -244,9 +248,8 @@ def compute_stats(trajectories: list[Trajectory]) -> dict:
         raise DatasetError("cannot compute statistics of an empty split")
     vel, angvel, dvel, dangvel, radius, mass = [], [], [], [], [], []
     for tr in trajectories:
-        f64 = lambda a: torch.as_tensor(np.asarray(a, dtype=np.float64))  # noqa: E731
         v, w = finite_difference_velocities(
-            f64(tr.pos), f64(tr.quat), f64(tr.vel[0]), f64(tr.angvel[0]), tr.dt
+            _float64(tr.pos), _float64(tr.quat), _float64(tr.vel[0]), _float64(tr.angvel[0]), tr.dt
         )
         v, w = v.numpy(), w.numpy()
         vel.append(v.reshape(-1, 3))

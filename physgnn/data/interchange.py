@@ -60,18 +60,23 @@ def metadata(splits: dict[str, list[Trajectory]]) -> dict:
     acc = np.concatenate([np.diff(s, axis=0).reshape(-1, 3) for s in steps])
     radii = np.concatenate([t.radius for t in trajs]).astype(np.float64)
     out = {
-        "dim": 3, "dt": float(trajs[0].dt), "solver": "pybullet (physgnn)",
+        "dim": 3,
+        "dt": float(trajs[0].dt),
+        "solver": "pybullet (physgnn)",
         "bounds": np.stack([pos.min(0), pos.max(0)], axis=1).tolist(),
         "sequence_length": min(t.n_frames for t in trajs),
         "default_connectivity_radius": 3.0 * float(radii.max()),
         "dx": float(np.cbrt(np.mean(4 / 3 * np.pi * radii**3))),
         "num_particles_max": max(t.n_spheres for t in trajs),
-        "periodic_boundary_conditions": [False, False, False], "write_every": 1,
-        "vel_mean": vel.mean(0).tolist(), "vel_std": vel.std(0).tolist(),
-        "acc_mean": acc.mean(0).tolist(), "acc_std": acc.std(0).tolist(),
+        "periodic_boundary_conditions": [False, False, False],
+        "write_every": 1,
+        "vel_mean": vel.mean(0).tolist(),
+        "vel_std": vel.std(0).tolist(),
+        "acc_mean": acc.mean(0).tolist(),
+        "acc_std": acc.std(0).tolist(),
         "material_columns": MATERIAL_COLUMNS,
         "materials": {k: [t.materials.tolist() for t in v] for k, v in splits.items()},
-    }  # fmt: skip
+    }
     for split, items in splits.items():
         out[f"sequence_length_{split}"] = min(t.n_frames for t in items)
     return out

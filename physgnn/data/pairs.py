@@ -16,6 +16,7 @@ would give (same fields, same values, same order), without building one object p
 
 from __future__ import annotations
 
+import functools
 import math
 
 import torch
@@ -49,8 +50,16 @@ class PairDataset(Dataset):
         self.device = torch.device("cpu")
         self.host = {"pairs": self.pairs, "n_spheres": self.n_spheres, "n_planes": self.n_planes}
 
-    _ON_DEVICE = ("pairs", "n_spheres", "n_planes", "frame_start", "sphere_start", "plane_start",
-                  "dt", "effects")  # fmt: skip
+    _ON_DEVICE = (
+        "pairs",
+        "n_spheres",
+        "n_planes",
+        "frame_start",
+        "sphere_start",
+        "plane_start",
+        "dt",
+        "effects",
+    )
 
     def to(self, device) -> PairDataset:
         """Keep the tables on ``device`` (in place): a batch is then a few gathers there, with
@@ -66,15 +75,14 @@ class PairDataset(Dataset):
         trajectory i, frame t, sphere n = ``frame_start[i] + t·N_i + n``), the per-sphere
         arrays ``[Σ N_i]``, the planes ``[Σ S_i, ·]``, and per trajectory ``n_spheres``,
         ``n_planes``, their first rows, ``dt [n_traj]`` and ``effects [n_traj, 5]``."""
-        long = lambda values: torch.tensor(values, dtype=torch.long)  # noqa: E731
+        long = functools.partial(torch.tensor, dtype=torch.long)
         self.n_spheres = long([f.pos.shape[1] for f in frames])
         self.n_planes = long([f.static["planes"].shape[0] for f in frames])
         rows = long([f.pos.shape[0] * f.pos.shape[1] for f in frames])
         self.frame_start, self.sphere_start, self.plane_start = (
             torch.cumsum(c, 0) - c for c in (rows, self.n_spheres, self.n_planes)
         )
-        flat = lambda x: x.reshape(-1, x.shape[-1])  # noqa: E731
-        self.tables = {key: torch.cat([flat(getattr(f, key)) for f in frames]) for key in _DYNAMIC}
+        self.tables = {key: torch.cat([_rows(getattr(f, key)) for f in frames]) for key in _DYNAMIC}
         for key in (*_SPHERE, *_PLANE):
             self.tables[key] = torch.cat([f.static[key] for f in frames])
         self.dt = torch.cat([f.static["dt"] for f in frames])
@@ -123,6 +131,11 @@ class PairDataset(Dataset):
         batch = Batch(_base_cls=SceneState, **fields, batch=node_graph, ptr=ptr)
         batch.host_sizes = sizes  # graph builds then read no size back
         return batch
+
+
+def _rows(x: torch.Tensor) -> torch.Tensor:
+    """``x [..., C]`` as ``[rows, C]``."""
+    return x.reshape(-1, x.shape[-1])
 
 
 def _segments(counts: torch.Tensor, total: int) -> tuple[torch.Tensor, ...]:

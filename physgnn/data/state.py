@@ -21,9 +21,18 @@ from physgnn.physics.trajectory import Trajectory
 
 # Per-sphere fields of a SceneState (first dimension N); the rest are per plane or per scene.
 NODE_KEYS = (
-    "pos", "quat", "vel", "angvel", "radius", "mass", "material", "material_params", "batch",
-    "target_vel", "target_angvel",
-)  # fmt: skip
+    "pos",
+    "quat",
+    "vel",
+    "angvel",
+    "radius",
+    "mass",
+    "material",
+    "material_params",
+    "batch",
+    "target_vel",
+    "target_angvel",
+)
 SCENE_KEYS = ("planes", "plane_kind", "plane_materials", "plane_batch", "dt", "effects", "ptr")
 
 
@@ -89,6 +98,10 @@ def effects_tensor(effects: Effects) -> torch.Tensor:
     return torch.tensor([[getattr(effects, k) for k in EFFECT_NAMES]], dtype=torch.bool)
 
 
+def _float32(a) -> torch.Tensor:
+    return torch.as_tensor(np.asarray(a, dtype=np.float32))
+
+
 class TrajectoryFrames:
     """A trajectory as float32 tensors with its finite-difference velocities precomputed.
 
@@ -99,18 +112,17 @@ class TrajectoryFrames:
 
     def __init__(self, traj: Trajectory):
         self.traj = traj
-        f32 = lambda a: torch.as_tensor(np.asarray(a, dtype=np.float32))  # noqa: E731
-        self.pos, self.quat = f32(traj.pos), f32(traj.quat)
+        self.pos, self.quat = _float32(traj.pos), _float32(traj.quat)
         self.vel, self.angvel = finite_difference_velocities(
-            self.pos, self.quat, f32(traj.vel[0]), f32(traj.angvel[0]), traj.dt
+            self.pos, self.quat, _float32(traj.vel[0]), _float32(traj.angvel[0]), traj.dt
         )
         self.static = dict(
-            radius=f32(traj.radius),
-            mass=f32(traj.mass),
+            radius=_float32(traj.radius),
+            mass=_float32(traj.mass),
             material=torch.as_tensor(np.asarray(traj.material), dtype=torch.long),
-            material_params=f32(np.asarray(traj.materials).reshape(-1, 4)[traj.material]),
-            planes=f32(traj.planes),
-            plane_materials=f32(traj.plane_coefficients),
+            material_params=_float32(np.asarray(traj.materials).reshape(-1, 4)[traj.material]),
+            planes=_float32(traj.planes),
+            plane_materials=_float32(traj.plane_coefficients),
             plane_kind=torch.as_tensor(np.asarray(traj.plane_kind), dtype=torch.long),
             plane_batch=torch.zeros(len(traj.planes), dtype=torch.long),
             dt=torch.tensor([traj.dt], dtype=torch.float32),

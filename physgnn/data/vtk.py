@@ -33,9 +33,13 @@ SERIES = "spheres.vtu.series"
 PLANES = "planes.vtu"
 # (array name, Trajectory field) of each sphere's point data; frame fields per frame
 POINT_ARRAYS = (
-    ("radius", "radius"), ("mass", "mass"), ("material", "material"), ("velocity", "vel"),
-    ("angular_velocity", "angvel"), ("orientation", "quat"),
-)  # fmt: skip
+    ("radius", "radius"),
+    ("mass", "mass"),
+    ("material", "material"),
+    ("velocity", "vel"),
+    ("angular_velocity", "angvel"),
+    ("orientation", "quat"),
+)
 
 
 def _write(path: Path, points: np.ndarray, cells: tuple[str, np.ndarray], **data) -> None:
@@ -114,15 +118,27 @@ def read_vtk(folder: str | Path, name: str = "vtk") -> Trajectory:
         ) from None
     frames = [_read(folder / f["name"]) for f in files]
     dt = times[1] - times[0] if len(files) > 1 else 0.1
-    stack = lambda key: np.stack([f.point_data[key] for f in frames])  # noqa: E731
     planes, kinds = read_planes(folder / PLANES)
     first = frames[0].point_data
     return Trajectory.from_arrays(
-        np.stack([f.points for f in frames]), first["radius"], dt, quat=stack("orientation"),
-        vel=stack("velocity"), angvel=stack("angular_velocity"), mass=first["mass"],
-        material=first["material"], planes=planes, plane_kind=kinds, name=name,
+        np.stack([f.points for f in frames]),
+        first["radius"],
+        dt,
+        quat=_stacked(frames, "orientation"),
+        vel=_stacked(frames, "velocity"),
+        angvel=_stacked(frames, "angular_velocity"),
+        mass=first["mass"],
+        material=first["material"],
+        planes=planes,
+        plane_kind=kinds,
+        name=name,
         effects=Effects(),
-    )  # fmt: skip
+    )
+
+
+def _stacked(frames: list, key: str) -> np.ndarray:
+    """The point data ``key`` of every frame, ``[T, N, ·]``."""
+    return np.stack([f.point_data[key] for f in frames])
 
 
 def read_planes(path: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -52,16 +52,18 @@ def bounce_rows(
         (pred,) = rollout(simulator, [seed], **kwargs)
         apex = _first_apex(pred, radius, dt)
         truth = _truth_ratio(e, height, radius, dt)
-        rows.append({
-            "run": name,
-            "restitution": e,
-            "mass": float(seed.mass[0]),
-            "height": height,
-            "apex": apex,
-            "ratio": apex / (e * e * height),
-            "truth_ratio": truth,
-            "diverged_at": pred.diverged_at,
-        })  # fmt: skip
+        rows.append(
+            {
+                "run": name,
+                "restitution": e,
+                "mass": float(seed.mass[0]),
+                "height": height,
+                "apex": apex,
+                "ratio": apex / (e * e * height),
+                "truth_ratio": truth,
+                "diverged_at": pred.diverged_at,
+            }
+        )
     return rows
 
 

@@ -55,8 +55,17 @@ from physgnn.report.document import write_report
 # What an eval writes into its report_dir (replaced whole by the next eval).
 # The eval's switches: true or false (``save_rollouts=maybe`` is refused, not taken as true).
 FLAGS = ("overwrite", "videos", "save_rollouts", "sleeping_compare", "stability")
-REPORT_OUTPUTS = ("report.md", "metrics.csv", "stability.csv", "freefall.csv", "bounce.csv",
-                  "invariance.csv", "figures", "videos", "rollouts")  # fmt: skip
+REPORT_OUTPUTS = (
+    "report.md",
+    "metrics.csv",
+    "stability.csv",
+    "freefall.csv",
+    "bounce.csv",
+    "invariance.csv",
+    "figures",
+    "videos",
+    "rollouts",
+)
 MATERIAL_KEYS = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
 
 
@@ -84,8 +93,9 @@ def check_eval_values(cfg: DictConfig) -> None:
     ``tol`` a number >= 0; each switch true or false; ``pybullet`` null or its substep
     counts and processes."""
     frames = cfg.get("max_frames")
-    if frames is not None and (not isinstance(frames, int) or isinstance(frames, bool)
-                               or frames < 2):  # fmt: skip
+    if frames is not None and (
+        not isinstance(frames, int) or isinstance(frames, bool) or frames < 2
+    ):
         raise ConfigError(
             f"max_frames must be a whole number >= 2 or null (whole trajectories), got {frames!r}"
         )
@@ -223,5 +233,10 @@ def made_by(pred, run: str) -> dict:
     it diverged (-1: it did not) and how its velocities were obtained."""
     diverged = -1 if pred.diverged_at is None else int(pred.diverged_at)
     velocity = "finite differences of the predicted positions"
-    return {"made_by": "physgnn learned simulator", "run": run, "start": int(pred.start),
-            "diverged_at": diverged, "velocity": velocity}  # fmt: skip
+    return {
+        "made_by": "physgnn learned simulator",
+        "run": run,
+        "start": int(pred.start),
+        "diverged_at": diverged,
+        "velocity": velocity,
+    }

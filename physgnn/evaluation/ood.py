@@ -20,6 +20,10 @@ MARGIN = 0.1
 MATERIAL_KEYS = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
 
 
+def _ball_mass(radius: float, density: float) -> float:
+    return density * 4.0 / 3.0 * math.pi * radius**3
+
+
 def training_ranges(cfg) -> dict[str, tuple[float, float]]:
     """``{quantity: (low, high)}`` of the run config's training family (empty when the config
     names none)."""
@@ -27,9 +31,8 @@ def training_ranges(cfg) -> dict[str, tuple[float, float]]:
     if family is None or "radius_min" not in family:
         return {}
     r0, r1, rho = float(family.radius_min), float(family.radius_max), float(family.density)
-    ball = lambda r: rho * 4.0 / 3.0 * math.pi * r**3  # noqa: E731
     fall = math.sqrt(2 * 9.81 * float(family.get("h_max", 0.0)))
-    ranges = {"radius (m)": (r0, r1), "mass (kg)": (ball(r0), ball(r1))}
+    ranges = {"radius (m)": (r0, r1), "mass (kg)": (_ball_mass(r0, rho), _ball_mass(r1, rho))}
     ranges["speed (m/s)"] = (0.0, float(family.get("max_speed0", 0.0)) + fall)
     ranges["dt (s)"] = (float(family.dt), float(family.dt))
     drawn = family.get("material_ranges") or {}
@@ -68,5 +71,7 @@ def outside(scene, cfg) -> list[str]:
 def warning_text(name: str, found: list[str]) -> str:
     """The one line that says ``name`` lies outside the training ranges (``found``: what
     :func:`outside` returned)."""
-    return (f"{name} lies outside what the run was trained on: {'; '.join(found)}; its rollout "
-            "is extrapolation")  # fmt: skip
+    return (
+        f"{name} lies outside what the run was trained on: {'; '.join(found)}; its rollout "
+        "is extrapolation"
+    )

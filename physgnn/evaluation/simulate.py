@@ -115,8 +115,12 @@ def learned(run_dir: str, truth: Trajectory, constraints: int = 0) -> tuple[Traj
     if constraints > 0:
         simulator = ConstrainedSimulator(simulator, constraints)
     if truth.n_spheres * truth.n_frames >= LONG:
-        print(f"rolling the learned simulator out: {truth.n_spheres} spheres, {truth.n_frames} "
-              "frames ...", file=sys.stderr, flush=True)  # fmt: skip
+        print(
+            f"rolling the learned simulator out: {truth.n_spheres} spheres, {truth.n_frames} "
+            "frames ...",
+            file=sys.stderr,
+            flush=True,
+        )
     start = time.perf_counter()
     pred = rollout_prediction(simulator, truth)
     steps = max(pred.n_frames - history - 1, 1)
@@ -133,8 +137,11 @@ def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dic
     checked_frames(truth.pos, "truth pos")  # named as the truth's, before a copy of it is measured
     mine = pred if pred is not None else truth.with_finite_velocities()
     m = metrics.trajectory_metrics(mine, truth, tol=tol, horizon=20)
-    keys = (*METRIC_KEYS, *metrics.PENETRATION_KEYS) if pred is not None else (
-        "energy_gain", *metrics.PENETRATION_KEYS)  # fmt: skip
+    keys = (
+        (*METRIC_KEYS, *metrics.PENETRATION_KEYS)
+        if pred is not None
+        else ("energy_gain", *metrics.PENETRATION_KEYS)
+    )
     out = {k: m.get(k) for k in keys}
     if pred is not None and pred.diverged_at is not None:
         out = dict.fromkeys(keys) | {"diverged_at": pred.diverged_at}
@@ -164,10 +171,12 @@ def _simulate_into(cfg, scene_text, folders: tuple[Path, Path], how: tuple) -> d
     start = time.perf_counter()
     truth = simulate_with_progress(scene)
     truth.attrs.update(
-        group="truth", scene=scene.name, scene_config=text,
-        velocity="the engine's (pybullet)", ms_per_frame=1000 * (time.perf_counter() - start)
-        / max(scene.n_frames - 1, 1),
-    )  # fmt: skip
+        group="truth",
+        scene=scene.name,
+        scene_config=text,
+        velocity="the engine's (pybullet)",
+        ms_per_frame=1000 * (time.perf_counter() - start) / max(scene.n_frames - 1, 1),
+    )
     pred, source = (None, {}) if not cfg.get("run") else learned(str(cfg.run), truth, steps)
     warnings = outside(scene, source.get("cfg")) if pred is not None else []
     if warnings:
@@ -175,13 +184,19 @@ def _simulate_into(cfg, scene_text, folders: tuple[Path, Path], how: tuple) -> d
     trajs = [truth] if pred is None else [truth, with_provenance(pred, truth, source)]
     h5 = write_split(out / "simulate.h5", trajs, {"split": "simulate", "preset": scene.name})
     result = {
-        "scene": scene.name, "n_spheres": scene.n_spheres, "n_frames": scene.n_frames,
-        "run": source.get("checkpoint"), "constraints": steps, "warnings": warnings,
-        "ms_per_frame": {"pybullet": truth.attrs["ms_per_frame"],
-                         "learned": source.get("ms_per_frame")},
+        "scene": scene.name,
+        "n_spheres": scene.n_spheres,
+        "n_frames": scene.n_frames,
+        "run": source.get("checkpoint"),
+        "constraints": steps,
+        "warnings": warnings,
+        "ms_per_frame": {
+            "pybullet": truth.attrs["ms_per_frame"],
+            "learned": source.get("ms_per_frame"),
+        },
         "metrics": scene_metrics(truth, pred, tol),
         "files": {"hdf5": str(h5)},
-    }  # fmt: skip
+    }
     if video:
         result["files"].update(write_videos(out, truth, pred, bool(source)))
     result["files"] = {k: str(final / Path(v).name) for k, v in result["files"].items()}
@@ -221,14 +236,19 @@ def with_provenance(pred: Trajectory, truth: Trajectory, source: dict) -> Trajec
     """The prediction with attributes that say what made it (not the truth's engine's):
     the run, its checkpoint, H, the constraint iterations, ``diverged_at`` (-1: it did not),
     how its velocities were obtained and ms per frame."""
-    attrs = {"group": "prediction", "scene": truth.attrs.get("scene", truth.name),
-             "scene_config": truth.attrs.get("scene_config", ""),
-             "made_by": "physgnn learned simulator", "run": source.get("run", ""),
-             "checkpoint": Path(source.get("checkpoint", "")).name, "H": source.get("H", -1),
-             "constraints": source.get("constraints", 0),
-             "diverged_at": -1 if pred.diverged_at is None else int(pred.diverged_at),
-             "velocity": "finite differences of the predicted positions",
-             "ms_per_frame": source.get("ms_per_frame", -1.0)}  # fmt: skip
+    attrs = {
+        "group": "prediction",
+        "scene": truth.attrs.get("scene", truth.name),
+        "scene_config": truth.attrs.get("scene_config", ""),
+        "made_by": "physgnn learned simulator",
+        "run": source.get("run", ""),
+        "checkpoint": Path(source.get("checkpoint", "")).name,
+        "H": source.get("H", -1),
+        "constraints": source.get("constraints", 0),
+        "diverged_at": -1 if pred.diverged_at is None else int(pred.diverged_at),
+        "velocity": "finite differences of the predicted positions",
+        "ms_per_frame": source.get("ms_per_frame", -1.0),
+    }
     return dataclasses.replace(pred, attrs=attrs)
 
 
@@ -247,8 +267,10 @@ def summary(result: dict) -> str:
     metrics_ = result["metrics"]
     m = ", ".join(f"{k} {v:.3g}" for k, v in metrics_.items() if v is not None)
     if metrics_.get("diverged_at") is not None:
-        m = (f"the prediction DIVERGED at frame {int(metrics_['diverged_at'])}: no metrics "
-             "(its frames before that would read as a good rollout)")  # fmt: skip
+        m = (
+            f"the prediction DIVERGED at frame {int(metrics_['diverged_at'])}: no metrics "
+            "(its frames before that would read as a good rollout)"
+        )
     lines = [f"{result['scene']}: {result['n_spheres']} spheres, {result['n_frames']} frames; {m}"]
     lines += [f"  {kind}: {path}" for kind, path in result["files"].items()]
     return "\n".join(lines)

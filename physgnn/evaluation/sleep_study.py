@@ -28,8 +28,18 @@ from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
 from physgnn.training.runs import load_run
 
-COLUMNS = ("scene", "sleeping", "rest_drift", "rest_drift_mean", "mse", "mse20", "chamfer",
-           "frozen_pct", "ms_per_frame", "diverged_at")  # fmt: skip
+COLUMNS = (
+    "scene",
+    "sleeping",
+    "rest_drift",
+    "rest_drift_mean",
+    "mse",
+    "mse20",
+    "chamfer",
+    "frozen_pct",
+    "ms_per_frame",
+    "diverged_at",
+)
 
 
 def resting_pile(cfg: DictConfig) -> Trajectory:
@@ -53,15 +63,20 @@ def compare(simulator, traj: Trajectory, sleep: dict) -> list[dict]:
         (res,) = rollout(simulator, [traj], sleeping=on, sleep=sleep)
         m = metrics.trajectory_metrics(res, traj, horizon=20)
         drift = metrics.drift_before_hit(res.pos, traj.pos, traj.radius, res.start)
-        rows.append(dict(
-            scene=traj.name, sleeping="on" if on else "off",
-            rest_drift=float(drift.max()) if drift.size else None,
-            rest_drift_mean=float(drift.mean()) if drift.size else None,
-            mse=m["mse"], mse20=m["mse20"], chamfer=m["chamfer"],
-            frozen_pct=frozen_share(res.pos, res.start),
-            ms_per_frame=1000.0 / res.fps if res.fps else 0.0,
-            diverged_at=res.diverged_at,
-        ))  # fmt: skip
+        rows.append(
+            dict(
+                scene=traj.name,
+                sleeping="on" if on else "off",
+                rest_drift=float(drift.max()) if drift.size else None,
+                rest_drift_mean=float(drift.mean()) if drift.size else None,
+                mse=m["mse"],
+                mse20=m["mse20"],
+                chamfer=m["chamfer"],
+                frozen_pct=frozen_share(res.pos, res.start),
+                ms_per_frame=1000.0 / res.fps if res.fps else 0.0,
+                diverged_at=res.diverged_at,
+            )
+        )
     return rows
 
 

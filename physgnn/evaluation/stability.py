@@ -67,8 +67,9 @@ def rollout_rows(
     """Roll ``simulator`` out on every trajectory (from its first H+1 frames; keyword
     arguments of :func:`physgnn.rollout.rollout`, e.g. ``sleeping``) and measure."""
     rows = []
-    for truth, pred in zip(trajectories, rollout(simulator, trajectories, **rollout_kwargs),
-                           strict=True):  # fmt: skip
+    for truth, pred in zip(
+        trajectories, rollout(simulator, trajectories, **rollout_kwargs), strict=True
+    ):
         row = measure(truth, pred, rest_tol)
         rows.append({"run": name, "experiment": experiment, "source": source, **row})
     return rows

@@ -83,9 +83,12 @@ class Renderer:
         """A dark disc on the ground under a sphere (TinyRenderer's own shadows are unusable
         at these scales): it tells a sphere in the air from one on the ground."""
         shape = p.createVisualShape(
-            p.GEOM_CYLINDER, radius=0.9 * r, length=SHADOW_Z, rgbaColor=[0.5, 0.48, 0.43, 1],
+            p.GEOM_CYLINDER,
+            radius=0.9 * r,
+            length=SHADOW_Z,
+            rgbaColor=[0.5, 0.48, 0.43, 1],
             physicsClientId=self.cid,
-        )  # fmt: skip
+        )
         return p.createMultiBody(0, -1, shape, physicsClientId=self.cid)
 
     def _plane(self, row: np.ndarray, kind: int, centre, distance: float) -> None:
@@ -112,9 +115,15 @@ class Renderer:
                 shadow, ground, [0, 0, 0, 1], physicsClientId=self.cid
             )
         _, _, rgba, _, _ = p.getCameraImage(
-            WIDTH, HEIGHT, self.view, self.proj, shadow=0, lightDirection=[0.4, -0.6, 1.0],
-            renderer=p.ER_TINY_RENDERER, physicsClientId=self.cid,
-        )  # fmt: skip
+            WIDTH,
+            HEIGHT,
+            self.view,
+            self.proj,
+            shadow=0,
+            lightDirection=[0.4, -0.6, 1.0],
+            renderer=p.ER_TINY_RENDERER,
+            physicsClientId=self.cid,
+        )
         return np.asarray(rgba, np.uint8).reshape(HEIGHT, WIDTH, 4)[..., :3]
 
     def __enter__(self) -> Renderer:

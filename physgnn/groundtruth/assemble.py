@@ -9,7 +9,14 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.groundtruth.layouts import materials_array, random_quaternions
-from physgnn.physics.scene import PLANE_MATERIAL, Effects, Material, Scene, SceneError
+from physgnn.physics.scene import (
+    PLANE_MATERIAL,
+    Effects,
+    Material,
+    Scene,
+    SceneError,
+    as_float32,
+)
 
 MATERIAL_KEYS = tuple(f.name for f in dataclasses.fields(Material))
 
@@ -82,19 +89,18 @@ def finish_scene(
     if material is None:
         material = rng.integers(0, len(mats), size=n)
     zeros = np.zeros((n, 3))
-    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     scene = Scene(
         name=c["name"],
-        radius=f32(radius),
-        mass=f32(c["density"] * 4 / 3 * np.pi * radius**3),
+        radius=as_float32(radius),
+        mass=as_float32(c["density"] * 4 / 3 * np.pi * radius**3),
         material=np.asarray(material, dtype=np.int64),
-        pos=f32(pos),
-        quat=f32(random_quaternions(rng, n)),
-        vel=f32(zeros if vel is None else vel),
-        angvel=f32(zeros if angvel is None else angvel),
-        planes=f32(planes),
+        pos=as_float32(pos),
+        quat=as_float32(random_quaternions(rng, n)),
+        vel=as_float32(zeros if vel is None else vel),
+        angvel=as_float32(zeros if angvel is None else angvel),
+        planes=as_float32(planes),
         plane_kind=np.asarray(kinds, dtype=np.int64),
-        materials=f32(mats),
+        materials=as_float32(mats),
         dt=float(c["dt"]),
         n_frames=int(c["n_frames"]),
         effects=Effects.from_dict(c.get("effects")),

@@ -28,7 +28,7 @@ from scipy.spatial.transform import Rotation
 
 from physgnn.groundtruth.settings import EngineSettings
 from physgnn.physics import quaternion as Q
-from physgnn.physics.scene import GROUND, Scene, default_plane_materials
+from physgnn.physics.scene import GROUND, Scene, as_float32, default_plane_materials
 from physgnn.physics.trajectory import Trajectory
 
 
@@ -242,8 +242,12 @@ def _stored(scene: Scene, pos, quat, vel, angvel) -> dict[str, np.ndarray]:
     quat = Q.from_xyzw(torch.from_numpy(quat)).numpy()
     if not scene.effects.rotation:
         angvel = np.zeros_like(angvel)
-    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
-    return {"pos": f32(pos), "quat": f32(quat), "vel": f32(vel), "angvel": f32(angvel)}
+    return {
+        "pos": as_float32(pos),
+        "quat": as_float32(quat),
+        "vel": as_float32(vel),
+        "angvel": as_float32(angvel),
+    }
 
 
 def simulate(
@@ -262,18 +266,19 @@ def simulate(
         frames = _run(scene, s, cid, on_frame)
     finally:
         p.disconnect(cid)
-    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     gravity = scene.gravity if scene.effects.gravity else (0.0, 0.0, 0.0)
     return Trajectory(
         name=scene.name,
         **_stored(scene, *frames),
-        radius=f32(scene.radius),
-        mass=f32(scene.mass),
+        radius=as_float32(scene.radius),
+        mass=as_float32(scene.mass),
         material=np.asarray(scene.material, dtype=np.int64),
-        planes=f32(scene.planes),
+        planes=as_float32(scene.planes),
         plane_kind=np.asarray(scene.plane_kind, dtype=np.int64),
-        materials=f32(scene.materials),
-        plane_materials=None if scene.plane_materials is None else f32(scene.plane_materials),
+        materials=as_float32(scene.materials),
+        plane_materials=None
+        if scene.plane_materials is None
+        else as_float32(scene.plane_materials),
         dt=float(scene.dt),
         effects=scene.effects,
         attrs={

@@ -166,7 +166,10 @@ def _hollows(rng, pos, radius, r: float, max_gap: float) -> np.ndarray:
         return np.zeros((0, 3))
     i, j, k = np.array(list(combinations(range(m), 3))).T
     reach = radius + r + max_gap  # a sphere touching a and b has them this close at most
-    near = lambda a, b: np.linalg.norm(pos[a] - pos[b], axis=1) <= reach[a] + reach[b]  # noqa: E731
+
+    def near(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(pos[a] - pos[b], axis=1) <= reach[a] + reach[b]
+
     keep = near(i, j) & near(i, k) & near(j, k)
     out = []
     for a, b, c in zip(i[keep], j[keep], k[keep], strict=True):

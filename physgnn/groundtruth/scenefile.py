@@ -45,6 +45,7 @@ from physgnn.physics.scene import (
     Material,
     Scene,
     SceneError,
+    as_float32,
     ground_plane,
 )
 
@@ -133,6 +134,11 @@ def check_placement(where: str, pos, radius, planes) -> None:
         raise SceneError(str(e).replace(f"scene '{where}'", where)) from None
 
 
+def _column(rows: list[dict], key: str) -> np.ndarray:
+    """``key`` of every sphere row, stacked: ``[N, ·]``."""
+    return np.stack([np.asarray(r[key]) for r in rows])
+
+
 def scene_from_dict(d, where: str = "scene") -> Scene:
     """A validated :class:`Scene` from a parsed scene file; ``where`` prefixes errors."""
     d = known_keys(where, d, SCHEMA)
@@ -143,28 +149,26 @@ def scene_from_dict(d, where: str = "scene") -> Scene:
     rows = [_sphere(f"{where}: spheres[{i}]", s, names) for i, s in enumerate(spheres)]
     planes = [_plane(f"{where}: planes[{i}]", p) for i, p in enumerate(d.get("planes") or [])]
     ground_e = restitution(f"{where}: ground_restitution", d.get("ground_restitution", 1.0))
-    col = lambda k: np.stack([np.asarray(r[k]) for r in rows])  # noqa: E731
-    pos, radius = col("pos"), col("radius")
+    pos, radius = _column(rows, "pos"), _column(rows, "radius")
     plane_rows = np.stack([ground_plane().astype(np.float64), *[p for p, _, _ in planes]])
     check_placement(where, pos, radius, plane_rows)
     try:
         effects = Effects.from_dict(d.get("effects"))
     except (SceneError, TypeError) as e:
         raise SceneError(f"{where}: effects: {e}") from None
-    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)  # noqa: E731
     scene = Scene(
         name=str(d.get("name", "scene")),
-        radius=f32(radius),
-        mass=f32(col("mass")),
-        material=col("material").astype(np.int64),
-        pos=f32(pos),
-        quat=f32(col("quat")),
-        vel=f32(col("vel")),
-        angvel=f32(col("angvel")),
-        planes=f32(plane_rows),
+        radius=as_float32(radius),
+        mass=as_float32(_column(rows, "mass")),
+        material=_column(rows, "material").astype(np.int64),
+        pos=as_float32(pos),
+        quat=as_float32(_column(rows, "quat")),
+        vel=as_float32(_column(rows, "vel")),
+        angvel=as_float32(_column(rows, "angvel")),
+        planes=as_float32(plane_rows),
         plane_kind=np.array([GROUND] + [k for _, k, _ in planes], dtype=np.int64),
         plane_materials=_plane_materials([ground_e] + [e for *_, e in planes]),
-        materials=f32(materials),
+        materials=as_float32(materials),
         dt=number(f"{where}: dt", d.get("dt", 0.1), positive=True),
         n_frames=check_whole(f"{where}: frames", d.get("frames", 100), 2, FRAMES, SceneError),
         effects=effects,

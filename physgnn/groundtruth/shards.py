@@ -135,8 +135,13 @@ def differences(there, here, key: str = "") -> list[str]:
         return out
     if there == here:
         return []
-    short = lambda v: (r := json.dumps(v))[:40] + ("..." if len(r) > 40 else "")  # noqa: E731
-    return [f"{key}: {short(there)} there, {short(here)} here"]
+    return [f"{key}: {_short(there)} there, {_short(here)} here"]
+
+
+def _short(value) -> str:
+    """``value`` as JSON, cut after 40 characters."""
+    text = json.dumps(value)
+    return text[:40] + ("..." if len(text) > 40 else "")
 
 
 def write_shard(cfg: DictConfig, jobs: list[Job], i: int, n: int, source: Callable) -> Path:

@@ -71,8 +71,9 @@ def _sphere_planes(pos, radius, planes, kinds, ground: bool):
     for plane, kind in zip(planes, kinds, strict=True):
         if (kind == GROUND) != ground:
             continue
-        depth = plane_depth(torch.from_numpy(pos), torch.from_numpy(radius),
-                            torch.from_numpy(plane), int(kind)).numpy()  # fmt: skip
+        depth = plane_depth(
+            torch.from_numpy(pos), torch.from_numpy(radius), torch.from_numpy(plane), int(kind)
+        ).numpy()
         norm_depth = depth / (2.0 * radius)  # [T, N]
         deepest = np.maximum(deepest, norm_depth.max(0))
         depths.append(norm_depth[norm_depth > 0])

@@ -77,6 +77,11 @@ class Material:
 PLANE_MATERIAL = (1.0, 1.0, 0.0, 0.0)
 
 
+def as_float32(a) -> np.ndarray:
+    """``a`` as a contiguous float32 array, the form of a :class:`Scene`'s arrays."""
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
 def default_plane_materials(n_planes: int) -> np.ndarray:
     """``[S, 4]`` float32: :data:`PLANE_MATERIAL` for each of ``n_planes`` planes."""
     return np.tile(np.asarray(PLANE_MATERIAL, dtype=np.float32), (int(n_planes), 1))

@@ -85,9 +85,12 @@ class Trajectory:
         """The same frames with ``v_k = (p_k − p_{k−1})/dt`` (``v_0`` kept), what a rollout
         records. At dt = 0.1 s a bounce inside a frame interval makes this kinetic energy dip
         and recover, which the energy gain counts: the gain a perfect rollout would show."""
-        f64 = lambda a: torch.as_tensor(np.asarray(a, np.float64))  # noqa: E731
         vel, _ = finite_difference_velocities(
-            f64(self.pos), f64(self.quat), f64(self.vel[0]), f64(self.angvel[0]), self.dt
+            _float64(self.pos),
+            _float64(self.quat),
+            _float64(self.vel[0]),
+            _float64(self.angvel[0]),
+            self.dt,
         )
         return dataclasses.replace(self, vel=vel.numpy())
 
@@ -127,20 +130,18 @@ class Trajectory:
         radius = _array("radius", radius if radius.ndim else np.full(n, radius), np.float32, (n,))
         quat = _frames("quat", quat, (t, n, 4), _identity(t, n))
         vel_fd, angvel_fd = _finite_velocities(pos, quat, dt)
-        volume = 4 / 3 * np.pi * radius.astype(np.float64) ** 3
-        static = {
-            "radius": radius,
-            "mass": _frames("mass", mass, (n,), DEFAULT_DENSITY * volume),
-            "material": _frames("material", material, (n,), np.zeros(n), np.int64),
-            "materials": _frames("materials", materials, (None, 4), Material().as_array()[None]),
-            "planes": _frames("planes", planes, (None, 11), ground_plane()[None]),
-            "plane_kind": _frames("plane_kind", plane_kind, (None,), [GROUND], np.int64),
-        }
+        static = _static_fields(radius, mass, material, materials, planes, plane_kind)
         return cls(
-            name=name, pos=pos, quat=quat, dt=float(dt), effects=effects or Effects(),
-            vel=_frames("vel", vel, (t, n, 3), vel_fd), attrs=dict(attrs or {}),
-            angvel=_frames("angvel", angvel, (t, n, 3), angvel_fd), **static,
-        )  # fmt: skip
+            name=name,
+            pos=pos,
+            quat=quat,
+            dt=float(dt),
+            effects=effects or Effects(),
+            vel=_frames("vel", vel, (t, n, 3), vel_fd),
+            attrs=dict(attrs or {}),
+            angvel=_frames("angvel", angvel, (t, n, 3), angvel_fd),
+            **static,
+        )
 
 
 STATIC_KEYS = ("radius", "mass", "material", "planes", "plane_kind", "materials", "plane_materials")
@@ -171,6 +172,21 @@ def continued(truth: Trajectory, run: Trajectory, start: int, fps: float) -> Tra
     return pred.with_finite_velocities()
 
 
+def _static_fields(radius: np.ndarray, mass, material, materials, planes, plane_kind) -> dict:
+    """The arrays of :meth:`Trajectory.from_arrays` that do not change over frames, checked,
+    with their defaults (``radius`` ``[N]``, already checked)."""
+    n = len(radius)
+    volume = 4 / 3 * np.pi * radius.astype(np.float64) ** 3
+    return {
+        "radius": radius,
+        "mass": _frames("mass", mass, (n,), DEFAULT_DENSITY * volume),
+        "material": _frames("material", material, (n,), np.zeros(n), np.int64),
+        "materials": _frames("materials", materials, (None, 4), Material().as_array()[None]),
+        "planes": _frames("planes", planes, (None, 11), ground_plane()[None]),
+        "plane_kind": _frames("plane_kind", plane_kind, (None,), [GROUND], np.int64),
+    }
+
+
 def _array(key: str, value, dtype, shape: tuple) -> np.ndarray:
     """``value`` as a ``dtype`` array of ``shape`` (None: any size); else a ``SceneError``."""
     arr = np.asarray(value, dtype=dtype)
@@ -179,8 +195,9 @@ def _array(key: str, value, dtype, shape: tuple) -> np.ndarray:
     )
     if not fits:
         want = "[" + ", ".join("*" if s is None else str(s) for s in shape) + "]"
-        raise SceneError(f"Trajectory.from_arrays: {key} has shape {list(arr.shape)}, "
-                         f"expected {want}")  # fmt: skip
+        raise SceneError(
+            f"Trajectory.from_arrays: {key} has shape {list(arr.shape)}, expected {want}"
+        )
     return arr
 
 
@@ -228,11 +245,14 @@ def _identity(t: int, n: int) -> np.ndarray:
     return quat
 
 
+def _float64(a) -> torch.Tensor:
+    return torch.as_tensor(np.asarray(a, np.float64))
+
+
 def _finite_velocities(pos: np.ndarray, quat: np.ndarray, dt: float):
     """vel, angvel ``[T, N, 3]`` by finite differences, frame 0 a copy of frame 1."""
     zeros = torch.zeros(pos.shape[1:], dtype=torch.float64)
-    f64 = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
-    vel, angvel = finite_difference_velocities(f64(pos), f64(quat), zeros, zeros, dt)
+    vel, angvel = finite_difference_velocities(_float64(pos), _float64(quat), zeros, zeros, dt)
     if pos.shape[0] > 1:
         vel[0], angvel[0] = vel[1], angvel[1]
     return vel.float().numpy(), angvel.float().numpy()

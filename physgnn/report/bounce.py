@@ -24,8 +24,14 @@ def section(rows: list[dict]) -> str:
     """Markdown of the bounce section: one table row per (run, restitution)."""
     if not rows:
         return "No bounce measurements (`make eval` with `bounce.height` writes them)."
-    header = ["run", "restitution e", "drop (m)", "apex (m)", "apex / e²H, learned",
-              "apex / e²H, pybullet"]  # fmt: skip
+    header = [
+        "run",
+        "restitution e",
+        "drop (m)",
+        "apex (m)",
+        "apex / e²H, learned",
+        "apex / e²H, pybullet",
+    ]
     body = [
         [
             f"`{r['run']}`",
@@ -34,7 +40,7 @@ def section(rows: list[dict]) -> str:
             fmt(r["apex"]),
             fmt(r["ratio"]),
             fmt(r["truth_ratio"]),
-        ]  # fmt: skip
+        ]
         for r in sorted(rows, key=lambda r: (r["run"], -r["restitution"]))
     ]
     note = (

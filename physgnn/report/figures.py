@@ -61,8 +61,9 @@ def plot_sweep(
             ax = axes[r, c]
             vals = stats.get((split, metric), [None] * len(xs))
             _sweep_panel(ax, metric, vals, diverged.get(split, [False] * len(xs)))
-            ax.set_xticks(np.arange(len(xs)), xs, fontsize=7,
-                          rotation=30 if max(map(len, xs)) > 6 else 0)  # fmt: skip
+            ax.set_xticks(
+                np.arange(len(xs)), xs, fontsize=7, rotation=30 if max(map(len, xs)) > 6 else 0
+            )
             ax.set_title(f"{split}: {metric}", fontsize=8)
             ax.tick_params(axis="y", labelsize=7)
             if r == len(splits) - 1:
@@ -80,8 +81,9 @@ def _sweep_panel(ax, metric: str, vals: list, div: list[bool]) -> None:
         return
     mean = np.array([vals[i][0] for i in ok])
     std = np.array([vals[i][1] for i in ok])
-    ax.errorbar(pos[ok], mean, yerr=std, fmt="o-", color="tab:blue", ecolor="tab:red",
-                capsize=3, ms=4)  # fmt: skip
+    ax.errorbar(
+        pos[ok], mean, yerr=std, fmt="o-", color="tab:blue", ecolor="tab:red", capsize=3, ms=4
+    )
     bad = [j for j, i in enumerate(ok) if div[i]]
     if bad:
         ax.plot(pos[ok][bad], mean[bad], "x", color="red", ms=9, mew=2, label="diverged (prefix)")

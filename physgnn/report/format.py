@@ -15,6 +15,11 @@ def fmt(x: float | None) -> str:
     return f"{x:.2e}"
 
 
+def fmt_as(x: float | None, spec: str = ".1f") -> str:
+    """``x`` in the format ``spec``; "–" for None (not measured)."""
+    return "–" if x is None else f"{x:{spec}}"
+
+
 def fmt_stat(s: tuple[float, float, int] | None) -> str:
     return "–" if s is None else f"{fmt(s[0])} ± {fmt(s[1])}"
 

@@ -36,8 +36,16 @@ def section(rows: list[dict]) -> str:
     """Markdown of the free-fall section: one table row per (run, height)."""
     if not rows:
         return "No free-fall measurements (`make eval` with `freefall.heights` writes them)."
-    header = ["run", "height (m)", "T (s)", "z at T, analytic", "z at T, learned", "error (m)",
-              "error (% of fall)", "Δv_z first step (m/s)"]  # fmt: skip
+    header = [
+        "run",
+        "height (m)",
+        "T (s)",
+        "z at T, analytic",
+        "z at T, learned",
+        "error (m)",
+        "error (% of fall)",
+        "Δv_z first step (m/s)",
+    ]
     body = [
         [
             f"`{r['run']}`",
@@ -48,7 +56,7 @@ def section(rows: list[dict]) -> str:
             fmt(r["z_error"]),
             fmt(r["z_error_pct"]),
             fmt(r["dvz_first"]),
-        ]  # fmt: skip
+        ]
         for r in sorted(rows, key=lambda r: (r["run"], r["height"]))
     ]
     dt = rows[0]["dt"]

@@ -20,12 +20,28 @@ from physgnn.files import write_rows
 from physgnn.report import freefall, stability, table
 from physgnn.report.figures import plt, save_figure
 
-COLUMNS = ("step", "run", "test_mse", "ood_mse", "cubes_depth", "ramps_depth", "ramps_tunnelled",
-           "pile_drift", "tight_depth", "freefall_pct", "diverged")  # fmt: skip
-PANELS = (("test_mse", "test MSE (m²)"), ("ood_mse", "OOD MSE (m²)"),
-          ("cubes_depth", "OOD cubes max depth (d)"), ("ramps_depth", "OOD ramps max depth (d)"),
-          ("pile_drift", "resting pile drift (r)"), ("tight_depth", "tight pack max depth (d)"),
-          ("freefall_pct", "free fall |error| (% of fall)"))  # fmt: skip
+COLUMNS = (
+    "step",
+    "run",
+    "test_mse",
+    "ood_mse",
+    "cubes_depth",
+    "ramps_depth",
+    "ramps_tunnelled",
+    "pile_drift",
+    "tight_depth",
+    "freefall_pct",
+    "diverged",
+)
+PANELS = (
+    ("test_mse", "test MSE (m²)"),
+    ("ood_mse", "OOD MSE (m²)"),
+    ("cubes_depth", "OOD cubes max depth (d)"),
+    ("ramps_depth", "OOD ramps max depth (d)"),
+    ("pile_drift", "resting pile drift (r)"),
+    ("tight_depth", "tight pack max depth (d)"),
+    ("freefall_pct", "free fall |error| (% of fall)"),
+)
 _STEP = re.compile(r"step0*(\d+)$")
 
 
@@ -42,22 +58,31 @@ def curve_rows(metrics: list[dict], hard: list[dict], fall: list[dict] = ()) -> 
             continue
         ours = [r for r in metrics if r["run"] == run]
         scenes = {r["scene"]: r for r in hard if r["run"] == run}
-        gone = [f"{r['split']}/{r['trajectory']}@{r['diverged_at']}" for r in ours
-                if r["diverged_at"] is not None]  # fmt: skip
-        gone += [f"{r['scene']}@{r['diverged_at']}" for r in scenes.values()
-                 if r["diverged_at"] is not None and r["source"] == "hard"]  # fmt: skip
-        rows.append({
-            "step": int(found.group(1)), "run": run,
-            "test_mse": _split_mse(ours, lambda split: split == "test"),
-            "ood_mse": _split_mse(ours, lambda split: split.startswith("ood")),
-            "cubes_depth": _value(scenes, "ood_cubes", "max_pen_sphere"),
-            "ramps_depth": _value(scenes, "ood_cubes_ramps", "max_pen_sphere"),
-            "ramps_tunnelled": _value(scenes, "ood_cubes_ramps", "tunnelled"),
-            "pile_drift": _value(scenes, "resting_pile", "rest_drift"),
-            "tight_depth": _value(scenes, "tight_pack", "max_pen_sphere"),
-            "freefall_pct": _mean(abs(r["z_error_pct"]) for r in fall if r["run"] == run),
-            "diverged": " ".join(gone),
-        })  # fmt: skip
+        gone = [
+            f"{r['split']}/{r['trajectory']}@{r['diverged_at']}"
+            for r in ours
+            if r["diverged_at"] is not None
+        ]
+        gone += [
+            f"{r['scene']}@{r['diverged_at']}"
+            for r in scenes.values()
+            if r["diverged_at"] is not None and r["source"] == "hard"
+        ]
+        rows.append(
+            {
+                "step": int(found.group(1)),
+                "run": run,
+                "test_mse": _split_mse(ours, lambda split: split == "test"),
+                "ood_mse": _split_mse(ours, lambda split: split.startswith("ood")),
+                "cubes_depth": _value(scenes, "ood_cubes", "max_pen_sphere"),
+                "ramps_depth": _value(scenes, "ood_cubes_ramps", "max_pen_sphere"),
+                "ramps_tunnelled": _value(scenes, "ood_cubes_ramps", "tunnelled"),
+                "pile_drift": _value(scenes, "resting_pile", "rest_drift"),
+                "tight_depth": _value(scenes, "tight_pack", "max_pen_sphere"),
+                "freefall_pct": _mean(abs(r["z_error_pct"]) for r in fall if r["run"] == run),
+                "diverged": " ".join(gone),
+            }
+        )
     return sorted(rows, key=lambda r: r["step"])
 
 
@@ -94,8 +119,11 @@ def plot_curve(rows: list[dict], path: str | Path) -> Path:
         ax.set_title(label, fontsize=9)
         ax.set_ylim(bottom=0)
     if any(r["diverged"] for r in rows):
-        fig.suptitle("red dotted: a checkpoint with a diverged rollout (no MSE of that split)",
-                     fontsize=9, color="red")  # fmt: skip
+        fig.suptitle(
+            "red dotted: a checkpoint with a diverged rollout (no MSE of that split)",
+            fontsize=9,
+            color="red",
+        )
     return save_figure(fig, path)
 
 

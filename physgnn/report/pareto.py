@@ -69,8 +69,13 @@ def _draw(ax, points: list[Point], title: str, ylabel: str) -> None:
         ax.step(*_xy(on_front), where="post", color="black", lw=1.0, label="Pareto frontier")
         ax.scatter(*_xy(on_front), s=80, facecolors="none", edgecolors="black")
     for p in points:
-        ax.annotate(p.label, (p.ms_per_frame, p.error), fontsize=5, xytext=(3, 2),
-                    textcoords="offset points")  # fmt: skip
+        ax.annotate(
+            p.label,
+            (p.ms_per_frame, p.error),
+            fontsize=5,
+            xytext=(3, 2),
+            textcoords="offset points",
+        )
     _axes(ax, points, title, ylabel)
 
 

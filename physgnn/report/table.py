@@ -45,12 +45,30 @@ SPLITS = ("test", "ood")
 SLEEP_SUFFIX = "+sleeping"
 SLEEP_SCENE = "ood_resting_hit"
 # drift_before_hit: radii a sphere resting in the truth moved before the truth moves it.
-SLEEP_METRICS = ("drift_before_hit", "mse", "chamfer", "energy_gain", "depth_sphere", "pct_sphere",
-                 "fps")  # fmt: skip
+SLEEP_METRICS = (
+    "drift_before_hit",
+    "mse",
+    "chamfer",
+    "energy_gain",
+    "depth_sphere",
+    "pct_sphere",
+    "fps",
+)
 # Overrides that do not name a configuration (train.yaml's override_dirname excludes most):
 # these keys and everything under them (``trainer.devices=2``, ``+callbacks.rollout...``).
-IGNORED_KEYS = ("seed", "experiment", "experiment_name", "ckpt_path", "run_dir", "trainer",
-                "logger", "callbacks", "hydra", "hydra/launcher", "paths")  # fmt: skip
+IGNORED_KEYS = (
+    "seed",
+    "experiment",
+    "experiment_name",
+    "ckpt_path",
+    "run_dir",
+    "trainer",
+    "logger",
+    "callbacks",
+    "hydra",
+    "hydra/launcher",
+    "paths",
+)
 
 
 def write_csv(path: str | Path, rows: list[dict]) -> Path:

@@ -29,8 +29,15 @@ RESUMABLE = ("interrupted", "running", "failed")
 # Every status physgnn writes into a run.json (physgnn/training/train.py, export.py).
 STATUSES = ("running", "finished", "truncated", "interrupted", "diverged", "failed", "debug")
 # What the rollout callback logs (physgnn/training/callbacks.py)
-ROLLOUT_METRICS = ("val/rollout_score", "val/rollout_mse", "val/chamfer", "val/energy_gain",
-                   "val/max_depth", "val/tunnelled", "val/rest_drift")  # fmt: skip
+ROLLOUT_METRICS = (
+    "val/rollout_score",
+    "val/rollout_mse",
+    "val/chamfer",
+    "val/energy_gain",
+    "val/max_depth",
+    "val/tunnelled",
+    "val/rest_drift",
+)
 # Constructor arguments that the code passes, not the config
 PASSED = (
     "self",
@@ -136,8 +143,9 @@ def check_monitors(callbacks_cfg: DictConfig | None) -> None:
     """A callback that watches a ``val/rollout…`` or other rollout metric needs the rollout
     callback, the only one that logs them (else Lightning fails at the first validation)."""
     callbacks = dict(callbacks_cfg or {})
-    rollout = any(str(c.get("_target_", "")).endswith("RolloutCallback") for c in
-                  callbacks.values() if c)  # fmt: skip
+    rollout = any(
+        str(c.get("_target_", "")).endswith("RolloutCallback") for c in callbacks.values() if c
+    )
     for name, c in callbacks.items():
         watched = str((c or {}).get("monitor") or "")
         if (watched in ROLLOUT_METRICS or watched.startswith("ood/")) and not rollout:

@@ -154,9 +154,14 @@ class StatePairDataModule(L.LightningDataModule):
             (self.trainer.global_rank, self.trainer.world_size) if self.trainer else (0, 1)
         )
         sampler = EpochSampler(
-            len(self.train_set), self.pairs_per_epoch, self.seed, rank, world,
-            self.batch_size, self._batches_done,
-        )  # fmt: skip
+            len(self.train_set),
+            self.pairs_per_epoch,
+            self.seed,
+            rank,
+            world,
+            self.batch_size,
+            self._batches_done,
+        )
         return pair_loader(
             self._on_device(self.train_set), self.batch_size, sampler, self.num_workers
         )

@@ -36,8 +36,20 @@ from physgnn.training.runs import (
     write_run_json,
 )
 
-KEPT = ("experiment", "overrides", "seed", "dataset", "epochs", "max_epochs", "global_step",
-        "train_time_s", "sessions", "threads", "host", "pairs_seen")  # fmt: skip
+KEPT = (
+    "experiment",
+    "overrides",
+    "seed",
+    "dataset",
+    "epochs",
+    "max_epochs",
+    "global_step",
+    "train_time_s",
+    "sessions",
+    "threads",
+    "host",
+    "pairs_seen",
+)
 
 
 def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path | None = None):
@@ -49,8 +61,9 @@ def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path |
             "export (make ship RUN=<a finished run folder>)"
         )
     source = Path(checkpoint) if checkpoint else checkpoint_of(run_dir)
-    full = load_checkpoint(source, "export {other} (CHECKPOINT=...), or train the run again",
-                           weights_only=True)  # fmt: skip
+    full = load_checkpoint(
+        source, "export {other} (CHECKPOINT=...), or train the run again", weights_only=True
+    )
     weights = {k: v for k, v in full["state_dict"].items() if k.startswith("simulator.")}
     step = int(full.get("global_step", 0))
     claim_folder(out_dir, "OUT_DIR", overwrite=None)  # ship takes no overwrite=true
@@ -62,10 +75,15 @@ def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path |
         torch.save({"state_dict": weights, "global_step": step, "epoch": full.get("epoch")}, tmp)
     write_text(out_dir / ".hydra" / "config.yaml", (run_dir / ".hydra" / "config.yaml").read_text())
     info = {k: v for k, v in read_run_json(run_dir).items() if k in KEPT}
-    info |= {"status": "finished", "weights_format": WEIGHTS_FORMAT, "checkpoint_step": step,
-             "exported_from": f"{portable(run_dir)} ({source.name})", "commit": _commit(),
-             "machine": f"{platform.machine()} {platform.processor() or platform.system()}",
-             "exported": datetime.now().isoformat(timespec="seconds")}  # fmt: skip
+    info |= {
+        "status": "finished",
+        "weights_format": WEIGHTS_FORMAT,
+        "checkpoint_step": step,
+        "exported_from": f"{portable(run_dir)} ({source.name})",
+        "commit": _commit(),
+        "machine": f"{platform.machine()} {platform.processor() or platform.system()}",
+        "exported": datetime.now().isoformat(timespec="seconds"),
+    }
     write_run_json(out_dir, info)
     return target
 

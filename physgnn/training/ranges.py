@@ -37,9 +37,13 @@ RANGES = {
 # The words a string argument takes (torch.compile's modes): checked whether or not it is used
 # now (lit.compile=false), so that a run does not fail the day it is switched on.
 CHOICES = {
-    "lit.compile_mode": ("default", "reduce-overhead", "max-autotune",
-                         "max-autotune-no-cudagraphs"),
-}  # fmt: skip
+    "lit.compile_mode": (
+        "default",
+        "reduce-overhead",
+        "max-autotune",
+        "max-autotune-no-cudagraphs",
+    ),
+}
 
 
 def check_range(key: str, value, hint=None) -> None:

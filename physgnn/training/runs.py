@@ -186,8 +186,11 @@ def load_checkpoint(path: Path, way_out: str, **kwargs) -> dict:
     except Exception as err:  # a zip cut short, not a zip, a pickle torch refuses
         reason = (str(err).splitlines() or [type(err).__name__])[0][:120]
         others = whole_checkpoints(path.parent, but=path)
-        fix = way_out.format(other=others[0]) if others else (
-            f"no other checkpoint in {path.parent} reads whole: train the run again")  # fmt: skip
+        fix = (
+            way_out.format(other=others[0])
+            if others
+            else (f"no other checkpoint in {path.parent} reads whole: train the run again")
+        )
         raise RunError(f"{path} is truncated or corrupt ({reason}): {fix}") from None
 
 

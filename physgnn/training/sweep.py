@@ -61,8 +61,9 @@ def summarize(sweep_dir: Path) -> list[dict]:
     """Write ``sweep.json`` and print the summary; returns the jobs that did not finish."""
     jobs = sweep_jobs(sweep_dir)
     counts = Counter(j["status"] for j in jobs)
-    write_json(sweep_dir / "sweep.json", {"sweep_dir": str(sweep_dir), "counts": counts,
-                                          "jobs": jobs})  # fmt: skip
+    write_json(
+        sweep_dir / "sweep.json", {"sweep_dir": str(sweep_dir), "counts": counts, "jobs": jobs}
+    )
     failed = [j for j in jobs if j["status"] not in DONE]
     said = ", ".join(f"{n} {status}" for status, n in sorted(counts.items()))
     print(f"sweep {sweep_dir}: {len(jobs)} jobs ({said}); summary in sweep.json", file=sys.stderr)
@@ -73,8 +74,15 @@ def summarize(sweep_dir: Path) -> list[dict]:
 
 
 # Keys whose sweep gives jobs other datasets: the sweep's own config then names none of them
-DATA_KEYS = ("data", "+data", "paths", "datamodule.data_dir", "datamodule.preset", "variant",
-             "+variant")  # fmt: skip
+DATA_KEYS = (
+    "data",
+    "+data",
+    "paths",
+    "datamodule.data_dir",
+    "datamodule.preset",
+    "variant",
+    "+variant",
+)
 
 
 def swept_keys(config: DictConfig) -> list[str]:

@@ -124,8 +124,12 @@ def _train(cfg: DictConfig, run_dir: Path) -> dict:
     try:
         ckpt_path = info["resumed_from"] = resume_from(cfg, run_dir)
         _record(run_dir, info)
-        log.info("training %s in %s%s", cfg.experiment_name, run_dir,
-                 f", resuming from {ckpt_path}" if ckpt_path else "")  # fmt: skip
+        log.info(
+            "training %s in %s%s",
+            cfg.experiment_name,
+            run_dir,
+            f", resuming from {ckpt_path}" if ckpt_path else "",
+        )
         check_seed(cfg.seed)
         L.seed_everything(cfg.seed, workers=True)
         datamodule, lit, trainer = build(cfg, [progress, stop])
