@@ -25,7 +25,6 @@ from __future__ import annotations
 import json
 import os
 import sys
-import time
 from pathlib import Path
 from statistics import median
 
@@ -122,11 +121,13 @@ def measure(folder: Path, out: Path, runs: list[str]) -> None:
     runs_in = {n: {"traj": t} for n, t in inputs["moving"].items()}
     parts = [{"variants": ["eager"], "rollout_variants": ["eager"]}]
     parts += [{"variants": [v], "rollout_variants": []} for v in cfg.gpu.variants if v != "eager"]
-    parts += [{"variants": [], "rollout_variants": [v]} for v in cfg.gpu.rollout_variants
-              if v != "eager"]
+    parts += [
+        {"variants": [], "rollout_variants": [v]} for v in cfg.gpu.rollout_variants if v != "eager"
+    ]
     for part in parts:
-        section = gpu_section(OmegaConf.merge(cfg, {"gpu": part}), inputs["train"],
-                              inputs["stats"], runs_in)
+        section = gpu_section(
+            OmegaConf.merge(cfg, {"gpu": part}), inputs["train"], inputs["stats"], runs_in
+        )
         gpu = result.setdefault("gpu", section | {"training": [], "rollout": []})
         gpu["training"] += section["training"]
         gpu["rollout"] += section["rollout"]
@@ -158,15 +159,41 @@ def render(folder: Path, measured: Path) -> None:
             for name, r, j in (("CPU", learned_cpu, cpu), ("GPU", gpu_learned, on_gpu)):
                 best = next((e for e in engine if e["substeps"] == j["matched_substeps"]), None)
                 ratio = "–" if best is None else f"{r['fps'] / best['fps']:.2f}×"
-                body.append([
-                    n, run, name, fmt(r["mse20"]), f"{r['fps']:.1f}",
-                    "on" if j["on_front"] else "off", str(j["matched_substeps"]), ratio,
-                ])
+                body.append(
+                    [
+                        n,
+                        run,
+                        name,
+                        fmt(r["mse20"]),
+                        f"{r['fps']:.1f}",
+                        "on" if j["on_front"] else "off",
+                        str(j["matched_substeps"]),
+                        ratio,
+                    ]
+                )
             for e in engine:
-                body.append([n, run, f"pybullet-{e['substeps']}", fmt(e["mse20"]),
-                             f"{e['fps']:.1f}", "", "", ""])
-    header = ["spheres", "model", "simulator", "MSE20", "FPS (median)", "front", "matched",
-              "FPS / matched FPS"]
+                body.append(
+                    [
+                        n,
+                        run,
+                        f"pybullet-{e['substeps']}",
+                        fmt(e["mse20"]),
+                        f"{e['fps']:.1f}",
+                        "",
+                        "",
+                        "",
+                    ]
+                )
+    header = [
+        "spheres",
+        "model",
+        "simulator",
+        "MSE20",
+        "FPS (median)",
+        "front",
+        "matched",
+        "FPS / matched FPS",
+    ]
     lines.append(md_table(header, body))
     (folder / "gpu.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {folder / 'gpu.md'}")
