@@ -25,7 +25,8 @@ sphere wholly behind one has tunnelled and feels nothing); plus one edge from ev
 ground plane. The rules are evaluated in float64 (boundary included); the features are in the
 input dtype and in raw physical units.
 
-**Features see no absolute position.** A ps edge carries the offset ``δ`` from the closest
+**Features see no absolute position.** A ps edge (the blocks of
+:data:`~physgnn.graph.edges.PS`) carries the offset ``δ`` from the closest
 point of the plane (the rectangle for bounded planes, the infinite plane for the ground) to
 the sphere's centre, and the signed height ``h = δ·n_s``, both clipped at the sphere's reach
 ``ρ_i = r_i + a_i + ε`` plus ``clip_margin``: a sphere farther than the reach cannot touch the
@@ -148,7 +149,7 @@ class GraphBuilder:
         if checks_on():
             _check_ground(state, batch)
         clip = self.reach(state, allowance) + self.clip_margin
-        ps_attr = ps_features(state, ps_index, offset[keep], clip)
+        ps_attr = ps_features(state, ps_index, offset[keep], clip)  # the PS blocks
         return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance, *masks)
 
     def rules(
@@ -209,26 +210,51 @@ class GraphBuilder:
         if self.connectivity == "approach":
             vel = (_velocity(state) if velocity is None else velocity).to(torch.float64)
             along = ((vel[i] - vel[j]) * rel).sum(-1) / dist.clamp_min(1e-300)
-            limit = self.factor * torch.relu(-along) * state.dt.to(torch.float64)[batch[i]]
+            limit = self._closing_limit(along, state.dt.to(torch.float64)[batch[i]])
         else:
-            limit = allowance[i] + allowance[j]
-        return (batch[i] == batch[j]) & (gap <= limit + self.epsilon)
+            limit = allowance[i] + allowance[j] + self.epsilon
+        return (batch[i] == batch[j]) & (gap <= limit)
 
     def plane_within_reach(
-        self, state, sphere, normal, clearance, allowance, velocity=None
+        self, state, sphere, normal, clearance, allowance, velocity=None, fall=None
     ) -> torch.Tensor:
         """``[Q]`` bool: a plane at ``clearance [Q]`` (float64, from the sphere's surface along
         the unit direction ``normal [Q, 3]`` pointing from the plane to the sphere) can be
         reached by ``sphere [Q]`` before the next frame: ``approach``'s
-        ``clearance ≤ factor · max(0, −v̂·n) · dt + ε``, else ``clearance ≤ a_i + ε``;
-        ``velocity [N, 3]``: :meth:`rule_velocity` where the caller has it."""
+        ``clearance ≤ factor · max(0, −v̂·n) · dt + ε``, else ``clearance ≤ a_i + ε`` (plus
+        ``fall [Q]`` where given: :meth:`touches_plane`); ``velocity [N, 3]``:
+        :meth:`rule_velocity` where the caller has it."""
         if self.connectivity != "approach":
-            return clearance <= allowance[sphere] + self.epsilon
+            limit = allowance[sphere] + self.epsilon
+            return clearance <= (limit if fall is None else limit + fall)
         vel = self.rule_velocity(state) if velocity is None else velocity
         vel = vel.to(torch.float64)[sphere]
         along = (vel * normal.to(torch.float64)).sum(-1)
         dt = state.dt.to(torch.float64)[scene_of_sphere(state)[sphere]]
-        return clearance <= self.factor * torch.relu(-along) * dt + self.epsilon
+        return clearance <= self._closing_limit(along, dt)
+
+    def touches_plane(
+        self, state, sphere, normal, clearance, allowance, provisional: Sequence = ()
+    ) -> torch.Tensor:
+        """``[Q]`` bool: :meth:`plane_within_reach` counting gravity's fall within the frame,
+        under the rule's own motion or any ``provisional`` velocity (the union, as a build
+        keeps edges): ``approach`` moves spheres by ``v̂ = v + g·dt``, which counts the fall,
+        and reads each velocity; the other rules add the fall ``g·dt²`` to ``a_i + ε`` (their
+        allowance already holds the provisional velocities). The gravity prior's plane reach
+        (:mod:`physgnn.models.reach`)."""
+        args = state, sphere, normal, clearance, allowance
+        if self.connectivity != "approach":
+            dt = state.scene_dt[sphere]
+            return self.plane_within_reach(*args, fall=G * dt * dt)
+        near = self.plane_within_reach(*args)
+        for vel in provisional:
+            near = near | self.plane_within_reach(*args, vel)
+        return near
+
+    def _closing_limit(self, along: torch.Tensor, dt: torch.Tensor) -> torch.Tensor:
+        """``approach``'s limit ``factor · max(0, −along) · dt + ε`` of a gap or clearance, with
+        ``along`` the velocity along the direction from the contact to the sphere (float64)."""
+        return self.factor * torch.relu(-along) * dt + self.epsilon
 
     def _pair_candidates(self, state, batch, allowance, spheres, counts, layout) -> tuple:
         """Candidate pairs ``(i, j)``, ``i < j``, sorted: all pairs of each scene when ``layout``

@@ -1,6 +1,8 @@
 """Inputs that state the contact, material values, and gravity as a known prior: the parts of
 the default model's input that the report's model (``model=report``) does not have.
 
+Each function writes named blocks of the edge contract (:mod:`physgnn.graph.edges`).
+
 **Contact features** (``contact_features=True``): the contact is stated instead of left for
 the network to compute. pp edges add the signed gap ``(|p_i − p_j| − r_i − r_j)/ℓ`` and the
 normal relative speed ``(v_i − v_j)·n̂_ij / σ_v`` (``n̂_ij`` from j to i; negative when the pair
@@ -31,42 +33,37 @@ from __future__ import annotations
 import torch
 
 from physgnn.graph.builder import ballistic_velocity
+from physgnn.graph.edges import PP, PP_CONTACT, PS, PS_CONTACT, PS_MATERIAL, pair_layout
 
-PP_CONTACT, PS_CONTACT = 2, 3  # features the contact inputs add per pp / ps edge
-PS_MATERIAL = 2  # per ps edge with plane_materials: the sphere's restitution and friction
 # Scale of the material parameters (restitution, lateral, rolling, spinning friction) as node
 # inputs: rolling and spinning coefficients are ~0.01, the others ~0.5.
 MATERIAL_SCALE = (1.0, 1.0, 100.0, 100.0)
 
 
 def pp_contact(graph, state, length_scale, speed_scale) -> torch.Tensor:
-    """``[E, 2]``: gap / ℓ and ``(v_i − v_j)·n̂_ij`` / σ_v (i the target; a pair of coincident
-    spheres has ``n̂ = 0``)."""
+    """The :data:`~physgnn.graph.edges.PP_CONTACT` blocks ``[E, 2]``: gap / ℓ and
+    ``(v_i − v_j)·n̂_ij`` / σ_v (i the target; a pair of coincident spheres has ``n̂ = 0``)."""
     src, dst = graph.pp_index
     normal, gap = _normal_and_gap(graph, state)
     vel = state.vel[:, 0]
     closing = ((vel[dst] - vel[src]) * normal).sum(1, keepdim=True)
-    return torch.cat([gap / length_scale, closing / speed_scale], 1)
+    return PP_CONTACT.join({"gap": gap / length_scale, "normal_speed": closing / speed_scale})
 
 
 def _normal_and_gap(graph, state) -> tuple[torch.Tensor, torch.Tensor]:
     """``(n̂_ij [E, 3], gap [E, 1])`` of the pp edges: the unit vector from source j to target
     i (0 for coincident spheres) and ``|p_i − p_j| − r_i − r_j``."""
     src, dst = graph.pp_index
-    rel, dist = graph.pp_attr[:, :3], graph.pp_attr[:, 3:4]
+    rel, dist = PP.take(graph.pp_attr, "offset"), PP.take(graph.pp_attr, "distance")
     gap = dist - (state.radius[src] + state.radius[dst])[:, None]
     return rel / dist.clamp_min(1e-12), gap
-
-
-def pair_width(history: int, mass_ratio: bool, materials: bool) -> int:
-    """Columns of :func:`pair_inputs` for ``history`` = H + 1 velocities."""
-    return 5 + 3 * history + int(mass_ratio) + (2 if materials else 0)
 
 
 def pair_inputs(
     graph, state, length_scale, speed_scale, history: int, mass_ratio: bool, materials: bool
 ) -> torch.Tensor:
-    """``[E, pair_width(...)]``: the pair's *relative* inputs, none of which changes when a
+    """The :func:`~physgnn.graph.edges.pair_layout` blocks ``[E, 5 + 3·history (+1) (+2)]``:
+    the pair's *relative* inputs, none of which changes when a
     common velocity is added to both spheres (Galilean invariance) or every mass is scaled
     (mass-scale invariance); i the target, j the source, ``n̂_ij`` from j to i:
 
@@ -79,35 +76,39 @@ def pair_inputs(
     dv = state.vel[dst, :history] - state.vel[src, :history]  # [E, history, 3]
     along = (dv[:, 0] * normal).sum(1, keepdim=True)
     across = torch.linalg.vector_norm(dv[:, 0] - along * normal, dim=1, keepdim=True)
-    radius = torch.stack([state.radius[dst], state.radius[src]], 1) / length_scale
-    parts = [gap / length_scale, along / speed_scale, across / speed_scale]
-    parts += [dv.flatten(1) / speed_scale, radius]
+    radii = torch.stack([state.radius[dst], state.radius[src]], 1) / length_scale
+    parts = {"gap": gap / length_scale, "normal_speed": along / speed_scale}
+    parts |= {"tangential_speed": across / speed_scale, "radii": radii}
+    parts["velocity_history"] = dv.flatten(1) / speed_scale
     if mass_ratio:
-        parts.append((state.mass[dst] / (state.mass[dst] + state.mass[src]))[:, None])
+        parts["mass_ratio"] = (state.mass[dst] / (state.mass[dst] + state.mass[src]))[:, None]
     if materials:
         params = state.material_params
-        parts.append(params[dst, :2] * params[src, :2])
-    return torch.cat(parts, 1)
+        parts["material"] = params[dst, :2] * params[src, :2]
+    return pair_layout(history, mass_ratio, materials).join(parts)
 
 
 def ps_contact(graph, state, length_scale, speed_scale) -> torch.Tensor:
-    """``[F, 3]``: clearance ``(h − r)`` / ℓ, ``v·n`` / σ_v and the tangential speed / σ_v."""
+    """The :data:`~physgnn.graph.edges.PS_CONTACT` blocks ``[F, 3]``: clearance ``(h − r)`` / ℓ,
+    ``v·n`` / σ_v and the tangential speed / σ_v."""
     ps = graph.ps_attr
-    vel, normal, height = ps[:, :3], ps[:, 3:6], ps[:, 9:10]
+    vel, normal, height = (PS.take(ps, name) for name in ("velocity", "normal", "height"))
     clearance = height - state.radius[graph.ps_index[1]][:, None]
     along = (vel * normal).sum(1, keepdim=True)
     across = torch.linalg.vector_norm(vel - along * normal, dim=1, keepdim=True)
-    return torch.cat([clearance / length_scale, along / speed_scale, across / speed_scale], 1)
+    blocks = {"clearance": clearance / length_scale, "normal_speed": along / speed_scale}
+    return PS_CONTACT.join(blocks | {"tangential_speed": across / speed_scale})
 
 
 def ps_material(graph, state) -> torch.Tensor:
-    """``[F, 2]``: the restitution and lateral friction of each ps edge's contact, the sphere's
-    times the plane's (Bullet's product rule; planes of a state without ``plane_materials``,
-    and the planes of earlier datasets, have restitution and friction 1)."""
+    """The :data:`~physgnn.graph.edges.PS_MATERIAL` block ``[F, 2]``: the restitution and
+    lateral friction of each ps edge's contact, the sphere's times the plane's (Bullet's
+    product rule; planes of a state without ``plane_materials``, and the planes of earlier
+    datasets, have restitution and friction 1)."""
     plane, sphere = graph.ps_index
     own = state.material_params[sphere, :2]
     planes = getattr(state, "plane_materials", None)
-    return own if planes is None else own * planes[plane, :2]
+    return PS_MATERIAL.join({"material": own if planes is None else own * planes[plane, :2]})
 
 
 def material_features(state) -> torch.Tensor:

@@ -53,6 +53,7 @@ from torch import nn
 
 from physgnn.data.state import scene_of_sphere
 from physgnn.graph.builder import GraphBuilder
+from physgnn.graph.edges import PS, Layout, pp_inputs, ps_inputs
 from physgnn.models import boundary, contact_inputs, impulses, reach, rest
 from physgnn.models.normalisation import (  # noqa: F401 (StatsError: re-exported)
     StatsError,
@@ -64,10 +65,9 @@ from physgnn.nn.padding import pad_graph
 from physgnn.physics.scene import EFFECT_NAMES
 
 ROTATION = EFFECT_NAMES.index("rotation")
-# Input widths before the optional columns: pp [p_i − p_j, |p_i − p_j|], ps [v, n, δ, h];
-# outputs: normalised Δv and Δω (then the rest logit with rest_decision); per pair with
-# pair_impulses: an impulse and a couple (3 + 3).
-PP_BASE, PS_BASE, OUTPUTS, PAIR_OUTPUTS = 4, 10, 6, 6
+# Outputs: normalised Δv and Δω (then the rest logit with rest_decision); per pair with
+# pair_impulses: an impulse and a couple (3 + 3). The edge inputs: physgnn.graph.edges.
+OUTPUTS, PAIR_OUTPUTS = 6, 6
 
 
 class LearnedSimulator(nn.Module):
@@ -133,13 +133,11 @@ class LearnedSimulator(nn.Module):
 
     def _network(self, network: Callable[..., EncodeProcessDecode]) -> EncodeProcessDecode:
         """``network`` called with the input and output widths of the simulator's inputs."""
-        ps_extra = contact_inputs.PS_CONTACT if self.contact_features else 0
-        ps_extra += contact_inputs.PS_MATERIAL if self.plane_materials else 0
         pairs = {"pair_out": PAIR_OUTPUTS} if self.pair_impulses else {}
         built = network(
             node_in=self.node_in,
-            pp_in=PP_BASE + self.pair_extra,
-            ps_in=PS_BASE + ps_extra,
+            pp_in=self.pp_layout.width,
+            ps_in=self.ps_layout.width,
             out_dim=OUTPUTS + int(self.rest_decision),
             **pairs,
         )
@@ -170,11 +168,15 @@ class LearnedSimulator(nn.Module):
         return 6 * (self.H + 1) + 1 + int(not self.mass_ratio) + extra
 
     @property
-    def pair_extra(self) -> int:
-        """pp input columns after the 4 geometric ones (module doc)."""
-        if self.relative_pairs:
-            return contact_inputs.pair_width(self.H + 1, self.mass_ratio, self.material_features)
-        return contact_inputs.PP_CONTACT if self.contact_features else 0
+    def pp_layout(self) -> Layout:
+        """The blocks of the network's pp input (:func:`~physgnn.graph.edges.pp_inputs`)."""
+        flags = self.relative_pairs, self.mass_ratio, self.material_features
+        return pp_inputs(self.H + 1, *flags, self.contact_features)
+
+    @property
+    def ps_layout(self) -> Layout:
+        """The blocks of the network's ps input (:func:`~physgnn.graph.edges.ps_inputs`)."""
+        return ps_inputs(self.contact_features, self.plane_materials)
 
     @property
     def speed_scale(self) -> torch.Tensor:
@@ -222,13 +224,19 @@ class LearnedSimulator(nn.Module):
         return boundary.boundary_features(state, self.boundary_radius)
 
     def edge_features(self, graph, state=None) -> tuple[torch.Tensor, torch.Tensor]:
-        """pp ``[E, 4]`` (lengths / length_scale); ps ``[F, 10]`` (velocity / σ_v, normal
-        unchanged, lengths / length_scale); with ``contact_features`` (needs ``state``) pp
-        ``[E, 6]`` and ps ``[F, 13]``, the contact columns of the module doc appended."""
-        pp_attr = graph.pp_attr / self.length_scale
+        """pp ``[E, pp_layout.width]`` and ps ``[F, ps_layout.width]``
+        (:mod:`physgnn.graph.edges`): the graph's blocks, lengths / length_scale, the ps
+        velocity / σ_v per axis, the normal unchanged; then the blocks of the model's options
+        (:mod:`physgnn.models.contact_inputs`; they need ``state``)."""
+        pp_attr = graph.pp_attr / self.length_scale  # both PP blocks are lengths
         ps = graph.ps_attr
-        ps_attr = torch.cat(
-            [ps[:, :3] / self.vel_std, ps[:, 3:6], ps[:, 6:] / self.length_scale], 1
+        ps_attr = PS.join(
+            {
+                "velocity": PS.take(ps, "velocity") / self.vel_std,
+                "normal": PS.take(ps, "normal"),
+                "offset": PS.take(ps, "offset") / self.length_scale,
+                "height": PS.take(ps, "height") / self.length_scale,
+            }
         )
         scales = self.length_scale, self.speed_scale
         if self.relative_pairs:

@@ -3,9 +3,10 @@ support through contacts (the default model; :mod:`physgnn.models.learned`).
 
 - **In reach** (:func:`contact_reach`): a sphere that may touch something before the next
   frame: a pp edge, an edge to a wall or static plane (the graph's own rule), or the ground
-  within the graph's plane rule (for ``vi``, ``vmax``, ``epsilon``: ``h − r ≤ a_i + ε + g·dt²``,
-  the rule plus the fall that gravity adds within the frame; ``approach`` counts the fall
-  itself), under the ballistic motion or any provisional velocity of an earlier pass. Every
+  within the graph's plane rule counting gravity's fall within the frame
+  (:meth:`~physgnn.graph.builder.GraphBuilder.touches_plane`: for ``vi``, ``vmax``,
+  ``epsilon`` ``h − r ≤ a_i + ε + g·dt²``; ``approach`` counts the fall itself), under the
+  ballistic motion or any provisional velocity of an earlier pass. Every
   other sphere flies ballistically: ``v_{t+1} = v_t + g·dt``, ``ω_{t+1} = ω_t`` exactly.
 - **Near a plane**: the same, planes only. Only these spheres take a change of their own from
   the network (a plane is external: it may change a sphere's momentum); sphere–sphere changes
@@ -70,23 +71,16 @@ def contact_reach(state, graph, builder, provisional: Sequence = (), latch=False
 
 def plane_edges_in_reach(state, graph, builder, provisional: Sequence = ()) -> torch.Tensor:
     """``[F]`` bool: ps edges whose plane the sphere may touch before the next frame (module
-    doc): every wall / static edge the graph kept, the ground by the plane rule."""
+    doc): every wall / static edge the graph kept, the ground by the builder's
+    :meth:`~physgnn.graph.builder.GraphBuilder.touches_plane`."""
     plane, sphere = graph.ps_index
     bounded = state.plane_kind[plane] != GROUND
     # the edge features' heights are clipped: the clearance from the geometry itself
     depth = edge_plane_depth(
         state.pos, state.radius, state.planes, state.plane_kind, graph.ps_index
     )
-    if builder.connectivity == "approach":  # the rule itself counts the fall (v + g·dt)
-        normal = state.planes[plane, 3:6]
-        near = builder.plane_within_reach(state, sphere, normal, -depth, graph.allowance)
-        for vel in provisional:
-            near = near | builder.plane_within_reach(
-                state, sphere, normal, -depth, graph.allowance, vel
-            )
-    else:
-        dt = state.scene_dt[sphere]
-        near = -depth <= graph.allowance[sphere] + builder.epsilon + G * dt * dt
+    normal = state.planes[plane, 3:6]
+    near = builder.touches_plane(state, sphere, normal, -depth, graph.allowance, provisional)
     near = bounded | near
     if graph.masked:  # a fixed-capacity graph's candidates outside the rules
         near = near & graph.ps_mask

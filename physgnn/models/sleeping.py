@@ -206,8 +206,7 @@ class _Reach:
         """``moving [N]`` bool: the spheres that move."""
         self.builder = getattr(simulator, "graph_builder", None) or _TOUCHING
         self.allow = self.builder.allowance(state, moving)
-        radius = state.radius.to(torch.float64)
-        self.max_extra = float((radius + self.allow).max()) + self.builder.epsilon
+        self.max_extra = float(self.builder.reach(state, self.allow).max())  # r_i + a_i + ε
 
     def __call__(self, state, i: torch.Tensor, j: torch.Tensor) -> torch.Tensor:
         return self.builder.pair_within_reach(state, i, j, self.allow)

@@ -90,7 +90,9 @@ class EncodeProcessDecode(nn.Module):
     to ``out_dim`` numbers per sphere (report: v and ω, 6).
 
     ``forward(x [N, node_in], pp_index [2, E], pp_attr [E, pp_in], ps_index [2, F],
-    ps_attr [F, ps_in], material [N] | None) -> [N, out_dim]``.
+    ps_attr [F, ps_in], material [N] | None) -> [N, out_dim]``; the simulator sets ``pp_in``
+    and ``ps_in`` from its edge layouts (``physgnn.graph.edges``, whose ``PP`` and ``PS``
+    widths are the defaults here: tested, as ``nn`` imports nothing of physgnn).
 
     - pp edges are in the paired layout (edge ``e + E/2`` is the reverse of edge ``e``); with
       ``third_law`` the messages of a pair are exactly opposite (see :class:`InteractionBlock`).
