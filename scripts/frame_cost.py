@@ -1,0 +1,85 @@
+"""The cost of a rollout frame of trained models, side by side: ``python scripts/frame_cost.py
+RUN RUN ... [--sizes 154 1000] [--rounds 5]``.
+
+Each RUN (a run folder or ``pretrained``) rolls out over the same bench pile in motion
+(``conf/bench.yaml``'s random_box at each size, the spheres landed as the crossover lands them,
+then ``crossover.frames`` frames), one scene at a time on one thread, the runs taking turns for
+``--rounds`` rounds. Printed per size: each run's median ms per frame, its ratio to the first
+run's (the median of the rounds' ratios), the graph builds and network passes per frame, and the
+1-minute load average before and after.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from collections import Counter
+from statistics import median
+
+import numpy as np
+import torch
+
+from physgnn.benchmark.crossover import landed_window
+from physgnn.cli.overrides import compose_config
+from physgnn.graph.builder import GraphBuilder
+from physgnn.rollout import rollout
+from physgnn.training.runs import load_run
+
+
+def counted_rollout(sim, window) -> tuple[float, Counter]:
+    """``(ms per frame, {"builds", "passes"} per rollout)`` of ``sim`` over ``window``."""
+    calls = Counter()
+    build, head = GraphBuilder.__call__, type(sim).head
+
+    def counting_build(self, *args, **kwargs):
+        calls["builds"] += 1
+        return build(self, *args, **kwargs)
+
+    def counting_head(self, *args, **kwargs):
+        calls["passes"] += 1
+        return head(self, *args, **kwargs)
+
+    GraphBuilder.__call__, type(sim).head = counting_build, counting_head
+    try:
+        result = rollout(sim, [window])[0]
+    finally:
+        GraphBuilder.__call__, type(sim).head = build, head
+    return 1000.0 / result.fps, calls
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="+")
+    parser.add_argument("--sizes", nargs="+", type=int, default=[154, 1000])
+    parser.add_argument("--rounds", type=int, default=5)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    cfg = compose_config("bench", ["crossover.run=null"])
+    sims = [load_run(run)[0].eval() for run in args.runs]
+    rng = np.random.default_rng(int(cfg.seed))
+    for n in args.sizes:
+        window = landed_window(cfg, n, rng, max(int(s.H) for s in sims), {})
+        frames = window.n_frames
+        for sim in sims:
+            rollout(sim, [window.truncated(sim.H + 3)])  # warm-up
+        load = os.getloadavg()[0]
+        ms = [[] for _ in sims]
+        calls = [Counter() for _ in sims]
+        for _ in range(args.rounds):
+            for k, sim in enumerate(sims):
+                cost, counted = counted_rollout(sim, window)
+                ms[k].append(cost)
+                calls[k] += counted
+        print(f"{n} spheres, {frames} frames, load {load:.1f} -> {os.getloadavg()[0]:.1f}")
+        for k, run in enumerate(args.runs):
+            ratio = median(a / b for a, b in zip(ms[k], ms[0], strict=True))
+            steps = args.rounds * (frames - sims[k].H - 1)
+            builds, passes = calls[k]["builds"] / steps, calls[k]["passes"] / steps
+            print(
+                f"  {run}: {median(ms[k]):.1f} ms/frame, {ratio:.2f}x the first; "
+                f"builds {builds:.2f}, passes {passes:.2f} per frame"
+            )
+
+
+if __name__ == "__main__":
+    main()
