@@ -271,8 +271,12 @@ class BallIndex:
         counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=len(hits))
         rows = np.repeat(np.arange(len(hits)), counts)
         cols = np.concatenate([np.asarray(h, dtype=np.int64) for h in hits]) if counts.sum() else []
-        as_long = lambda a: torch.as_tensor(np.asarray(a, np.int64), device=pos.device)  # noqa: E731
-        return as_long(rows), as_long(cols)
+        return _long_tensor(rows, pos.device), _long_tensor(cols, pos.device)
+
+
+def _long_tensor(values, device: torch.device) -> torch.Tensor:
+    """``values`` (an array or a list) as an int64 tensor on ``device``."""
+    return torch.as_tensor(np.asarray(values, np.int64), device=device)
 
 
 def extent_span(pos: torch.Tensor, margin: float = 0.0) -> float:

@@ -78,8 +78,16 @@ class ConstrainedSimulator(nn.Module):
         plane, sphere = scene_plane_pairs(spheres, planes, state.plane_batch.long(), counts)
         surfaces = state.effects[scene[sphere], SURFACE_CONTACT]
         x = project_contacts(
-            state.pos, pos_next, state.radius, state.mass, pairs, state.planes,
-            state.plane_kind, torch.stack([plane, sphere]), self.iterations, ps_active=surfaces,
-        )  # fmt: skip
+            state.pos,
+            pos_next,
+            state.radius,
+            state.mass,
+            pairs,
+            state.planes,
+            state.plane_kind,
+            torch.stack([plane, sphere]),
+            self.iterations,
+            ps_active=surfaces,
+        )
         moved = (x != pos_next).any(1, keepdim=True)
         return torch.where(moved, (x - state.pos) / dt, vel)

@@ -243,8 +243,9 @@ class _RestIndex:
         return query[rows], self.members[cols]
 
 
-def _pairs_within(state, query: torch.Tensor, data: torch.Tensor, extra: torch.Tensor,
-                  data_extra: float) -> torch.Tensor:  # fmt: skip
+def _pairs_within(
+    state, query: torch.Tensor, data: torch.Tensor, extra: torch.Tensor, data_extra: float
+) -> torch.Tensor:
     """Candidate pairs ``[2, P]`` (positions into ``query`` and ``data``) with
     ``|p_q − p_d| ≤ r_q + extra_q + data_extra`` (a superset the caller filters)."""
     if query.numel() == 0 or data.numel() == 0:

@@ -45,7 +45,10 @@ def pad_graph(
     n, half, f = x.shape[0], pp_index.shape[1] // 2, ps_index.shape[1]
     extra_nodes, extra_pairs = bucket(n + 1) - n, bucket(half) - half
     extra_ps = bucket(f) - f
-    ghost = lambda count: pp_index.new_full((count,), n)  # noqa: E731
+
+    def ghost(count: int) -> Tensor:
+        return pp_index.new_full((count,), n)
+
     x = torch.cat([x, x.new_zeros(extra_nodes, x.shape[1])])
     dummy = torch.stack([ghost(extra_pairs), ghost(extra_pairs)])
     pp_index = torch.cat([pp_index[:, :half], dummy, pp_index[:, half:], dummy], 1)
