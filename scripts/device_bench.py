@@ -140,63 +140,75 @@ def _write(out: Path, result: dict) -> None:
 
 
 def render(folder: Path, measured: Path) -> None:
-    from physgnn.benchmark.crossover import judged
     from physgnn.benchmark.markdown import gpu_section
-    from physgnn.report.format import fmt, md_table
 
     cpu_rows = torch.load(folder / "cpu.pt", weights_only=False)
     result = json.loads(measured.read_text())
     lines = [f"# The bench on a GPU: {result['device']}", ""]
     lines += gpu_section({"gpu": result.get("gpu")})
     lines += ["", "## The same work: the learned simulator on the GPU, pybullet on the CPU", ""]
+    lines += same_work_table(result["crossover"], cpu_rows)
+    (folder / "gpu.md").write_text("\n".join(lines) + "\n")
+    print(f"wrote {folder / 'gpu.md'}")
+
+
+def engine_rows(cpu_rows: dict, n: int) -> list[dict]:
+    """pybullet's rows at ``n`` spheres, each setting at the highest FPS it reached in the
+    runs' rounds (the least loaded moment: the engine is never made to look slower than it
+    was measured); the scores are the same in every run (the same start, deterministic)."""
+    measured = [cpu_rows[run][n]["rows"][1:] for run in cpu_rows]
+    return [max(rows, key=lambda r: r["fps"]) for rows in zip(*measured, strict=True)]
+
+
+def same_work_table(crossover: dict, cpu_rows: dict) -> list[str]:
+    """Per size: pybullet's rows, then each run's learned rows on the CPU and on the GPU, each
+    judged against those engine rows as the crossover judges (front, matched setting)."""
+    from physgnn.benchmark.crossover import judged
+    from physgnn.report.format import fmt, md_table
+
     body = []
-    for run, sizes in result["crossover"].items():
-        for n, gpu_row in sizes.items():
-            cpu = cpu_rows[run][int(n)]
-            learned_cpu, engine = cpu["rows"][0], cpu["rows"][1:]
-            gpu_learned = {**learned_cpu, **gpu_row, "substeps": None}
-            on_gpu = judged([gpu_learned] + engine)
-            for name, r, j in (("CPU", learned_cpu, cpu), ("GPU", gpu_learned, on_gpu)):
+    for n in sorted({int(n) for sizes in crossover.values() for n in sizes}):
+        engine = engine_rows(cpu_rows, n)
+        for e in engine:
+            body.append(
+                [
+                    str(n),
+                    f"pybullet-{e['substeps']} (CPU)",
+                    fmt(e["mse20"]),
+                    f"{e['fps']:.1f}",
+                    "",
+                    "",
+                    "",
+                ]
+            )
+        for run, sizes in crossover.items():
+            cpu = cpu_rows[run][n]["rows"][0]
+            gpu = {**cpu, **sizes[str(n)], "substeps": None}
+            for where, row in (("CPU", cpu), ("GPU", gpu)):
+                j = judged([row] + engine)
                 best = next((e for e in engine if e["substeps"] == j["matched_substeps"]), None)
-                ratio = "–" if best is None else f"{r['fps'] / best['fps']:.2f}×"
+                ratio = "–" if best is None else f"{row['fps'] / best['fps']:.2f}×"
                 body.append(
                     [
-                        n,
-                        run,
-                        name,
-                        fmt(r["mse20"]),
-                        f"{r['fps']:.1f}",
+                        str(n),
+                        f"{run} ({where})",
+                        fmt(row["mse20"]),
+                        f"{row['fps']:.1f}",
                         "on" if j["on_front"] else "off",
                         str(j["matched_substeps"]),
                         ratio,
                     ]
                 )
-            for e in engine:
-                body.append(
-                    [
-                        n,
-                        run,
-                        f"pybullet-{e['substeps']}",
-                        fmt(e["mse20"]),
-                        f"{e['fps']:.1f}",
-                        "",
-                        "",
-                        "",
-                    ]
-                )
     header = [
         "spheres",
-        "model",
         "simulator",
         "MSE20",
         "FPS (median)",
-        "front",
+        "MSE20 front",
         "matched",
         "FPS / matched FPS",
     ]
-    lines.append(md_table(header, body))
-    (folder / "gpu.md").write_text("\n".join(lines) + "\n")
-    print(f"wrote {folder / 'gpu.md'}")
+    return [md_table(header, body)]
 
 
 if __name__ == "__main__":
