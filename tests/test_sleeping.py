@@ -338,10 +338,12 @@ def test_sleep_state_survives_a_scene_leaving_the_batch():
 
 @pytest.mark.parametrize("name, key", [("eval", "rollout.sleep"), ("sleep_study", "sleep")])
 def test_configs_are_off_by_default_and_agree_with_the_class_defaults(name, key):
-    from hydra import compose, initialize
+    from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    with initialize(version_base="1.3", config_path="../conf"):
+    from physgnn import CONF_DIR
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose(name)
     if name == "eval":
         assert cfg.rollout.sleeping is False  # off until measured (README: sleeping spheres)
