@@ -15,8 +15,7 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "physgnn"
-COMMANDS = {"train", "generate", "eval", "bench", "data_report", "sleep_study", "simulate",
-            "study"}  # fmt: skip
+COMMANDS = {"train", "generate", "eval", "bench", "data_report", "sleep_study", "simulate", "study"}
 
 # part -> the parts it may import (besides itself). "base" is physgnn/__init__, errors, files.
 ALLOWED = {
@@ -33,26 +32,57 @@ ALLOWED = {
     "report": {"metrics", "physics", "base"},
     "training": {"rollout", "metrics", "models", "data", "physics", "base"},
     "evaluation": {
-        "training", "report", "rollout", "metrics", "models", "groundtruth", "data",
-        "physics", "base",
+        "training",
+        "report",
+        "rollout",
+        "metrics",
+        "models",
+        "groundtruth",
+        "data",
+        "physics",
+        "base",
     },
     "benchmark": {
-        "training", "report", "rollout", "metrics", "models", "groundtruth", "data", "physics",
+        "training",
+        "report",
+        "rollout",
+        "metrics",
+        "models",
+        "groundtruth",
+        "data",
+        "physics",
         "base",
     },
     "ablation": {
-        "cli", "evaluation", "training", "report", "rollout", "metrics", "models",
-        "groundtruth", "data", "physics", "benchmark", "base",
+        "cli",
+        "evaluation",
+        "training",
+        "report",
+        "rollout",
+        "metrics",
+        "models",
+        "groundtruth",
+        "data",
+        "physics",
+        "benchmark",
+        "base",
     },
     "commands": {"cli", "training", "groundtruth", "evaluation", "benchmark", "ablation"},
     # the notebook API: what a notebook needs, from evaluation down
     "api": {
-        "evaluation", "training", "rollout", "metrics", "models", "groundtruth", "data",
-        "physics", "base",
+        "evaluation",
+        "training",
+        "rollout",
+        "metrics",
+        "models",
+        "groundtruth",
+        "data",
+        "physics",
+        "base",
     },
     # the console script imports each command by name when it runs it
     "__main__": set(),
-}  # fmt: skip
+}
 # Outside libraries a part must not import (prefixes of module names).
 FORBIDDEN = {
     "physics": ("lightning", "hydra", "omegaconf", "torch_geometric", "physgnn.nn"),
