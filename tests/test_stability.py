@@ -353,6 +353,9 @@ TINY_HARD = [
     "hard.scenes.tight_pack.k=2",
     "hard.scenes.tight_pack.n_frames=8",
 ]
+# What these evals do not check: videos, the sleeping comparison, pybullet on the same work
+# (and its Pareto figures: tests/test_eval.py), the invariance checks (test_invariance_checks.py)
+QUIET = ["videos=false", "sleeping_compare=false", "pybullet=null", "invariance=null"]
 
 
 class Falling(GravityOnlySimulator):
@@ -390,8 +393,7 @@ def fake_eval(tmp_path, monkeypatch, *overrides, entry=None):
     with initialize_config_dir(CONF_DIR, version_base="1.3"):
         cfg = compose(
             "eval",
-            [f"paths.outputs={outputs}", "videos=false", "sleeping_compare=false", *TINY_HARD]
-            + list(overrides),
+            [f"paths.outputs={outputs}", *QUIET, *TINY_HARD] + list(overrides),
         )
     if entry is not None:
         return entry(cfg)
