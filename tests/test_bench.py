@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import torch
+from gpukit import OPS_PER_TRAINING_STEP
 from hydra import compose, initialize_config_dir
 from torch.utils.flop_counter import FlopCounterMode
 
@@ -68,6 +69,9 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
     readiness = data["gpu_readiness"]
     for part in parts:
         assert 0 < readiness[f"{part}_compiled"]["kernels"] < readiness[part]["kernels"]
+    # the default recipe's compiled training step keeps to the op budget; eager it does not
+    steps = readiness["train_step_compiled"]["kernels"], readiness["train_step"]["kernels"]
+    assert steps[0] <= OPS_PER_TRAINING_STEP < steps[1]
     if not torch.cuda.is_available():
         assert data["gpu"] is None
         assert "Skipped: torch saw no CUDA device" in (out / "bench.md").read_text()

@@ -1,6 +1,7 @@
 """Compiled regions (``lit.compile=true`` on counted graphs): the graph rules and the step after
 the graph build each run as one region with dynamic shapes; results equal eager's to float
-rounding; a training step dispatches at most 1 500 aten ops outside them.
+rounding; a training step dispatches at most 1 500 aten ops outside them (slow here; the fast
+suite checks it on the quick bench).
 
 The regions are compiled with ``aot_eager`` (dynamo and AOT autograd, no code generation): what
 runs inside or outside a region does not depend on the backend, and it compiles in seconds.
@@ -10,8 +11,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import torch
-from gpukit import training_batch
+from gpukit import OPS_PER_TRAINING_STEP, training_batch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from simdata import trajectory
@@ -22,8 +24,6 @@ from physgnn.benchmark.gpu_readiness import training_step_counts
 from physgnn.benchmark.syncs import profiling_ops
 from physgnn.models.capture import ShapeBoundCall, compile_simulator
 from physgnn.rollout import rollout
-
-OPS_PER_TRAINING_STEP = 1500  # the budget of aten ops dispatched outside the compiled regions
 
 
 def default_pair(stats):
@@ -76,9 +76,12 @@ def test_compiled_regions_give_the_eager_losses_and_gradients(tiny_train):
             assert_close(g_c, g_e, rtol=1e-4, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_a_compiled_training_step_dispatches_at_most_the_budget(tiny_train):
     """The default recipe through Lightning (noise, contact noise, push-forward up to 2, the
-    loss, backward, clipping, Adam): eager it dispatches far more than the budget."""
+    loss, backward, clipping, Adam): eager it dispatches far more than the budget. Slow (its
+    compile takes minutes on 2 busy cores): the fast suite checks the same budget on the quick
+    bench's compiled training step (tests/test_bench.py), the same model and recipe."""
     trajectories, stats = tiny_train
     cfg = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness
     model = OmegaConf.merge(OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml"), cfg.model)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 
@@ -13,6 +14,7 @@ from scipy import stats
 from simdata import trajectory
 from torch import nn
 
+import physgnn.ablation.jobs
 from physgnn import CONF_DIR
 from physgnn.ablation import aggregate, verdicts
 from physgnn.ablation.jobs import (
@@ -27,6 +29,7 @@ from physgnn.ablation.measure import FIGURES, measure_trajectory
 from physgnn.ablation.registry import append_record, done_ids, read_registry
 from physgnn.ablation.report import write_study_report
 from physgnn.ablation.study import run_study
+from physgnn.cli import compose_config
 from physgnn.metrics import trajectory_metrics
 from physgnn.models.baselines import GravityOnlySimulator
 
@@ -37,6 +40,24 @@ SWEEPS = [
     "ablation_connectivity",
     "ablation_lambda",
 ]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def each_training_config_composed_once():
+    """A study composes the training config of every sweep point (dozens of Hydra composes),
+    and the tests here ask for the same points again and again: each is composed once in this
+    module and handed out as a copy."""
+    composed = {}
+
+    def once(name, overrides=None):
+        key = (name, tuple(overrides or ()))
+        if key not in composed:
+            composed[key] = compose_config(name, overrides)
+        return copy.deepcopy(composed[key])
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(physgnn.ablation.jobs, "compose_config", once)
+        yield
 
 
 def study_cfg(tmp_path, *overrides):
