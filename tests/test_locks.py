@@ -12,8 +12,9 @@ import subprocess
 import sys
 
 import pytest
-from processes import ROOT, start, wait_for
+from processes import start, wait_for
 
+import physgnn.generate as generate_command
 import physgnn.train as train_command
 from physgnn.evaluation.runs import EvalError, find_runs
 from physgnn.files import InUseError, exclusive
@@ -65,7 +66,10 @@ def test_a_lock_of_another_host_is_refused_with_the_way_to_free_it(tmp_path):
             pass
 
 
-def test_two_generates_into_one_folder_one_writes_the_other_is_refused(tmp_path):
+def test_two_generates_into_one_folder_one_writes_the_other_is_refused(
+    tmp_path, monkeypatch, capsys
+):
+    """The first a child process, the second this one (the command as its console runs it)."""
     outputs = tmp_path / "outputs"
     common = ["data=tiny", f"paths.outputs={outputs}", "progress=false", "workers=1"]
     first = start(
@@ -73,24 +77,16 @@ def test_two_generates_into_one_folder_one_writes_the_other_is_refused(tmp_path)
     )
     lock = outputs / "data" / "tiny.lock"
     wait_for(lock, first)
-    second = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "physgnn.generate",
-            *common,
-            "data.seed=7",
-            f"hydra.run.dir={tmp_path}/b",
-        ],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    first.send_signal(signal.SIGTERM)
-    first.communicate(timeout=60)
-    lines = second.stderr.strip().splitlines()
-    assert second.returncode == 2 and len(lines) == 1, second.stderr[-2000:]
+    argv = ["physgnn.generate", *common, "data.seed=7", f"hydra.run.dir={tmp_path}/b"]
+    monkeypatch.setattr(sys, "argv", argv)
+    try:
+        with pytest.raises(SystemExit) as exit_info:
+            generate_command.main()
+    finally:
+        first.send_signal(signal.SIGTERM)
+        first.communicate(timeout=60)
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert exit_info.value.code == 2 and len(lines) == 1, lines
     assert lines[0].startswith(f"error: data.dir {outputs / 'data' / 'tiny'} is in use: ")
     assert f"pid {first.pid} on {socket.gethostname()}" in lines[0]
     assert not lock.exists()  # the first released it when it stopped
