@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import shutil
@@ -64,6 +65,16 @@ def tiny_run(tiny_dataset, tmp_path_factory) -> Path:
     # train() keeps the config where load_run looks, also without Hydra's output folder
     assert OmegaConf.load(run_dir / ".hydra" / "config.yaml").model.network.M == 1
     return run_dir
+
+
+@pytest.fixture(scope="session")
+def tiny_train(tiny_dataset):
+    """The ``tiny`` preset's training split and its statistics: ``(trajectories, stats)``.
+    Read-only."""
+    from physgnn.data.dataset import read_split
+
+    stats = json.loads((tiny_dataset / "stats.json").read_text())
+    return read_split(tiny_dataset / "train.h5"), stats
 
 
 @pytest.fixture(autouse=True)

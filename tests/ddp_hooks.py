@@ -37,8 +37,13 @@ class Probe(L.Callback):
     def dump(self, trainer) -> None:
         ckpt = trainer.checkpoint_callback
         best = None if ckpt.best_model_score is None else float(ckpt.best_model_score)
-        out = {"steps": self.steps, "scores": self.scores, "rolled": self.rolled,
-               "best": ckpt.best_model_path, "best_score": best}  # fmt: skip
+        out = {
+            "steps": self.steps,
+            "scores": self.scores,
+            "rolled": self.rolled,
+            "best": ckpt.best_model_path,
+            "best_score": best,
+        }
         (self.folder / f"rank{trainer.global_rank}.json").write_text(json.dumps(out))
 
     def on_train_batch_start(self, trainer, pl_module, batch, batch_idx) -> None:

@@ -1,6 +1,7 @@
 """Hand-built states, scenes and trajectories shared by the graph, contact and data tests:
-one ``SceneState`` with planes (:func:`make_state`), a batch of spheres in uniform motion
-(:func:`scene`), a contact-aware model (:func:`make`), linear trajectories (:func:`linear_traj`)."""
+one ``SceneState`` with planes (:func:`make_state`), a wall (:data:`WALL_ROW`), a seeded batch
+of scenes (:func:`random_batch`), a batch of spheres in uniform motion (:func:`scene`), a
+contact-aware model (:func:`make`), linear trajectories (:func:`linear_traj`)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from torch_geometric.data import Batch
 
 from physgnn.data.state import SceneState, TrajectoryFrames
 from physgnn.models.learned import LearnedSimulator
-from physgnn.physics.scene import GROUND, Effects, Material, ground_plane
+from physgnn.physics.scene import GROUND, WALL, Effects, Material, ground_plane, make_plane
 from physgnn.physics.trajectory import Trajectory
 
 
@@ -37,6 +38,30 @@ def make_state(pos, vel=None, radius=0.5, planes=(), kinds=(), dt=0.125, effects
         dt=torch.tensor([dt]),
         effects=torch.tensor([effects], dtype=torch.bool),
     )
+
+
+# A wall x = 4 facing −x, spanning y ∈ [−2, 2] and z ∈ [0, 6] (half lengths 2 and 3).
+WALL_ROW = make_plane((4, 0, 3), (-1, 0, 0), (0, 1, 0), 2.0, 3.0)
+
+
+def random_batch(seed: int, scenes: int = 5, host: bool = True) -> Batch:
+    """``scenes`` scenes of 1 to 13 spheres (radius 0.4) at random, every second one with
+    :data:`WALL_ROW`; ``host``: with the ``host_sizes`` a data loader gives."""
+    gen = torch.Generator().manual_seed(seed)
+    states = []
+    for s in range(scenes):
+        n = int(torch.randint(1, 14, (1,), generator=gen))
+        pos = torch.rand(n, 3, generator=gen) * torch.tensor([5.0, 3.0, 4.0])
+        vel = torch.randn(n, 3, generator=gen)
+        walls = dict(planes=[WALL_ROW], kinds=[WALL]) if s % 2 else {}
+        states.append(make_state(pos, vel, radius=0.4, **walls))
+    batch = Batch.from_data_list(states)
+    if host:
+        batch.host_sizes = (
+            tuple(s.pos.shape[0] for s in states),
+            tuple(s.planes.shape[0] for s in states),
+        )
+    return batch
 
 
 DT = 0.1

@@ -30,29 +30,57 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.mark.parametrize(
     "command,override,message",
     [
-        ("train", "+lr=0.01", "+lr=0.01: lr is not a key of the train config and nothing reads "
-         "it ('+' adds a key that is not there): did you mean lit.optimizer.lr?"),
-        ("train", "+trainer.max_epoch=5", "+trainer.max_epoch=5: trainer.max_epoch is not an "
-         "argument of lightning.Trainer (did you mean trainer.max_epochs or trainer.min_epochs?)"),
-        ("train", "+model.Hx=3", "+model.Hx=3: model.Hx is not an argument of "
-         "physgnn.models.learned.LearnedSimulator (did you mean model.H?)"),
-        ("train", "+model.network.Mx=3", "+model.network.Mx=3: model.network.Mx is not an "
-         "argument of physgnn.nn.epd.EncodeProcessDecode (did you mean model.network.M?)"),
-        ("train", "+model.M=3", "+model.M=3: model.M is not an argument of "
-         "physgnn.models.learned.LearnedSimulator (did you mean model.network.M?)"),
-        ("generate", "+data.scene.n_maxx=2", "+data.scene.n_maxx=2: data.scene.n_maxx is not a "
-         "key of the generate config and nothing reads it ('+' adds a key that is not there): "
-         "did you mean data.scene.n_max?"),
+        (
+            "train",
+            "+lr=0.01",
+            "+lr=0.01: lr is not a key of the train config and nothing reads "
+            "it ('+' adds a key that is not there): did you mean lit.optimizer.lr?",
+        ),
+        (
+            "train",
+            "+trainer.max_epoch=5",
+            "+trainer.max_epoch=5: trainer.max_epoch is not an argument of lightning.Trainer "
+            "(did you mean trainer.max_epochs or trainer.min_epochs?)",
+        ),
+        (
+            "train",
+            "+model.Hx=3",
+            "+model.Hx=3: model.Hx is not an argument of "
+            "physgnn.models.learned.LearnedSimulator (did you mean model.H?)",
+        ),
+        (
+            "train",
+            "+model.network.Mx=3",
+            "+model.network.Mx=3: model.network.Mx is not an "
+            "argument of physgnn.nn.epd.EncodeProcessDecode (did you mean model.network.M?)",
+        ),
+        (
+            "train",
+            "+model.M=3",
+            "+model.M=3: model.M is not an argument of "
+            "physgnn.models.learned.LearnedSimulator (did you mean model.network.M?)",
+        ),
+        (
+            "generate",
+            "+data.scene.n_maxx=2",
+            "+data.scene.n_maxx=2: data.scene.n_maxx is not a "
+            "key of the generate config and nothing reads it ('+' adds a key that is not there): "
+            "did you mean data.scene.n_max?",
+        ),
         ("eval", "+max_frame=3", "+max_frame=3: max_frame is not a key of the eval config"),
         ("bench", "+quik=true", "+quik=true: quik is not a key of the bench config"),
-        ("data_report", "+splitz=[test]", "+splitz=[test]: splitz is not a key of the "
-         "data_report config"),
+        (
+            "data_report",
+            "+splitz=[test]",
+            "+splitz=[test]: splitz is not a key of the data_report config",
+        ),
         ("sleep_study", "+tresh=1", "+tresh=1: tresh is not a key of the sleep_study config"),
         ("study", "+seed=[0]", "+seed=[0]: seed is not a key of the study config"),
     ],
-)  # fmt: skip
-def test_an_added_key_nothing_reads_is_refused(tmp_path, monkeypatch, capsys, command, override,
-                                               message):  # fmt: skip
+)
+def test_an_added_key_nothing_reads_is_refused(
+    tmp_path, monkeypatch, capsys, command, override, message
+):
     module = importlib.import_module(f"physgnn.{command}")
     argv = [f"physgnn.{command}", f"paths.outputs={tmp_path}", f"hydra.run.dir={tmp_path}/h"]
     monkeypatch.setattr(sys, "argv", [*argv, override])
@@ -70,15 +98,20 @@ def test_an_added_key_nothing_reads_is_refused(tmp_path, monkeypatch, capsys, co
 @pytest.mark.parametrize(
     "arg,message",
     [
-        ("tol=-1", "tol must be a number >= 0 (a fraction of the diameter; 0: any overlap "
-         "counts), got -1"),
+        (
+            "tol=-1",
+            "tol must be a number >= 0 (a fraction of the diameter; 0: any overlap counts), got -1",
+        ),
         ("tol=nan", "tol must be a number >= 0"),
-        ("frames=abc", "frames must be a whole number >= 2 (the first frame is the start; e.g. "
-         "frames=100), got 'abc'"),
+        (
+            "frames=abc",
+            "frames must be a whole number >= 2 (the first frame is the start; e.g. "
+            "frames=100), got 'abc'",
+        ),
         ("frames=1", "frames must be a whole number >= 2"),
         ("video=yes", "video must be true or false, got 'yes'"),
     ],
-)  # fmt: skip
+)
 def test_bad_simulate_values_are_one_line(tmp_path, capsys, arg, message):
     scene = Path(CONF_DIR) / "scene" / "head_on.yaml"
     with pytest.raises(SystemExit) as exit_info:
@@ -92,12 +125,14 @@ def test_bad_simulate_values_are_one_line(tmp_path, capsys, arg, message):
 @pytest.mark.parametrize(
     "override,message",
     [
-        ("max_frames=0", "max_frames must be a whole number >= 2 or null (whole trajectories), "
-         "got 0"),
+        (
+            "max_frames=0",
+            "max_frames must be a whole number >= 2 or null (whole trajectories), got 0",
+        ),
         ("max_frames=-1", "max_frames must be a whole number >= 2 or null"),
         ("tol=-1", "tol must be a number >= 0 (a fraction of the diameter"),
     ],
-)  # fmt: skip
+)
 def test_bad_eval_values_are_refused(tmp_path, override, message):
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose("eval", overrides=[f"paths.outputs={tmp_path}", override])
@@ -121,8 +156,9 @@ def test_a_dataset_with_a_negative_radius_or_mass_is_refused(tiny_dataset, tmp_p
     path = shutil.copy(tiny_dataset / "val.h5", tmp_path / "val.h5")
     with h5py.File(path, "r+") as f:
         f["traj_00000"][key][1] = -0.5
-    with pytest.raises(DatasetError, match=f"{path}:traj_00000: {key} of sphere 1 is -0.5; "
-                       f"every {key} must be > 0"):  # fmt: skip
+    with pytest.raises(
+        DatasetError, match=f"{path}:traj_00000: {key} of sphere 1 is -0.5; every {key} must be > 0"
+    ):
         read_split(path)
 
 
@@ -137,8 +173,14 @@ def test_a_dataset_with_a_negative_radius_or_mass_is_refused(tiny_dataset, tmp_p
     ],
 )
 def test_a_scene_float32_cannot_hold_is_refused(position, radius, message):
-    scene = {"name": "far", "frames": 3, "spheres": [{"radius": radius, "mass": 1.0,
-                                                      "position": position}]}  # fmt: skip
-    with pytest.raises(SceneError, match=f"scene 'far': {message} from the origin, finer than "
-                       "float32 resolves there: bring the scene near the origin"):  # fmt: skip
+    scene = {
+        "name": "far",
+        "frames": 3,
+        "spheres": [{"radius": radius, "mass": 1.0, "position": position}],
+    }
+    with pytest.raises(
+        SceneError,
+        match=f"scene 'far': {message} from the origin, finer than "
+        "float32 resolves there: bring the scene near the origin",
+    ):
         scene_from_dict(scene)

@@ -57,8 +57,9 @@ def test_roll_out_refuses_constraints_simulate_refuses(model, truth, constraints
 @pytest.mark.parametrize("frames", [2.7, 1, 0, "10"])
 def test_simulate_and_scene_from_arrays_refuse_frames_that_are_not_a_count(frames):
     scene = pg.scene_from_arrays(POS, 0.5, frames=3)
-    with pytest.raises(pg.ArgumentError, match=f"^frames must be a whole number >= 2 .*got "
-                       f"{frames!r}$"):  # fmt: skip
+    with pytest.raises(
+        pg.ArgumentError, match=f"^frames must be a whole number >= 2 .*got {frames!r}$"
+    ):
         pg.simulate(scene, frames=frames)
     with pytest.raises(pg.ArgumentError, match="^frames must be a whole number >= 2"):
         pg.scene_from_arrays(POS, 0.5, frames=frames)
@@ -133,11 +134,16 @@ def test_score_names_the_truth_when_the_truth_is_not_finite(truth):
 def test_load_model_refuses_a_run_still_training(tmp_path):
     run = tmp_path / "run"
     (run / ".hydra").mkdir(parents=True)
-    (run / ".hydra" / "config.yaml").write_text((PRETRAINED_DIR / ".hydra" / "config.yaml")
-                                                .read_text())  # fmt: skip
+    (run / ".hydra" / "config.yaml").write_text(
+        (PRETRAINED_DIR / ".hydra" / "config.yaml").read_text()
+    )
     trainer = subprocess.Popen(["sleep", "30"])  # stands for the training process
-    info = {"status": "running", "pid": trainer.pid, "host": socket.gethostname(),
-            "started": "2026-11-23T10:00:00"}  # fmt: skip
+    info = {
+        "status": "running",
+        "pid": trainer.pid,
+        "host": socket.gethostname(),
+        "started": "2026-11-23T10:00:00",
+    }
     (run / "run.json").write_text(json.dumps(info))
     try:
         with pytest.raises(RunError) as err:

@@ -19,14 +19,20 @@ def flight(p0, v0, w0=(0.0, 0.0, 0.0), frames=30, effects=None, name="fall"):
     quat = np.zeros((frames, 1, 4), np.float32)
     quat[..., 0] = 1
     return Trajectory(
-        name=name, pos=pos, quat=quat,
+        name=name,
+        pos=pos,
+        quat=quat,
         vel=np.broadcast_to(np.asarray(v0, np.float32), (frames, 1, 3)).copy(),
         angvel=np.broadcast_to(np.asarray(w0, np.float32), (frames, 1, 3)).copy(),
-        radius=np.full(1, 0.5, np.float32), mass=np.ones(1, np.float32),
-        material=np.zeros(1, np.int64), planes=ground_plane()[None],
-        plane_kind=np.zeros(1, np.int64), materials=np.zeros((1, 4), np.float32), dt=DT,
+        radius=np.full(1, 0.5, np.float32),
+        mass=np.ones(1, np.float32),
+        material=np.zeros(1, np.int64),
+        planes=ground_plane()[None],
+        plane_kind=np.zeros(1, np.int64),
+        materials=np.zeros((1, 4), np.float32),
+        dt=DT,
         effects=effects or Effects(),
-    )  # fmt: skip
+    )
 
 
 def test_gravity_only_reproduces_free_fall():

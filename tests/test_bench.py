@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import torch
+from gpukit import OPS_PER_TRAINING_STEP
 from hydra import compose, initialize_config_dir
 from torch.utils.flop_counter import FlopCounterMode
 
@@ -49,9 +50,15 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
     data = json.loads((out / "bench.json").read_text())
     assert data == json.loads(json.dumps(result))
     assert set(data) == {
-        "machine", "learned", "pybullet", "interleaved", "crossover", "training",
-        "gpu_readiness", "gpu"
-    }  # fmt: skip
+        "machine",
+        "learned",
+        "pybullet",
+        "interleaved",
+        "crossover",
+        "training",
+        "gpu_readiness",
+        "gpu",
+    }
     parts = {"train_step", "rollout_frame"}
     kinds = ("", "_fixed_capacity", "_compiled")
     assert set(data["gpu_readiness"]) == {f"{p}{kind}" for p in parts for kind in kinds}
@@ -62,6 +69,9 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
     readiness = data["gpu_readiness"]
     for part in parts:
         assert 0 < readiness[f"{part}_compiled"]["kernels"] < readiness[part]["kernels"]
+    # the default recipe's compiled training step keeps to the op budget; eager it does not
+    steps = readiness["train_step_compiled"]["kernels"], readiness["train_step"]["kernels"]
+    assert steps[0] <= OPS_PER_TRAINING_STEP < steps[1]
     if not torch.cuda.is_available():
         assert data["gpu"] is None
         assert "Skipped: torch saw no CUDA device" in (out / "bench.md").read_text()
@@ -252,8 +262,12 @@ def _learned(n, fps, graph, network, share):
 
 
 def _size(n, substeps, ratio, load):
-    return {"n_spheres": n, "matched_substeps": substeps, "matched_ratio": ratio,
-            "loadavg_start": load}  # fmt: skip
+    return {
+        "n_spheres": n,
+        "matched_substeps": substeps,
+        "matched_ratio": ratio,
+        "loadavg_start": load,
+    }
 
 
 def test_targets_table_met_and_not_met():
@@ -266,8 +280,11 @@ def test_targets_table_met_and_not_met():
         ],
         "training": {"share_of_matmul": 0.65, "gflops": 100.0, "nodes_per_s": 30_000.0},
     }
-    result = {"crossover": {"sizes": [_size(154, 5, 3.0, 0.5), _size(1000, 5, 4.0, 2.5),
-                                      _size(10000, 2, 0.5, 2.5)]}}  # fmt: skip
+    result = {
+        "crossover": {
+            "sizes": [_size(154, 5, 3.0, 0.5), _size(1000, 5, 4.0, 2.5), _size(10000, 2, 0.5, 2.5)]
+        }
+    }
     fps154, fps1000, share, graph, linear, pybullet, train_share, nodes = targets(result, extra)
     assert fps154[1:] == ["450.0 FPS", "met"]
     assert fps1000[1:] == ["50.0 FPS (needs ×2.4)", "not met"]
@@ -323,13 +340,19 @@ def test_quick_bench_takes_turns_and_names_the_model_in_the_targets_heading(quic
     out, result = quick
     [row] = result["interleaved"]
     assert (row["config"], row["n_spheres"], row["substeps"], len(row["ratios"])) == (
-        "baseline", 10, 10, 2)  # fmt: skip
+        "baseline",
+        10,
+        10,
+        2,
+    )
     ratios = [a / b for a, b in zip(row["learned_fps"], row["pybullet_fps"], strict=True)]
     assert row["ratios"] == ratios and row["median_ratio"] == sum(ratios) / 2
     md = (out / "bench.md").read_text()
     model = _cfg().model
-    heading = (f"## Targets (baseline M={model.network.M} H={model.H} "
-               f"{model.graph.connectivity} h={model.network.hidden})")  # fmt: skip
+    heading = (
+        f"## Targets (baseline M={model.network.M} H={model.H} "
+        f"{model.graph.connectivity} h={model.network.hidden})"
+    )
     assert heading in md and "## Learned against pybullet, taking turns" in md
     assert "![pybullet accuracy versus time on the bench pile](pybullet_accuracy.png)" in md
     assert (out / "pybullet_accuracy.png").stat().st_size > 1000
@@ -344,19 +367,34 @@ def test_interleaved_configs_must_be_learned_configs(tmp_path):
 # -------------------------------------------------------------------------------- crossover
 def _sim(name, mse20, fps, ratio=None, diverged=None):
     substeps = None if name == "learned" else int(name.split("-")[1])
-    return {"simulator": name, "substeps": substeps, "mse20": mse20, "fps": fps, "ratio": ratio,
-            "diverged_at": diverged}  # fmt: skip
+    return {
+        "simulator": name,
+        "substeps": substeps,
+        "mse20": mse20,
+        "fps": fps,
+        "ratio": ratio,
+        "diverged_at": diverged,
+    }
 
 
 def test_crossover_judges_the_front_and_the_matched_setting():
-    engine = [_sim("pybullet-1", 1.0, 400.0, 0.25), _sim("pybullet-5", 0.1, 100.0, 1.0),
-              _sim("pybullet-20", 0.01, 25.0, 4.0)]  # fmt: skip
+    engine = [
+        _sim("pybullet-1", 1.0, 400.0, 0.25),
+        _sim("pybullet-5", 0.1, 100.0, 1.0),
+        _sim("pybullet-20", 0.01, 25.0, 4.0),
+    ]
     # 100 FPS at 0.5: pybullet-5 is as fast and more accurate -> off; matched: pybullet-5
     assert crossover.judged([_sim("learned", 0.5, 100.0), *engine]) == {
-        "on_front": False, "matched_substeps": 5, "matched_ratio": 1.0}  # fmt: skip
+        "on_front": False,
+        "matched_substeps": 5,
+        "matched_ratio": 1.0,
+    }
     # 200 FPS at 0.05: nothing as fast is as accurate -> on; the fastest as accurate: 20 substeps
     assert crossover.judged([_sim("learned", 0.05, 200.0), *engine]) == {
-        "on_front": True, "matched_substeps": 20, "matched_ratio": 4.0}  # fmt: skip
+        "on_front": True,
+        "matched_substeps": 20,
+        "matched_ratio": 4.0,
+    }
     # more accurate than every setting tried: on the front, no matched setting
     assert crossover.judged([_sim("learned", 0.001, 1.0), *engine])["matched_substeps"] is None
     # a diverged rollout is never on the front

@@ -62,8 +62,17 @@ def test_bounce_rows_measure_each_material_and_pybullet():
 
 
 def test_bounce_section_and_csv_round_trip(tmp_path):
-    rows = [dict(run="a", restitution=0.5, height=10.0, apex=2.4, ratio=0.96,
-                 truth_ratio=1.0, diverged_at=None)]  # fmt: skip
+    rows = [
+        dict(
+            run="a",
+            restitution=0.5,
+            height=10.0,
+            apex=2.4,
+            ratio=0.96,
+            truth_ratio=1.0,
+            diverged_at=None,
+        )
+    ]
     path = bounce.write_csv(tmp_path / "bounce.csv", rows)
     back = bounce.read_csv(path)
     assert back[0]["ratio"] == pytest.approx(0.96) and back[0]["diverged_at"] is None

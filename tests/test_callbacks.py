@@ -78,9 +78,15 @@ def test_ood_off_logs_validation_only():
     module = FakeModule()
     callback_with([trajectory(2, 8)], [trajectory(2, 8)], ood=False).log_rollouts(module, None)
     assert set(module.logged) == {
-        "val/rollout_mse", "val/rollout_score", "val/chamfer", "val/energy_gain", "rollout/fps",
-        "val/max_depth", "val/tunnelled", "val/rest_drift",
-    }  # fmt: skip
+        "val/rollout_mse",
+        "val/rollout_score",
+        "val/chamfer",
+        "val/energy_gain",
+        "rollout/fps",
+        "val/max_depth",
+        "val/tunnelled",
+        "val/rest_drift",
+    }
 
 
 def test_runs_every_n_epochs_and_skips_sanity_check():
@@ -120,8 +126,9 @@ def test_a_diverged_validation_rollout_scores_infinity():
 
 def row(mse=2.0, sphere=0.0, ground=0.0, static=0.0, tunnelled=0, rest=None, diverged=None):
     pen = dict(max_pen_sphere=sphere, max_pen_ground=ground, max_pen_static=static)
-    return dict(mse=mse, tunnelled=tunnelled, n_spheres=4, rest_drift=rest, diverged_at=diverged,
-                **pen)  # fmt: skip
+    return dict(
+        mse=mse, tunnelled=tunnelled, n_spheres=4, rest_drift=rest, diverged_at=diverged, **pen
+    )
 
 
 def test_the_score_adds_depth_tunnelling_and_rest_drift_to_the_error():

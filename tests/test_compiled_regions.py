@@ -1,6 +1,7 @@
 """Compiled regions (``lit.compile=true`` on counted graphs): the graph rules and the step after
 the graph build each run as one region with dynamic shapes; results equal eager's to float
-rounding; a training step dispatches at most 1 500 aten ops outside them.
+rounding; a training step dispatches at most 1 500 aten ops outside them (slow here; the fast
+suite checks it on the quick bench).
 
 The regions are compiled with ``aot_eager`` (dynamo and AOT autograd, no code generation): what
 runs inside or outside a region does not depend on the backend, and it compiles in seconds.
@@ -10,7 +11,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import torch
+from gpukit import OPS_PER_TRAINING_STEP, training_batch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from simdata import trajectory
@@ -21,9 +24,6 @@ from physgnn.benchmark.gpu_readiness import training_step_counts
 from physgnn.benchmark.syncs import profiling_ops
 from physgnn.models.capture import ShapeBoundCall, compile_simulator
 from physgnn.rollout import rollout
-from tests.test_fixed_capacity import tiny, training_batch  # noqa: F401 (fixture)
-
-OPS_PER_TRAINING_STEP = 1500  # the budget of aten ops dispatched outside the compiled regions
 
 
 def default_pair(stats):
@@ -43,8 +43,8 @@ def compiled_pair(stats):
     return eager, compiled
 
 
-def test_a_compiled_simulator_rolls_out_as_the_eager_one(tiny):  # noqa: F811
-    trajectories, stats = tiny
+def test_a_compiled_simulator_rolls_out_as_the_eager_one(tiny_train):
+    trajectories, stats = tiny_train
     eager, compiled = (s.eval() for s in compiled_pair(stats))
     scenes = trajectories[:2] + [trajectory(6, seed=3)]  # contacts, and flight between walls
     out = [rollout(sim, scenes, n_frames=10) for sim in (eager, compiled)]
@@ -53,8 +53,8 @@ def test_a_compiled_simulator_rolls_out_as_the_eager_one(tiny):  # noqa: F811
         assert_close(b.quat, a.quat, rtol=1e-5, atol=1e-5)
 
 
-def test_compiled_regions_give_the_eager_losses_and_gradients(tiny):  # noqa: F811
-    trajectories, stats = tiny
+def test_compiled_regions_give_the_eager_losses_and_gradients(tiny_train):
+    trajectories, stats = tiny_train
     recipe = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness.lit
     eager, compiled = default_pair(stats)
     lits = [instantiate(recipe, simulator=s) for s in (eager, compiled)]
@@ -76,10 +76,13 @@ def test_compiled_regions_give_the_eager_losses_and_gradients(tiny):  # noqa: F8
             assert_close(g_c, g_e, rtol=1e-4, atol=1e-6)
 
 
-def test_a_compiled_training_step_dispatches_at_most_the_budget(tiny):  # noqa: F811
+@pytest.mark.slow
+def test_a_compiled_training_step_dispatches_at_most_the_budget(tiny_train):
     """The default recipe through Lightning (noise, contact noise, push-forward up to 2, the
-    loss, backward, clipping, Adam): eager it dispatches far more than the budget."""
-    trajectories, stats = tiny
+    loss, backward, clipping, Adam): eager it dispatches far more than the budget. Slow (its
+    compile takes minutes on 2 busy cores): the fast suite checks the same budget on the quick
+    bench's compiled training step (tests/test_bench.py), the same model and recipe."""
+    trajectories, stats = tiny_train
     cfg = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness
     model = OmegaConf.merge(OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml"), cfg.model)
     c = OmegaConf.create({"steps": 4, "warmup_steps": 2, "batch_size": 16})

@@ -19,12 +19,30 @@ GROUND_ROW = T(ground_plane()[None], dtype=F64)
 NO_PAIRS = torch.zeros(2, 0, dtype=torch.long)
 
 
-def project(pos, pos_next, radius, mass, pairs=NO_PAIRS, planes=GROUND_ROW, kinds=(GROUND,),
-            ps=None, iterations=1):  # fmt: skip
+def project(
+    pos,
+    pos_next,
+    radius,
+    mass,
+    pairs=NO_PAIRS,
+    planes=GROUND_ROW,
+    kinds=(GROUND,),
+    ps=None,
+    iterations=1,
+):
     pos, pos_next = T(pos, dtype=F64), T(pos_next, dtype=F64)
     ps = torch.zeros(2, 0, dtype=torch.long) if ps is None else T(ps)
-    return project_contacts(pos, pos_next, T(radius, dtype=F64), T(mass, dtype=F64), T(pairs),
-                            planes, T(kinds), ps, iterations)  # fmt: skip
+    return project_contacts(
+        pos,
+        pos_next,
+        T(radius, dtype=F64),
+        T(mass, dtype=F64),
+        T(pairs),
+        planes,
+        T(kinds),
+        ps,
+        iterations,
+    )
 
 
 def test_a_pair_separates_along_its_normal_with_its_momentum_kept():
@@ -61,14 +79,22 @@ def test_a_sphere_crossing_a_tilted_plane_in_one_frame_ends_on_its_front_face():
     normal = planes[1, 3:6]
     start = planes[1, 0:3] + 1.0 * normal
     through = planes[1, 0:3] - 1.5 * normal + T([0.3, 0.0, 0.0], dtype=F64)  # behind, over it
-    x = project([start.tolist()], [through.tolist()], [0.5], [1.0], planes=planes,
-                kinds=(GROUND, STATIC), ps=[[1], [0]])  # fmt: skip
+    x = project(
+        [start.tolist()],
+        [through.tolist()],
+        [0.5],
+        [1.0],
+        planes=planes,
+        kinds=(GROUND, STATIC),
+        ps=[[1], [0]],
+    )
     assert_close(float(((x[0] - planes[1, 0:3]) * normal).sum()), 0.5)
     # a sphere behind the ramp's plane, beside it, is never lifted onto it
     below = (planes[1, 0:3] - 1.0 * normal + T([7.0, 0, 0], dtype=F64)).tolist()
     under = (planes[1, 0:3] - 1.0 * normal).tolist()
-    x = project([below], [under], [0.5], [1.0], planes=planes, kinds=(GROUND, STATIC),
-                ps=[[1], [0]])  # fmt: skip
+    x = project(
+        [below], [under], [0.5], [1.0], planes=planes, kinds=(GROUND, STATIC), ps=[[1], [0]]
+    )
     assert_close(x[0], T(under, dtype=F64))
 
 
@@ -76,8 +102,15 @@ def test_a_contact_grazed_by_rounding_does_not_halve_a_deep_one():
     wall = make_plane((3, 0, 5), (-1, 0, 0), (0, 1, 0), 5.0, 5.0)  # faces -x at x = 3
     planes = T(np.stack([ground_plane(), wall]), dtype=F64)
     # resting on the ground (a graze of 1e-9 predicted) and sent 0.2 into the wall in one frame
-    x = project([[2.0, 0.0, 0.5]], [[2.7, 0.0, 0.5 - 1e-9]], [0.5], [1.0], planes=planes,
-                kinds=(GROUND, STATIC), ps=[[0, 1], [0, 0]])  # fmt: skip
+    x = project(
+        [[2.0, 0.0, 0.5]],
+        [[2.7, 0.0, 0.5 - 1e-9]],
+        [0.5],
+        [1.0],
+        planes=planes,
+        kinds=(GROUND, STATIC),
+        ps=[[0, 1], [0, 0]],
+    )
     assert_close(float(x[0, 0]), 2.5, atol=1e-8, rtol=0)  # back on the wall in one pass
     assert float(x[0, 2]) >= 0.5 - 1e-8
 
@@ -86,13 +119,27 @@ def test_a_sphere_from_behind_a_ramp_meets_its_edge_and_is_not_lifted():
     ramp = make_plane((0, 0, 2), (0, 0, 1), (1, 0, 0), 5.0, 5.0)  # a table: edge at x = 5
     planes = T(np.stack([ground_plane(), ramp]), dtype=F64)
     # from below the table's plane, beside it, up into its edge (0.2 from it)
-    x = project([[6.0, 0.0, 1.0]], [[5.2, 0.0, 2.0]], [0.5], [1.0], planes=planes,
-                kinds=(GROUND, STATIC), ps=[[1], [0]])  # fmt: skip
+    x = project(
+        [[6.0, 0.0, 1.0]],
+        [[5.2, 0.0, 2.0]],
+        [0.5],
+        [1.0],
+        planes=planes,
+        kinds=(GROUND, STATIC),
+        ps=[[1], [0]],
+    )
     assert_close(float(x[0, 0]), 5.5)  # pushed off the edge, along the edge normal
     assert_close(float(x[0, 2]), 2.0)
     # from below, beside it, to under its footprint just behind it: kept r away, behind
-    x = project([[6.0, 0.0, 1.0]], [[4.0, 0.0, 1.8]], [0.5], [1.0], planes=planes,
-                kinds=(GROUND, STATIC), ps=[[1], [0]])  # fmt: skip
+    x = project(
+        [[6.0, 0.0, 1.0]],
+        [[4.0, 0.0, 1.8]],
+        [0.5],
+        [1.0],
+        planes=planes,
+        kinds=(GROUND, STATIC),
+        ps=[[1], [0]],
+    )
     assert_close(x[0], T([4.0, 0.0, 1.5], dtype=F64))
 
 
@@ -100,8 +147,9 @@ def test_a_stack_stays_put_and_loses_energy():
     pos = [[0.0, 0.0, 0.5], [0.0, 0.0, 1.5]]  # resting on the ground, one on the other
     fall = -9.81 * DT * DT
     nxt = [[0.0, 0.0, 0.5 + fall], [0.0, 0.0, 1.5 + fall]]
-    x = project(pos, nxt, [0.5, 0.5], [1.0, 1.0], pairs=[[0], [1]], ps=[[0, 0], [0, 1]],
-                iterations=40)  # fmt: skip
+    x = project(
+        pos, nxt, [0.5, 0.5], [1.0, 1.0], pairs=[[0], [1]], ps=[[0, 0], [0, 1]], iterations=40
+    )
     assert_close(x, T(pos, dtype=F64), atol=1e-4, rtol=0)
     v_hat, v = (T(nxt, dtype=F64) - T(pos, dtype=F64)) / DT, (x - T(pos, dtype=F64)) / DT
     assert float((v**2).sum()) <= float((v_hat**2).sum())
@@ -135,8 +183,17 @@ def test_energy_never_rises_on_random_falls():
         mass = torch.rand(n, generator=gen, dtype=F64) + 0.5
         iu = torch.triu_indices(n, n, 1)
         ps = torch.stack([torch.zeros(n, dtype=torch.long), torch.arange(n)])
-        x = project_contacts(pos, pos + DT * vel, torch.full((n,), 0.5, dtype=F64), mass, iu,
-                             GROUND_ROW, T([GROUND]), ps, 10)  # fmt: skip
+        x = project_contacts(
+            pos,
+            pos + DT * vel,
+            torch.full((n,), 0.5, dtype=F64),
+            mass,
+            iu,
+            GROUND_ROW,
+            T([GROUND]),
+            ps,
+            10,
+        )
         v = (x - pos) / DT
         kinetic_before = float((mass[:, None] * vel**2).sum())
         assert float((mass[:, None] * v**2).sum()) <= kinetic_before + 1e-9
@@ -179,8 +236,15 @@ def test_a_sphere_sent_beyond_its_graphs_reach_still_meets_a_plane():
             return torch.zeros_like(vel) + T([0.0, 0.0, -100.0]), angvel, graph
 
     table = make_plane((0, 0, 2), (0, 0, 1), (1, 0, 0), 5.0, 5.0)
-    state = ballistic(scene([[0, 0, 10.0], [0, 0, 40.0]], [[0, 0, 0], [0, 0, 0]], [0.5, 0.5],
-                            planes=[ground_plane(), table], kinds=[GROUND, STATIC]))  # fmt: skip
+    state = ballistic(
+        scene(
+            [[0, 0, 10.0], [0, 0, 40.0]],
+            [[0, 0, 0], [0, 0, 0]],
+            [0.5, 0.5],
+            planes=[ground_plane(), table],
+            kinds=[GROUND, STATIC],
+        )
+    )
     _, _, graph = sim.predict(state)
     assert not (state.plane_kind[graph.ps_index[0]] == STATIC).any()  # no edge to the table
     vel, _ = ConstrainedSimulator(Plunge(), 3)(state)

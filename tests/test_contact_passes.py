@@ -156,8 +156,12 @@ def momenta(state, vel, angvel):
 
 
 def test_pair_impulses_conserve_momentum_for_any_weights():
-    cases = [([1.0, 1.0], [0.5, 0.5]), ([1.0, 2.0], [0.5, 0.75]), ([1.0, 8.0, 1.0, 8.0],
-             [0.5, 0.75, 0.6, 0.5]), ([1.0, 1e4, 3.0], [0.5, 0.5, 0.7])]  # fmt: skip
+    cases = [
+        ([1.0, 1.0], [0.5, 0.5]),
+        ([1.0, 2.0], [0.5, 0.75]),
+        ([1.0, 8.0, 1.0, 8.0], [0.5, 0.75, 0.6, 0.5]),
+        ([1.0, 1e4, 3.0], [0.5, 0.5, 0.7]),
+    ]
     for seed, (masses, radii) in enumerate(cases):
         sim = make(gravity_prior=True)
         torch.manual_seed(seed)

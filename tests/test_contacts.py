@@ -40,9 +40,12 @@ def test_relative_pair_inputs_by_hand():
     assert sim.relative_pairs and sim.mass_ratio
     # sphere 1 passes sphere 0 sideways at 4 m/s (y) while closing at 3 m/s (x)
     state = scene(
-        [[0, 0, 5], [1.7, 0, 5]], [[1, 0, 0], [-2, 4, 0]], [0.5, 1.0], mass=[1.0, 3.0],
+        [[0, 0, 5], [1.7, 0, 5]],
+        [[1, 0, 0], [-2, 4, 0]],
+        [0.5, 1.0],
+        mass=[1.0, 3.0],
         material=[0, 1],
-    )  # fmt: skip
+    )
     graph = sim.graph_builder(state)
     pp, _ = sim.edge_features(graph, state)
     sigma = float(torch.tensor([1.0, 2.0, 4.0]).square().mean().sqrt())
@@ -170,9 +173,16 @@ def test_contact_noise_pushes_contacts_in_and_targets_the_truth():
     assert torch.equal(none.pos, state.pos)
 
 
-SWITCHES = [("contact_features", True), ("material_features", True), ("gravity_prior", True),
-            ("connectivity", "approach"), ("relative_pairs", True), ("mass_ratio", True),
-            ("aggregation", "mean"), ("rest_decision", True)]  # fmt: skip
+SWITCHES = [
+    ("contact_features", True),
+    ("material_features", True),
+    ("gravity_prior", True),
+    ("connectivity", "approach"),
+    ("relative_pairs", True),
+    ("mass_ratio", True),
+    ("aggregation", "mean"),
+    ("rest_decision", True),
+]
 
 
 @pytest.mark.parametrize(("key", "value"), SWITCHES)

@@ -25,12 +25,20 @@ def traj(pos, name):
     quat = np.zeros((t, n, 4), np.float32)
     quat[..., 0] = 1
     return Trajectory(
-        name=name, pos=pos, quat=quat, vel=np.zeros((t, n, 3), np.float32),
-        angvel=np.zeros((t, n, 3), np.float32), radius=np.full(n, 0.5, np.float32),
-        mass=np.ones(n, np.float32), material=np.zeros(n, np.int64),
-        planes=ground_plane()[None], plane_kind=np.zeros(1, np.int64),
-        materials=np.zeros((1, 4), np.float32), dt=0.1, effects=Effects(),
-    )  # fmt: skip
+        name=name,
+        pos=pos,
+        quat=quat,
+        vel=np.zeros((t, n, 3), np.float32),
+        angvel=np.zeros((t, n, 3), np.float32),
+        radius=np.full(n, 0.5, np.float32),
+        mass=np.ones(n, np.float32),
+        material=np.zeros(n, np.int64),
+        planes=ground_plane()[None],
+        plane_kind=np.zeros(1, np.int64),
+        materials=np.zeros((1, 4), np.float32),
+        dt=0.1,
+        effects=Effects(),
+    )
 
 
 # A: two resting spheres on the ground overlapping by 0.2 (normalised 0.2), no energy change
@@ -97,8 +105,10 @@ def test_missing_split_or_folder_is_one_clear_error(dataset, tmp_path):
 def test_cli_missing_dataset_prints_one_line_and_exits_2(tmp_path):
     proc = subprocess.run(
         [sys.executable, "-m", "physgnn.data_report", f"dataset={tmp_path / 'missing'}"],
-        capture_output=True, text=True, cwd=tmp_path,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
     assert proc.returncode == 2
     assert proc.stderr.strip().count("\n") == 0 and proc.stderr.startswith("error: dataset folder")
     assert list(tmp_path.iterdir()) == []  # nothing written, not even Hydra's folders

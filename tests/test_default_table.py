@@ -13,19 +13,30 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def record(seed: int, mse: float, commit: str, diverged: int | None = None) -> dict:
-    ood = [{"trajectory": s, "mse": 10.0 * (i + 1), "max_depth_sphere": 0.5, "diverged_at": None}
-           for i, s in enumerate(["ood_cubes", "ood_cubes_ramps", "ood_resting_hit",
-                                  "ood_spaced_drop"])]  # fmt: skip
+    ood = [
+        {"trajectory": s, "mse": 10.0 * (i + 1), "max_depth_sphere": 0.5, "diverged_at": None}
+        for i, s in enumerate(
+            ["ood_cubes", "ood_cubes_ramps", "ood_resting_hit", "ood_spaced_drop"]
+        )
+    ]
     ood[0]["diverged_at"] = diverged
     test = [{"trajectory": "traj_00000", "mse": mse, "chamfer": mse / 2, "diverged_at": None}]
-    return {"key": "baseline", "seed": seed, "status": "finished", "commit": commit,
-            "date": "2026-01-01 00:00", "budget": {"steps": 300}, "checkpoint": {"step": 250},
-            "splits": {"test": test, "ood": ood}}  # fmt: skip
+    return {
+        "key": "baseline",
+        "seed": seed,
+        "status": "finished",
+        "commit": commit,
+        "date": "2026-01-01 00:00",
+        "budget": {"steps": 300},
+        "checkpoint": {"step": 250},
+        "splits": {"test": test, "ood": ood},
+    }
 
 
 def test_the_default_table_names_each_rows_commit(tmp_path, capsys):
-    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                          text=True).stdout.strip()  # fmt: skip
+    head = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
+    ).stdout.strip()
     registry, out = tmp_path / "registry.jsonl", tmp_path / "default.md"
     lines = [record(0, 30.0, head), record(1, 34.0, "0000000", diverged=12)]
     lines.append(record(2, 99.0, head) | {"key": "model.network.M=1"})  # another configuration

@@ -37,11 +37,22 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def sweep(outputs: Path, name: str, *args: str, background: bool = False):
     """``python -m physgnn.train -m model.network.M=1,2`` of two tiny jobs (experiment ``name``)."""
-    cmd = [sys.executable, "-m", "physgnn.train", "-m", "model.network.M=1,2", "data=tiny",
-           f"paths.outputs={outputs}", f"experiment_name={name}", *SHORT[1:], *args]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "physgnn.train",
+        "-m",
+        "model.network.M=1,2",
+        "data=tiny",
+        f"paths.outputs={outputs}",
+        f"experiment_name={name}",
+        *SHORT[1:],
+        *args,
+    ]
     if background:
-        return subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                text=True)  # fmt: skip
+        return subprocess.Popen(
+            cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+        )
     return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
 
 
@@ -65,8 +76,14 @@ def test_joblib_sweep_runs_two_jobs_in_worker_processes(tiny_dataset):
 @pytest.mark.slow
 def test_submitit_local_sweep_requeues_a_preempted_job_which_resumes(tiny_dataset):
     outputs = outputs_of(tiny_dataset)
-    proc = sweep(outputs, "submitit", "hydra/launcher=submitit_local", "trainer.max_epochs=2",
-                 "datamodule.pairs_per_epoch=40", background=True)  # fmt: skip
+    proc = sweep(
+        outputs,
+        "submitit",
+        "hydra/launcher=submitit_local",
+        "trainer.max_epochs=2",
+        "datamodule.pairs_per_epoch=40",
+        background=True,
+    )
     first = next(iter(wait_for_glob(outputs / "multirun" / "submitit", "*/0_*/run.json", proc)))
     pid = read_run_json(first.parent)["pid"]
     os.kill(pid, signal.SIGUSR2)  # what SLURM sends signal_delay_s before pre-empting
@@ -99,21 +116,42 @@ def three_sphere_dataset(tmp_path_factory) -> Path:
     global one, as DDP averages gradients. Two validation trajectories: one for each of two
     processes' rollouts."""
     outputs = tmp_path_factory.mktemp("outputs")
-    cfg = compose_generate(["data=tiny", f"paths.outputs={outputs}", "workers=1",
-                            "progress=false", "data.scene.n_min=3", "data.scene.n_max=3",
-                            "data.fit_scene.rest_fraction=0",  # rest scenes have their own sizes
-                            "data.splits.train=4", "data.splits.val=2"])  # fmt: skip
+    cfg = compose_generate(
+        [
+            "data=tiny",
+            f"paths.outputs={outputs}",
+            "workers=1",
+            "progress=false",
+            "data.scene.n_min=3",
+            "data.scene.n_max=3",
+            "data.fit_scene.rest_fraction=0",  # rest scenes have their own sizes
+            "data.splits.train=4",
+            "data.splits.val=2",
+        ]
+    )
     return generate(cfg)
 
 
 # A tiny 2-process run: 3 epochs of 2 steps of 2 × 4 pairs, hidden size 8, the default noise
 # and contact noise, push-forward from the first step, a validation rollout every epoch; the
 # loss of process 1 is NaN at step 5, epoch 2's last batch.
-TINY_DDP = ["trainer=ddp_cpu", "trainer.devices=2", "data=tiny", "seed=5", "model.network.M=1",
-            "model.network.hidden=8", "trainer.max_epochs=3", "trainer.max_time=null",
-            "trainer.enable_progress_bar=false", "trainer.enable_model_summary=false",
-            "datamodule.batch_size=4", "datamodule.pairs_per_epoch=16", "datamodule.val_pairs=8",
-            "lit.pushforward_after=0", "callbacks.rollout.every_n_epochs=1"]  # fmt: skip
+TINY_DDP = [
+    "trainer=ddp_cpu",
+    "trainer.devices=2",
+    "data=tiny",
+    "seed=5",
+    "model.network.M=1",
+    "model.network.hidden=8",
+    "trainer.max_epochs=3",
+    "trainer.max_time=null",
+    "trainer.enable_progress_bar=false",
+    "trainer.enable_model_summary=false",
+    "datamodule.batch_size=4",
+    "datamodule.pairs_per_epoch=16",
+    "datamodule.val_pairs=8",
+    "lit.pushforward_after=0",
+    "callbacks.rollout.every_n_epochs=1",
+]
 HANG_S = 120  # a run still going after this long hangs
 
 
@@ -123,11 +161,23 @@ def ddp_run(three_sphere_dataset, tmp_path_factory) -> dict:
     exit code, stderr, run folder and what each process probed. Still running after
     ``HANG_S`` (a hang), both processes are killed and the tests fail."""
     run_dir, probe = tmp_path_factory.mktemp("ddp") / "run", tmp_path_factory.mktemp("probe")
-    cmd = [sys.executable, str(ROOT / "tests" / "ddp_hooks.py"), *TINY_DDP,
-           f"data.dir={three_sphere_dataset}", f"hydra.run.dir={run_dir}"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        str(ROOT / "tests" / "ddp_hooks.py"),
+        *TINY_DDP,
+        f"data.dir={three_sphere_dataset}",
+        f"hydra.run.dir={run_dir}",
+    ]
     env = os.environ | {"PHYSGNN_PROBE": str(probe), "PHYSGNN_NAN_AT": "1:5"}
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
+    proc = subprocess.Popen(
+        cmd,
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         _, err = proc.communicate(timeout=HANG_S)
     except subprocess.TimeoutExpired:
@@ -141,8 +191,10 @@ def ddp_run(three_sphere_dataset, tmp_path_factory) -> dict:
 def test_a_nan_in_one_ddp_process_stops_both_with_the_one_line_error(ddp_run):
     # step 5 is an epoch's last batch, where finiteness is read: process 0's own losses are
     # all finite there, and without the shared read it would go on and wait for process 1
-    line = ("error: non-finite training loss (nan) at epoch 2, step 5 in DDP process 1 of 2: "
-            "the model exploded, training stopped")  # fmt: skip
+    line = (
+        "error: non-finite training loss (nan) at epoch 2, step 5 in DDP process 1 of 2: "
+        "the model exploded, training stopped"
+    )
     assert ddp_run["code"] == 1, ddp_run["err"][-3000:]
     assert ddp_run["err"].count(line) == 2  # one line from each process
     assert read_run_json(ddp_run["run_dir"])["status"] == "diverged"
@@ -179,16 +231,34 @@ def test_two_ddp_processes_match_one_on_the_same_global_batch(three_sphere_datas
     # No random draws (noise, contact noise, push-forward) and no gravity prior: its loss is a
     # mean over the spheres in reach of a contact, and two processes average two such means,
     # which equals one process's mean only when both count as many spheres.
-    common = ["model.network.M=1", "model.network.hidden=16", "trainer.max_epochs=2",
-              "trainer.max_time=null", "trainer.enable_progress_bar=false",
-              "trainer.enable_model_summary=false", "datamodule.pairs_per_epoch=32",
-              "datamodule.val_pairs=8", "lit.noise_std=0",
-              "lit.contact_noise_depth=0", "model.gravity_prior=false",
-              "lit.pushforward_steps=0", f"data.dir={three_sphere_dataset}"]  # fmt: skip
+    common = [
+        "model.network.M=1",
+        "model.network.hidden=16",
+        "trainer.max_epochs=2",
+        "trainer.max_time=null",
+        "trainer.enable_progress_bar=false",
+        "trainer.enable_model_summary=false",
+        "datamodule.pairs_per_epoch=32",
+        "datamodule.val_pairs=8",
+        "lit.noise_std=0",
+        "lit.contact_noise_depth=0",
+        "model.gravity_prior=false",
+        "lit.pushforward_steps=0",
+        f"data.dir={three_sphere_dataset}",
+    ]
     one = train(config(three_sphere_dataset, tmp_path / "one", *common, "datamodule.batch_size=8"))
     two_dir = tmp_path / "two"
-    cmd = [sys.executable, "-m", "physgnn.train", "trainer=ddp_cpu", "trainer.devices=2",
-           "data=tiny", f"hydra.run.dir={two_dir}", *common, "datamodule.batch_size=4"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "physgnn.train",
+        "trainer=ddp_cpu",
+        "trainer.devices=2",
+        "data=tiny",
+        f"hydra.run.dir={two_dir}",
+        *common,
+        "datamodule.batch_size=4",
+    ]
     done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     two = read_run_json(two_dir)
@@ -222,9 +292,19 @@ def test_several_devices_get_ddp_that_finds_unused_parameters(accelerator, tiny_
 
 @pytest.mark.parametrize(
     "devices,nodes,several",
-    [(1, 1, False), ("1", 1, False), ([0], 1, False), ("0,", 1, False), (1, 2, True),
-     (2, 1, True), (-1, 1, True), ("auto", 1, True), ("0,1", 1, True), ([0, 1], 1, True)],
-)  # fmt: skip
+    [
+        (1, 1, False),
+        ("1", 1, False),
+        ([0], 1, False),
+        ("0,", 1, False),
+        (1, 2, True),
+        (2, 1, True),
+        (-1, 1, True),
+        ("auto", 1, True),
+        ("0,1", 1, True),
+        ([0, 1], 1, True),
+    ],
+)
 def test_what_counts_as_several_processes(devices, nodes, several):
     trainer = OmegaConf.create({"devices": devices, "num_nodes": nodes})
     assert several_processes(trainer) is several

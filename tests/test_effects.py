@@ -107,8 +107,13 @@ def test_effects_trained_round_trip_through_a_lightning_checkpoint(tmp_path):
     pattern = torch.tensor([True, False, True, False, True])
     sim.effects_trained.copy_(pattern)
     lit = LitSimulator(sim, optimizer=torch.optim.Adam)
-    trainer = L.Trainer(logger=False, enable_checkpointing=False, enable_progress_bar=False,
-                        enable_model_summary=False, accelerator="cpu")  # fmt: skip
+    trainer = L.Trainer(
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        accelerator="cpu",
+    )
     trainer.strategy.connect(lit)
     (tmp_path / "checkpoints").mkdir()
     trainer.save_checkpoint(tmp_path / "checkpoints" / "last.ckpt")

@@ -248,8 +248,14 @@ def test_tiny_run_logs_rollouts_then_make_eval_reports_it(tiny_dataset, tmp_path
 
     # with the constraint stage: its variant in the tables, and filmed beside the pure run
     report = outputs / "report_stage"
-    ev.evaluate(eval_cfg(f"paths.outputs={outputs}", "video_frames=3", "rollout.constraints=2",
-                         f"report_dir={report}"))  # fmt: skip
+    ev.evaluate(
+        eval_cfg(
+            f"paths.outputs={outputs}",
+            "video_frames=3",
+            "rollout.constraints=2",
+            f"report_dir={report}",
+        )
+    )
     runs = {r["run"] for r in read_csv(report / "metrics.csv")}
     assert {"runs/baseline/t0", "runs/baseline/t0 + constraints"} <= runs
     frame = imageio.imread(report / "videos" / "ood_cubes_frame.png")

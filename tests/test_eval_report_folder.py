@@ -13,6 +13,9 @@ from omegaconf import OmegaConf
 import physgnn.evaluation.evaluate as ev
 import physgnn.training.runs
 
+# pybullet on the same work and its Pareto figures are tests/test_eval.py's: not re-run here
+NO_PYBULLET = "pybullet=null"
+
 
 def evaluate_again(outputs: Path, *overrides: str) -> Path:
     """:func:`evaluate_fake_runs` once more on the outputs it made."""
@@ -30,11 +33,11 @@ def evaluate_again(outputs: Path, *overrides: str) -> Path:
 
 def test_a_second_eval_without_videos_links_none_of_the_first(tmp_path):
     outputs = tmp_path / "outputs"
-    first = evaluate_fake_runs(outputs, "video_frames=3")
+    first = evaluate_fake_runs(outputs, "video_frames=3", NO_PYBULLET)
     videos = outputs / "report" / "videos"
     assert any(videos.glob("*.gif")) and "videos/" in first.read_text()
     (outputs / "report" / "notes.txt").write_text("mine")  # not an eval output: kept
-    second = evaluate_again(outputs, "videos=false")
+    second = evaluate_again(outputs, "videos=false", NO_PYBULLET)
     assert not videos.exists() and "videos/" not in second.read_text()
     assert (outputs / "report" / "notes.txt").read_text() == "mine"
     assert not (outputs / "report.partial").exists()
@@ -42,7 +45,7 @@ def test_a_second_eval_without_videos_links_none_of_the_first(tmp_path):
 
 def test_an_interrupted_eval_leaves_the_last_report(tmp_path, monkeypatch):
     outputs = tmp_path / "outputs"
-    report = evaluate_fake_runs(outputs, "videos=false")
+    report = evaluate_fake_runs(outputs, "videos=false", NO_PYBULLET)
     before = {p.name: p.read_bytes() for p in report.parent.iterdir() if p.is_file()}
 
     def interrupted(*args, **kwargs):
@@ -50,7 +53,7 @@ def test_an_interrupted_eval_leaves_the_last_report(tmp_path, monkeypatch):
 
     monkeypatch.setattr(ev, "write_report", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        evaluate_again(outputs, "videos=false")
+        evaluate_again(outputs, "videos=false", NO_PYBULLET)
     after = {p.name: p.read_bytes() for p in report.parent.iterdir() if p.is_file()}
     assert after == before and not (outputs / "report.partial").exists()
 
@@ -60,7 +63,7 @@ def test_overwrite_into_a_folder_of_yours_keeps_your_files_in_rollouts_and_figur
     for name in ("notes.txt", "rollouts/my_solver/test.h5", "figures/my_plot.png"):
         (mine / name).parent.mkdir(parents=True, exist_ok=True)
         (mine / name).write_text("mine")
-    overrides = ("videos=false", "save_rollouts=true", "overwrite=true")
+    overrides = ("videos=false", "save_rollouts=true", "overwrite=true", NO_PYBULLET)
     evaluate_fake_runs(tmp_path / "outputs", f"report_dir={mine}", *overrides)
     for name in ("notes.txt", "rollouts/my_solver/test.h5", "figures/my_plot.png"):
         assert (mine / name).read_text() == "mine", name

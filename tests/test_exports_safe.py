@@ -23,8 +23,12 @@ from physgnn.data.exports import ExportError
 from physgnn.physics.scene import SceneError
 
 # The file of each format that a user's file of the same name stands for.
-WRITES = {"vtk": "spheres_00000.vtu", "gns": "metadata.json", "lagrangebench": "test.h5",
-          "hdf5": "trajectories.h5"}  # fmt: skip
+WRITES = {
+    "vtk": "spheres_00000.vtu",
+    "gns": "metadata.json",
+    "lagrangebench": "test.h5",
+    "hdf5": "trajectories.h5",
+}
 
 
 def one_line(err) -> str:
@@ -60,7 +64,10 @@ def test_a_shorter_vtk_export_leaves_no_stale_frame(tmp_path):
     pg.export(trajectory(frames=20), tmp_path / "out", "vtk")
     pg.export(trajectory(frames=3, seed=1), tmp_path / "out", "vtk")
     assert sorted(p.name for p in (tmp_path / "out").glob("spheres_*.vtu")) == [
-        "spheres_00000.vtu", "spheres_00001.vtu", "spheres_00002.vtu"]  # fmt: skip
+        "spheres_00000.vtu",
+        "spheres_00001.vtu",
+        "spheres_00002.vtu",
+    ]
     assert_close(vtk.read_vtk(tmp_path / "out").pos, trajectory(frames=3, seed=1).pos)
 
 
@@ -109,8 +116,10 @@ def test_an_export_of_nothing_or_of_one_name_twice_is_refused_in_one_line(tmp_pa
 def test_load_trajectories_of_an_export_names_its_reader(tmp_path, fmt):
     pg.export(trajectory(), tmp_path / "out", fmt)
     for path in (tmp_path / "out", next((tmp_path / "out").iterdir())):
-        with pytest.raises(DatasetError, match=f"is a {fmt} export, not a physgnn HDF5 file: "
-                                               f"read it with physgnn.data.") as err:  # fmt: skip
+        with pytest.raises(
+            DatasetError,
+            match=f"is a {fmt} export, not a physgnn HDF5 file: read it with physgnn.data.",
+        ) as err:
             pg.load_trajectories(path)
         assert "generate" not in one_line(err)
 
@@ -159,8 +168,9 @@ def test_a_reader_refuses_a_bad_dt_or_radius_naming_the_file(tmp_path, fmt):
     assert "KeyError" in one_line(err)
 
 
-@pytest.mark.parametrize("fmt, name", [("gns", "test.npz"), ("lagrangebench", "test.h5"),
-                                       ("vtk", "spheres_00001.vtu")])  # fmt: skip
+@pytest.mark.parametrize(
+    "fmt, name", [("gns", "test.npz"), ("lagrangebench", "test.h5"), ("vtk", "spheres_00001.vtu")]
+)
 def test_a_truncated_or_foreign_import_file_is_named_in_one_line(tmp_path, fmt, name):
     readers = {"gns": interchange.read_gns, "lagrangebench": interchange.read_lagrangebench}
     read = vtk.read_vtk if fmt == "vtk" else lambda folder: readers[fmt](folder, "test", 0.5)

@@ -8,7 +8,7 @@ import os
 import subprocess
 import sys
 
-from tests.test_gpu_readiness import ROLLOUT_FRAME_SYNCS, TRAIN_STEP_SYNCS
+from gpukit import ROLLOUT_FRAME_SYNCS, TRAIN_STEP_SYNCS
 
 # A host-to-device copy in each network call, as the material features once had.
 REGRESSION = """

@@ -235,8 +235,7 @@ def test_failing_jobs_never_stop_a_sweep(tiny_dataset, tmp_path, monkeypatch, ca
     outputs = outputs_of(tiny_dataset)
     sweep = tmp_path / "sweep"
     args = ["-m", "lit.noise_std=abc,1e30,0.01", "data=tiny", f"paths.outputs={outputs}"]
-    monkeypatch.setattr(sys, "argv", ["physgnn.train", *args, f"hydra.sweep.dir={sweep}",
-                                      *SHORT])  # fmt: skip
+    monkeypatch.setattr(sys, "argv", ["physgnn.train", *args, f"hydra.sweep.dir={sweep}", *SHORT])
     with pytest.raises(SystemExit) as exit_info:
         train_command.main()
     assert exit_info.value.code == 1
@@ -278,8 +277,13 @@ def test_data_report_follows_physgnn_outputs_with_the_right_hint(tmp_path, monke
     hint = "run `make data PRESET=tiny` or `python -m physgnn.generate data=tiny`"
     with pytest.raises(DataReportError, match=f"{tmp_path}/data/tiny not found: {hint}"):
         data_report(cfg)
-    make = subprocess.run(["make", "-n", "data-report", "PRESET=tiny"], cwd=ROOT,
-                          capture_output=True, text=True, check=True)  # fmt: skip
+    make = subprocess.run(
+        ["make", "-n", "data-report", "PRESET=tiny"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     assert "-m physgnn.data_report preset=tiny" in make.stdout and "outputs/" not in make.stdout
 
 
@@ -290,18 +294,33 @@ def hydra_args(tiny_dataset, run_dir) -> list[str]:
     return ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"hydra.run.dir={run_dir}"]
 
 
-def test_resuming_a_missing_or_foreign_checkpoint_is_one_line(tiny_dataset, tmp_path,
-                                                              monkeypatch, capsys):  # fmt: skip
-    monkeypatch.setattr(sys, "argv", ["physgnn.train", *hydra_args(tiny_dataset, tmp_path / "m1"),
-                                      *SHORT, "model.network.M=1"])  # fmt: skip
+def test_resuming_a_missing_or_foreign_checkpoint_is_one_line(
+    tiny_dataset, tmp_path, monkeypatch, capsys
+):
+    monkeypatch.setattr(
+        sys,
+        "argv",
+        ["physgnn.train", *hydra_args(tiny_dataset, tmp_path / "m1"), *SHORT, "model.network.M=1"],
+    )
     train_command.main()  # a run with its .hydra/config.yaml
     missing = tmp_path / "none.ckpt"
-    code, line = run_main(monkeypatch, capsys, *hydra_args(tiny_dataset, tmp_path / "a"),
-                          *SHORT, f"ckpt_path={missing}")  # fmt: skip
+    code, line = run_main(
+        monkeypatch,
+        capsys,
+        *hydra_args(tiny_dataset, tmp_path / "a"),
+        *SHORT,
+        f"ckpt_path={missing}",
+    )
     assert code == 2 and line.startswith(f"error: ckpt_path={missing}: no such file")
     last = tmp_path / "m1" / "checkpoints" / "last.ckpt"
-    code, line = run_main(monkeypatch, capsys, *hydra_args(tiny_dataset, tmp_path / "b"),
-                          *SHORT, "model.network.M=2", f"ckpt_path={last}")  # fmt: skip
+    code, line = run_main(
+        monkeypatch,
+        capsys,
+        *hydra_args(tiny_dataset, tmp_path / "b"),
+        *SHORT,
+        "model.network.M=2",
+        f"ckpt_path={last}",
+    )
     assert code == 2 and line.startswith(f"error: ckpt_path={last} does not fit this model")
     assert "model.network.M is 1 there, 2 here" in line
     assert read_run_json(tmp_path / "b")["status"] == "failed"
@@ -380,8 +399,9 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
         ),
     ],
 )
-def test_config_mistakes_name_the_key_and_are_recorded(tiny_dataset, tmp_path, monkeypatch,
-                                                       capsys, override, message):  # fmt: skip
+def test_config_mistakes_name_the_key_and_are_recorded(
+    tiny_dataset, tmp_path, monkeypatch, capsys, override, message
+):
     code, line = run_main(monkeypatch, capsys, *hydra_args(tiny_dataset, tmp_path), override)
     assert code == 2 and line.startswith(f"error: {message}")
     info = read_run_json(tmp_path)  # the run folder says what went wrong ...
@@ -406,10 +426,12 @@ def test_physgnn_outputs_naming_a_file_is_one_line(tmp_path, monkeypatch, capsys
     [
         ('{"key": "a", "seed": 0, "bud', "not a JSON line (Unterminated string starting at)"),
         ('{"seed": 0, "budget": {}}', "not a run record (KeyError: 'key')"),
-        ("[1, 2]", "not a run record (TypeError: list indices must be integers or slices, "
-         "not str)"),
+        (
+            "[1, 2]",
+            "not a run record (TypeError: list indices must be integers or slices, not str)",
+        ),
     ],
-)  # fmt: skip
+)
 def test_a_corrupt_registry_line_is_one_line(tmp_path, capsys, bad, problem):
     registry = tmp_path / "registry.jsonl"
     append_record(registry, {"key": "a", "seed": 0, "budget": {"steps": 3}, "status": "finished"})
@@ -461,10 +483,11 @@ def test_run_dir_gets_the_log_of_every_session(tiny_dataset, tmp_path, monkeypat
         f"run_dir={run_dir}",
         *SHORT,
         *signal_at(signal.SIGINT, 1),
-    ]  # fmt: skip (a resume takes the same overrides)
+    ]  # a resume takes the same overrides
     code, line = run_main(monkeypatch, capsys, *args, f"hydra.run.dir={hydra_dir}/1")
-    assert code == 130 and line.endswith(f"Resume: python -m physgnn.train run_dir={run_dir} "
-                                         "(same overrides)")  # fmt: skip
+    assert code == 130 and line.endswith(
+        f"Resume: python -m physgnn.train run_dir={run_dir} (same overrides)"
+    )
     first = (run_dir / "train.log").read_text()  # a fresh run given its folder
     assert f"training baseline in {run_dir}\n" in first and "interrupted (stopped by" in first
     monkeypatch.setattr(sys, "argv", ["physgnn.train", *args, f"hydra.run.dir={hydra_dir}/2"])
@@ -479,8 +502,12 @@ def test_run_dir_gets_the_log_of_every_session(tiny_dataset, tmp_path, monkeypat
 
 
 def running_record(run_dir: Path, pid: int) -> dict:
-    info = {"status": "running", "pid": pid, "host": socket.gethostname(),
-            "started": "2026-01-02T03:04:05"}  # fmt: skip
+    info = {
+        "status": "running",
+        "pid": pid,
+        "host": socket.gethostname(),
+        "started": "2026-01-02T03:04:05",
+    }
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "run.json").write_text(json.dumps(info))
     return info
@@ -517,8 +544,9 @@ def test_a_running_record_of_a_dead_process_is_taken_over(tiny_dataset, tmp_path
 # --- a full disk ------------------------------------------------------------------------------
 
 
-def test_a_full_disk_keeps_the_last_good_checkpoint_and_says_failed(tiny_dataset, tmp_path,
-                                                                    monkeypatch):  # fmt: skip
+def test_a_full_disk_keeps_the_last_good_checkpoint_and_says_failed(
+    tiny_dataset, tmp_path, monkeypatch
+):
     save = torch.save
 
     def full_disk(obj, f, *args, **kwargs):
@@ -558,9 +586,18 @@ def children(pid: int) -> list[int]:
 def test_killing_generate_is_one_line_and_leaves_the_dataset(tiny_dataset, tmp_path, signum):
     data = copy_dataset(tiny_dataset, tmp_path)
     before = {p.name: p.read_bytes() for p in data.iterdir()}
-    proc = start(["physgnn.generate", "data=tiny", f"paths.outputs={tmp_path}", "workers=2",
-                  "overwrite=true", "data.splits.train=400", "progress=false",
-                  f"hydra.run.dir={tmp_path}/logs"])  # fmt: skip
+    proc = start(
+        [
+            "physgnn.generate",
+            "data=tiny",
+            f"paths.outputs={tmp_path}",
+            "workers=2",
+            "overwrite=true",
+            "data.splits.train=400",
+            "progress=false",
+            f"hydra.run.dir={tmp_path}/logs",
+        ]
+    )
     wait_for(data.with_name("tiny.partial") / DATASET_MARKER, proc)
     time.sleep(1.0)  # the workers are simulating
     workers = children(proc.pid)
@@ -579,8 +616,16 @@ def test_killing_generate_is_one_line_and_leaves_the_dataset(tiny_dataset, tmp_p
 def test_killing_training_saves_it_and_it_resumes(tiny_dataset, tmp_path):
     run_dir = tmp_path / "run"
     budget = ["trainer.max_epochs=1", "datamodule.pairs_per_epoch=4000"]
-    proc = start(["physgnn.train", "data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}",
-                  f"hydra.run.dir={run_dir}", *SHORT, *budget])  # fmt: skip
+    proc = start(
+        [
+            "physgnn.train",
+            "data=tiny",
+            f"paths.outputs={outputs_of(tiny_dataset)}",
+            f"hydra.run.dir={run_dir}",
+            *SHORT,
+            *budget,
+        ]
+    )
     wait_for(run_dir / "run.json", proc)
     time.sleep(1.0)
     proc.send_signal(signal.SIGTERM)
@@ -614,8 +659,9 @@ def test_a_schedulers_handlers_are_kept_and_its_preemption_signal_chained(monkey
     def requeue(signum, frame):
         calls.append(("requeue", signum))
 
-    before = {s: signal.signal(s, h) for s, h in ((signal.SIGTERM, bypass),
-                                                  (signal.SIGUSR2, requeue))}  # fmt: skip
+    before = {
+        s: signal.signal(s, h) for s, h in ((signal.SIGTERM, bypass), (signal.SIGUSR2, requeue))
+    }
     try:
         stop = StopOnSignal()
         stop.install()

@@ -26,8 +26,15 @@ from physgnn.files import OUTPUT_MARKER
 
 def test_a_generate_sweep_whose_jobs_fail_exits_1_naming_them(tmp_path, monkeypatch, capsys):
     sweep = tmp_path / "sweep"
-    args = ["-m", "data=tiny", f"paths.outputs={tmp_path}", "workers=1", "progress=false",
-            "shard=range(0,2)", f"hydra.sweep.dir={sweep}"]  # fmt: skip
+    args = [
+        "-m",
+        "data=tiny",
+        f"paths.outputs={tmp_path}",
+        "workers=1",
+        "progress=false",
+        "shard=range(0,2)",
+        f"hydra.sweep.dir={sweep}",
+    ]
     monkeypatch.setattr(sys, "argv", ["physgnn.generate", *args])
     with pytest.raises(SystemExit) as exit_info:
         generate_command.main()
@@ -152,11 +159,22 @@ def test_ddps_other_processes_rerun_the_command_not_the_console_script(monkeypat
 def test_ddp_on_two_gloo_processes_through_the_console_script(tiny_dataset, tmp_path):
     run_dir = tmp_path / "run"
     script = Path(sys.executable).parent / "physgnn"
-    cmd = [str(script), "train", "trainer=ddp_cpu", "trainer.devices=2", "data=tiny",
-           f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={run_dir}", *SHORT,
-           "datamodule.pairs_per_epoch=16"]  # fmt: skip
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1]),
-           "OMP_NUM_THREADS": "1"}  # fmt: skip
+    cmd = [
+        str(script),
+        "train",
+        "trainer=ddp_cpu",
+        "trainer.devices=2",
+        "data=tiny",
+        f"paths.outputs={outputs_of(tiny_dataset)}",
+        f"run_dir={run_dir}",
+        *SHORT,
+        "datamodule.pairs_per_epoch=16",
+    ]
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(Path(__file__).resolve().parents[1]),
+        "OMP_NUM_THREADS": "1",
+    }
     done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
     info = json.loads((run_dir / "run.json").read_text())
@@ -169,13 +187,25 @@ def test_simulate_refuses_a_run_still_training(tiny_run, tmp_path, capsys):
     run = tmp_path / "run"
     shutil.copytree(tiny_run, run)
     trainer = subprocess.Popen(["sleep", "30"])  # stands for the training process
-    info = {"status": "running", "pid": trainer.pid, "host": socket.gethostname(),
-            "started": "2026-11-26T10:00:00"}  # fmt: skip
+    info = {
+        "status": "running",
+        "pid": trainer.pid,
+        "host": socket.gethostname(),
+        "started": "2026-11-26T10:00:00",
+    }
     (run / "run.json").write_text(json.dumps(info))
     try:
         with pytest.raises(SystemExit) as exit_info:
-            console(["simulate", "scene=head_on", f"run={run}", "video=false", "frames=5",
-                     f"out={tmp_path / 'out'}"])  # fmt: skip
+            console(
+                [
+                    "simulate",
+                    "scene=head_on",
+                    f"run={run}",
+                    "video=false",
+                    "frames=5",
+                    f"out={tmp_path / 'out'}",
+                ]
+            )
     finally:
         trainer.kill()
         trainer.wait()

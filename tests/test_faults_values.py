@@ -26,21 +26,35 @@ SPHERE = "spheres:\n  - {radius: 0.5, position: [0, 0, 1]%s}\n"
 @pytest.mark.parametrize(
     "text,message",
     [
-        ("frames: 5\nframes: 7\n" + SPHERE % "", "not valid YAML (line 2): key 'frames' given "
-         "twice (keep one)"),
-        ("spheres:\n  - {radius: 0.5, radius: 0.4, position: [0, 0, 1]}\n", "not valid YAML "
-         "(line 2): key 'radius' given twice (keep one)"),
-        ("frames: 2.5\n" + SPHERE % "", "frames must be a whole number >= 2 (frames to simulate, "
-         "the first is the start), got 2.5"),
-        ("effects: {gravity: 'no'}\n" + SPHERE % "", "effects: effect gravity must be true or "
-         "false, got 'no'"),
-        ("effects: {rotation: 1}\n" + SPHERE % "", "effects: effect rotation must be true or "
-         "false, got 1"),
-        (SPHERE % ", velocity: [1e30, 0, 0]", "sphere 0 starts at 1e+30 m/s, which carries it "
-         "farther in the scene's 9.9 s than float32 resolves a radius of 0.5 m: give speeds "
-         "below 5050.4 m/s"),
+        (
+            "frames: 5\nframes: 7\n" + SPHERE % "",
+            "not valid YAML (line 2): key 'frames' given twice (keep one)",
+        ),
+        (
+            "spheres:\n  - {radius: 0.5, radius: 0.4, position: [0, 0, 1]}\n",
+            "not valid YAML (line 2): key 'radius' given twice (keep one)",
+        ),
+        (
+            "frames: 2.5\n" + SPHERE % "",
+            "frames must be a whole number >= 2 (frames to simulate, "
+            "the first is the start), got 2.5",
+        ),
+        (
+            "effects: {gravity: 'no'}\n" + SPHERE % "",
+            "effects: effect gravity must be true or false, got 'no'",
+        ),
+        (
+            "effects: {rotation: 1}\n" + SPHERE % "",
+            "effects: effect rotation must be true or false, got 1",
+        ),
+        (
+            SPHERE % ", velocity: [1e30, 0, 0]",
+            "sphere 0 starts at 1e+30 m/s, which carries it "
+            "farther in the scene's 9.9 s than float32 resolves a radius of 0.5 m: give speeds "
+            "below 5050.4 m/s",
+        ),
     ],
-)  # fmt: skip
+)
 def test_a_scene_file_value_taken_for_another_is_one_line(tmp_path, text, message):
     path = tmp_path / "s.yaml"
     path.write_text(text)
@@ -73,14 +87,20 @@ def test_an_eval_switch_that_is_not_true_or_false_is_refused(tmp_path, key):
 @pytest.mark.parametrize(
     "override,message",
     [
-        ("lit.compile_mode=fastest", "lit.compile_mode must be one of default, reduce-overhead, "
-         "max-autotune, max-autotune-no-cudagraphs, got 'fastest'"),
+        (
+            "lit.compile_mode=fastest",
+            "lit.compile_mode must be one of default, reduce-overhead, "
+            "max-autotune, max-autotune-no-cudagraphs, got 'fastest'",
+        ),
         ("lit.compile_shapes=0", "lit.compile_shapes must be a whole number >= 1"),
-        ("trainer.precision=fp8", "trainer.precision must be one of transformer-engine, "
-         "transformer-engine-float16, "
-         "16-true, 16-mixed, bf16-true, bf16-mixed, 32-true, 64-true, got 'fp8'"),
+        (
+            "trainer.precision=fp8",
+            "trainer.precision must be one of transformer-engine, "
+            "transformer-engine-float16, "
+            "16-true, 16-mixed, bf16-true, bf16-mixed, 32-true, 64-true, got 'fp8'",
+        ),
     ],
-)  # fmt: skip
+)
 def test_compile_and_precision_words_are_one_line_while_compile_is_off(
     tiny_dataset, tmp_path, monkeypatch, capsys, override, message
 ):

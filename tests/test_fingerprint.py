@@ -34,26 +34,53 @@ PINNED = Path(__file__).with_name("fingerprint.json")
 CONFIG = [
     "seed=0",
     # the model, every key that shapes its numerics
-    "model.H=2", "model.network.M=1", "model.network.hidden=16", "model.graph.connectivity=vi",
-    "model.graph.epsilon=0.01", "model.graph.factor=1.0", "model.network.third_law=true",
-    "model.network.use_surfaces=true", "model.boundary_features=false",
-    "model.contact_features=true", "model.material_features=true", "model.gravity_prior=true",
-    "model.network.layer_norm=false", "model.graph.clip_margin=1.0",
+    "model.H=2",
+    "model.network.M=1",
+    "model.network.hidden=16",
+    "model.graph.connectivity=vi",
+    "model.graph.epsilon=0.01",
+    "model.graph.factor=1.0",
+    "model.network.third_law=true",
+    "model.network.use_surfaces=true",
+    "model.boundary_features=false",
+    "model.contact_features=true",
+    "model.material_features=true",
+    "model.gravity_prior=true",
+    "model.network.layer_norm=false",
+    "model.graph.clip_margin=1.0",
     # the invariance keys (default since), at the values the fingerprint was measured with
-    "model.relative_pairs=false", "model.mass_ratio=false", "model.network.aggregation=sum",
-    "model.rest_decision=false", "model.rest_speed=0.01",
+    "model.relative_pairs=false",
+    "model.mass_ratio=false",
+    "model.network.aggregation=sum",
+    "model.rest_decision=false",
+    "model.rest_speed=0.01",
     # the recipe: noise, push-forward (from step 2 of 4), contact terms, Adam, schedule
-    "lit.noise_std=0.03", "lit.pushforward_steps=2", "lit.pushforward_after=2",
-    "lit.pushforward_growth=0", "lit.lambda_energy=0.0", "lit.lambda_contact=1.0",
-    "lit.contact_tol=0.02", "lit.contact_noise_depth=0.2", "lit.contact_noise_prob=0.3",
-    "lit.contact_touch=0.05", "lit.noise_rest_scale=1.0", "lit.lambda_rest=0.0",
-    "lit.optimizer.lr=1.0e-3", "lit.scheduler.final_lr_factor=0.0644846109465322",
+    "lit.noise_std=0.03",
+    "lit.pushforward_steps=2",
+    "lit.pushforward_after=2",
+    "lit.pushforward_growth=0",
+    "lit.lambda_energy=0.0",
+    "lit.lambda_contact=1.0",
+    "lit.contact_tol=0.02",
+    "lit.contact_noise_depth=0.2",
+    "lit.contact_noise_prob=0.3",
+    "lit.contact_touch=0.05",
+    "lit.noise_rest_scale=1.0",
+    "lit.lambda_rest=0.0",
+    "lit.optimizer.lr=1.0e-3",
+    "lit.scheduler.final_lr_factor=0.0644846109465322",
     # 4 steps of 4 pairs, no callbacks, no logger
-    "datamodule.batch_size=4", "datamodule.pairs_per_epoch=16", "datamodule.val_pairs=8",
-    "trainer.max_epochs=1", "trainer.max_time=null", "trainer.enable_progress_bar=false",
-    "trainer.enable_model_summary=false", "+trainer.enable_checkpointing=false",
-    "callbacks=none", "~logger",
-]  # fmt: skip
+    "datamodule.batch_size=4",
+    "datamodule.pairs_per_epoch=16",
+    "datamodule.val_pairs=8",
+    "trainer.max_epochs=1",
+    "trainer.max_time=null",
+    "trainer.enable_progress_bar=false",
+    "trainer.enable_model_summary=false",
+    "+trainer.enable_checkpointing=false",
+    "callbacks=none",
+    "~logger",
+]
 ROLLOUT_FRAMES = 8
 RTOL, ATOL = 1e-4, 1e-5
 
@@ -79,19 +106,29 @@ def measure(tiny_dataset, run_dir) -> dict:
     with torch.no_grad():
         pred = rollout(lit.simulator, [truth])[0]
     last = pred.pos[-1].tolist()
-    return {"train_losses": recorder.losses, "rollout_trajectory": truth.name,
-            "rollout_frames": ROLLOUT_FRAMES, "rollout_last_pos": last}  # fmt: skip
+    return {
+        "train_losses": recorder.losses,
+        "rollout_trajectory": truth.name,
+        "rollout_frames": ROLLOUT_FRAMES,
+        "rollout_last_pos": last,
+    }
 
 
 def repin(found: dict) -> None:
-    rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                         text=True).stdout.strip()  # fmt: skip
+    rev = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+    ).stdout.strip()
     about = (
         "Numerics fingerprint of tests/test_fingerprint.py (tiny preset, 1 thread); "
         "re-pinned by `make fingerprint` when training numerics change on purpose."
     )
-    pinned = {"about": about, "pinned_at": rev or None, "torch": torch.__version__,
-              "config": CONFIG, **found}  # fmt: skip
+    pinned = {
+        "about": about,
+        "pinned_at": rev or None,
+        "torch": torch.__version__,
+        "config": CONFIG,
+        **found,
+    }
     PINNED.write_text(json.dumps(pinned, indent=1) + "\n")
 
 
@@ -101,12 +138,16 @@ def test_training_numerics_match_the_pinned_fingerprint(tiny_dataset, tmp_path, 
         repin(found)
     assert PINNED.is_file(), f"no {PINNED.name}: pin it with `make fingerprint`"
     pinned = json.loads(PINNED.read_text())
-    how = (f"training numerics changed since {pinned.get('pinned_at')}: re-measure the README's "
-           "figures, then re-pin with `make fingerprint` if the change is meant")  # fmt: skip
+    how = (
+        f"training numerics changed since {pinned.get('pinned_at')}: re-measure the README's "
+        "figures, then re-pin with `make fingerprint` if the change is meant"
+    )
     assert pinned["config"] == CONFIG, f"CONFIG differs from the pinned one; {how}"
     assert len(found["train_losses"]) == len(pinned["train_losses"]), how
-    np.testing.assert_allclose(found["train_losses"], pinned["train_losses"], rtol=RTOL,
-                               err_msg=how)  # fmt: skip
+    np.testing.assert_allclose(
+        found["train_losses"], pinned["train_losses"], rtol=RTOL, err_msg=how
+    )
     assert found["rollout_trajectory"] == pinned["rollout_trajectory"], how
-    np.testing.assert_allclose(found["rollout_last_pos"], pinned["rollout_last_pos"], rtol=RTOL,
-                               atol=ATOL, err_msg=how)  # fmt: skip
+    np.testing.assert_allclose(
+        found["rollout_last_pos"], pinned["rollout_last_pos"], rtol=RTOL, atol=ATOL, err_msg=how
+    )

@@ -3,11 +3,12 @@ same edges, predictions and losses as the counted graph, and nothing read back."
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
 import torch
+from gpukit import training_batch
+from handmade import make_state, random_batch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from torch.testing import assert_close
@@ -15,13 +16,9 @@ from torch.testing import assert_close
 from physgnn import CONF_DIR
 from physgnn.benchmark.gpu_readiness import training_step_counts
 from physgnn.benchmark.syncs import counting
-from physgnn.data.dataset import read_split
-from physgnn.data.pairs import PairDataset
 from physgnn.graph.builder import CONNECTIVITIES, GraphBuilder
 from physgnn.nn.padding import bucket
 from physgnn.training.contacts import perturb_contacts
-from tests.test_gpu_readiness import random_batch
-from tests.test_graph import make_state
 
 EDGE_KEYS = ("pp_index", "pp_attr", "ps_index", "ps_attr", "allowance")
 
@@ -37,9 +34,9 @@ def test_the_accepted_edges_are_the_counted_graph_bit_for_bit(connectivity):
             assert torch.equal(getattr(fixed.compacted(), key), getattr(counted, key)), key
 
 
-def test_capacities_are_the_layouts_candidates_and_the_network_sees_buckets(tiny):
-    _, simulator = simulators(tiny[1])
-    state = training_batch(tiny[0], simulator.H)
+def test_capacities_are_the_layouts_candidates_and_the_network_sees_buckets(tiny_train):
+    _, simulator = simulators(tiny_train[1])
+    state = training_batch(tiny_train[0], simulator.H)
     spheres, planes = state.host_sizes
     pairs = sum(n * (n - 1) // 2 for n in spheres)
     plane_pairs = sum(n * s for n, s in zip(spheres, planes, strict=True))
@@ -65,12 +62,6 @@ def test_capacities_are_the_layouts_candidates_and_the_network_sees_buckets(tiny
     )
 
 
-def training_batch(trajectories, H: int):
-    """About 32 state pairs of the tiny preset's training split, spread over it."""
-    pairs = PairDataset(trajectories, H, future=2)
-    return pairs.batch(torch.arange(0, len(pairs), max(len(pairs) // 32, 1)))
-
-
 def test_a_fixed_capacity_build_reads_nothing_back():
     state = random_batch(0)
     with counting() as c:
@@ -92,12 +83,6 @@ def test_network_inputs_send_masked_edges_to_the_ghost_node():
     assert torch.equal(ps_index[0], g.ps_index[0])
 
 
-@pytest.fixture(scope="module")
-def tiny(tiny_dataset):
-    stats = json.loads((tiny_dataset / "stats.json").read_text())
-    return read_split(tiny_dataset / "train.h5"), stats
-
-
 def simulators(stats, **overrides):
     """The default model twice with the same random weights: counted and fixed capacity."""
     model = OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml")
@@ -109,8 +94,8 @@ def simulators(stats, **overrides):
     return out
 
 
-def test_predictions_and_losses_equal_the_counted_graphs(tiny):
-    trajectories, stats = tiny
+def test_predictions_and_losses_equal_the_counted_graphs(tiny_train):
+    trajectories, stats = tiny_train
     counted, fixed = simulators(stats)
     recipe = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness.lit
     lit = [instantiate(recipe, simulator=s) for s in (counted, fixed)]
@@ -134,8 +119,8 @@ def test_contact_noise_pushes_only_the_accepted_contacts():
     assert torch.equal(out.pos, state.pos)
 
 
-def test_a_training_step_on_fixed_capacity_graphs_reads_back_at_most_the_finiteness(tiny):
-    trajectories, stats = tiny
+def test_a_training_step_on_fixed_capacity_graphs_reads_back_at_most_the_finiteness(tiny_train):
+    trajectories, stats = tiny_train
     cfg = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness
     model = OmegaConf.merge(OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml"), cfg.model)
     model.graph.fixed_capacity = True

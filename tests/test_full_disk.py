@@ -4,8 +4,8 @@ small filesystem (tmpfs, mounted when the suite runs as root) checks simulate en
 
 from __future__ import annotations
 
+import importlib
 import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -17,7 +17,6 @@ from physgnn import CONF_DIR
 from physgnn import simulate as simulate_command
 from physgnn.cli import command
 
-ROOT = Path(__file__).resolve().parents[1]
 TORCH_FULL = (
     "[enforce fail at inline_container.cc:664] . PytorchStreamWriter failed writing "
     "file data/0: file write failed"
@@ -79,12 +78,16 @@ def test_simulate_onto_a_real_full_disk_is_one_line_and_leaves_nothing(full_tmpf
     ],
     ids=["train", "generate"],
 )
-def test_train_and_generate_onto_a_real_full_disk_are_one_line(full_tmpfs, module, args, key):
+def test_train_and_generate_onto_a_real_full_disk_are_one_line(
+    full_tmpfs, module, args, key, monkeypatch, capsys
+):
+    """In-process, as the console script runs each command (their own processes are tested in
+    tests/test_faults.py)."""
     argv = [a.format(disk=full_tmpfs) for a in args]
-    done = subprocess.run(
-        [sys.executable, "-m", module, *argv], cwd=ROOT, capture_output=True, text=True
-    )
-    assert done.returncode == 2
-    (line,) = [x for x in done.stderr.splitlines() if x.startswith("error")]
+    monkeypatch.setattr(sys, "argv", [module, *argv])
+    with pytest.raises(SystemExit) as exit_info:
+        importlib.import_module(module).main()
+    assert exit_info.value.code == 2
+    (line,) = [x for x in capsys.readouterr().err.splitlines() if x.startswith("error")]
     assert line.startswith(f"error: {key.format(disk=full_tmpfs)} cannot be written (no space ")
     assert sorted(p.name for p in full_tmpfs.iterdir()) == ["fill"]  # nothing made there

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
 import sys
 
 import h5py
@@ -12,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import compose_generate
 
+import physgnn.generate as generate_command
 import physgnn.groundtruth.generate as gen
 from physgnn.api import scene_of
 from physgnn.data.dataset import (
@@ -89,22 +89,19 @@ def test_same_seed_same_data_whatever_the_worker_count(tiny_dataset, tmp_path):
                 np.testing.assert_array_equal(getattr(ta, key), getattr(tb, key))
 
 
-def test_refuses_to_overwrite_in_one_line(tiny_dataset):
+def test_refuses_to_overwrite_in_one_line(tiny_dataset, monkeypatch, capsys):
     outputs = tiny_dataset.parents[1]
     with pytest.raises(FileExistsError, match="already exists .*pass overwrite=true"):
         gen.generate(tiny_cfg(outputs, "workers=1"))
-    cmd = [
-        sys.executable,
-        "-m",
-        "physgnn.generate",
-        "data=tiny",
-        f"paths.outputs={outputs}",
-        f"hydra.run.dir={outputs}/hydra",
-    ]
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-    assert res.returncode == 2
-    assert res.stderr.strip().startswith("error: dataset") and "Traceback" not in res.stderr
-    assert len(res.stderr.strip().splitlines()) == 1
+    # the command as its console script runs it (its own process: tests/test_faults.py)
+    argv = ["physgnn.generate", "data=tiny", f"paths.outputs={outputs}"]
+    monkeypatch.setattr(sys, "argv", [*argv, f"hydra.run.dir={outputs}/hydra"])
+    with pytest.raises(SystemExit) as exit_info:
+        generate_command.main()
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2
+    assert err.strip().startswith("error: dataset") and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_interrupted_overwrite_leaves_the_previous_dataset(tiny_dataset, tmp_path, monkeypatch):

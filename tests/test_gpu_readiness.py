@@ -8,10 +8,11 @@ from pathlib import Path
 
 import pytest
 import torch
+from gpukit import ROLLOUT_FRAME_SYNCS, TRAIN_STEP_SYNCS
+from handmade import make_state, random_batch
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from torch.testing import assert_close
-from torch_geometric.data import Batch
 
 import physgnn.graph.builder as builder_module
 from physgnn import CONF_DIR
@@ -21,17 +22,8 @@ from physgnn.data.dataset import read_split
 from physgnn.data.pairs import PairDataset
 from physgnn.graph.builder import GraphBuilder
 from physgnn.graph.candidates import compact, scene_counts, scene_pairs, scene_plane_pairs
-from physgnn.physics.scene import WALL
 from physgnn.rollout import rollout
 from physgnn.training.finite import FINITE_CHECK_EVERY, FiniteWatch, NonFiniteLossError
-from tests.test_graph import WALL_ROW, make_state
-
-# the budget of a training step: graph builds (contact noise, the push-forward's passes, the
-# loss), finiteness; k is drawn on the host
-TRAIN_STEP_SYNCS = 7
-# the graph builds of a frame (one, plus a rebuild per pass that adds edges, at most
-# model.contact_passes) and the divergence test
-ROLLOUT_FRAME_SYNCS = 4
 
 
 def test_the_counter_sees_each_kind_of_read_back():
@@ -85,24 +77,6 @@ def test_compact_is_nonzero_given_its_count():
     mask = torch.rand(500, generator=torch.Generator().manual_seed(0)) < 0.3
     assert_close(compact(mask, int(mask.sum())), torch.nonzero(mask).flatten())
     assert compact(torch.zeros(4, dtype=torch.bool), 0).numel() == 0
-
-
-def random_batch(seed: int, scenes: int = 5, host: bool = True):
-    gen = torch.Generator().manual_seed(seed)
-    states = []
-    for s in range(scenes):
-        n = int(torch.randint(1, 14, (1,), generator=gen))
-        pos = torch.rand(n, 3, generator=gen) * torch.tensor([5.0, 3.0, 4.0])
-        vel = torch.randn(n, 3, generator=gen)
-        walls = dict(planes=[WALL_ROW], kinds=[WALL]) if s % 2 else {}
-        states.append(make_state(pos, vel, radius=0.4, **walls))
-    batch = Batch.from_data_list(states)
-    if host:
-        batch.host_sizes = (
-            tuple(s.pos.shape[0] for s in states),
-            tuple(s.planes.shape[0] for s in states),
-        )
-    return batch
 
 
 @pytest.mark.parametrize("backend", ["torch", "kdtree"])

@@ -6,7 +6,7 @@ import math
 
 import pytest
 import torch
-from handmade import make_state
+from handmade import WALL_ROW, make_state
 from torch_geometric.data import Batch
 
 from physgnn.data.state import SceneState
@@ -21,10 +21,6 @@ def pairs_of(g: Graph) -> list[tuple[int, int]]:
 
 def ps_of(g: Graph) -> list[tuple[int, int]]:
     return [tuple(c) for c in g.ps_index.t().tolist()]
-
-
-# A wall x = 4 facing −x, spanning y ∈ [−2, 2] and z ∈ [0, 6] (half lengths 2 and 3).
-WALL_ROW = make_plane((4, 0, 3), (-1, 0, 0), (0, 1, 0), 2.0, 3.0)
 
 
 # --- hand-built pp cases --------------------------------------------------------------------

@@ -43,8 +43,13 @@ def test_from_arrays_defaults_are_identity_finite_differences_water_and_the_grou
 def test_from_arrays_keeps_what_it_is_given():
     ref = mixed()
     fields = ("quat", "vel", "angvel", "mass", "material", "materials", "planes", "plane_kind")
-    traj = Trajectory.from_arrays(ref.pos, ref.radius, ref.dt, effects=Effects(rotation=False),
-                                  **{k: getattr(ref, k) for k in fields})  # fmt: skip
+    traj = Trajectory.from_arrays(
+        ref.pos,
+        ref.radius,
+        ref.dt,
+        effects=Effects(rotation=False),
+        **{k: getattr(ref, k) for k in fields},
+    )
     for key in ("pos", "radius", *fields):
         np.testing.assert_array_equal(getattr(traj, key), getattr(ref, key), err_msg=key)
     assert not traj.effects.rotation
@@ -96,7 +101,8 @@ def test_vtk_files_are_binary_compressed_unstructured_grids(tmp_path):
     arrays = list(piece.iter("DataArray"))
     assert {a.get("format") for a in arrays} == {"binary"}
     assert {"radius", "velocity", "angular_velocity", "orientation"} <= {
-        a.get("Name") for a in arrays}  # fmt: skip
+        a.get("Name") for a in arrays
+    }
     planes = ET.parse(tmp_path / "out" / "planes.vtu").getroot().find("UnstructuredGrid/Piece")
     assert planes.get("NumberOfPoints") == str(4 * len(ref.planes))
     assert planes.get("NumberOfCells") == str(len(ref.planes))
@@ -115,8 +121,12 @@ def test_gns_round_trip_and_metadata(tmp_path):
         np.testing.assert_array_equal(got.material, ref.material)
         np.testing.assert_array_equal(got.materials, ref.materials)
     meta = json.loads((tmp_path / "out" / "metadata.json").read_text())
-    steps = np.concatenate([np.diff(t.pos.astype(np.float64), axis=0).reshape(-1, 3)
-                            for t in [*splits["train"], *splits["test"]]])  # fmt: skip
+    steps = np.concatenate(
+        [
+            np.diff(t.pos.astype(np.float64), axis=0).reshape(-1, 3)
+            for t in [*splits["train"], *splits["test"]]
+        ]
+    )
     assert_close(T(meta["vel_mean"], dtype=torch.float64), T(steps.mean(0)))
     assert meta["dt"] == 0.1 and meta["sequence_length"] == 5 and meta["dim"] == 3
 
@@ -125,7 +135,12 @@ def test_lagrangebench_round_trip(tmp_path):
     splits = {"train": [mixed(0)], "val": [mixed(1)], "test": [mixed(2), mixed(3)]}
     out = interchange.write_lagrangebench(tmp_path / "out", splits)
     assert sorted(p.name for p in out.iterdir()) == [
-        "metadata.json", "physgnn-output.json", "test.h5", "train.h5", "valid.h5"]  # fmt: skip
+        "metadata.json",
+        "physgnn-output.json",
+        "test.h5",
+        "train.h5",
+        "valid.h5",
+    ]
     with h5py.File(out / "test.h5") as f:
         assert sorted(f) == ["00000", "00001"] and f["00001/position"].shape == (6, 3, 3)
     back = interchange.read_lagrangebench(out, "test", radius=splits["test"][1].radius)

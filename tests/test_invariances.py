@@ -341,8 +341,12 @@ def test_the_decoders_rest_logit_decides_end_to_end():
         decoder.bias[6] = -50.0
         vel, angvel, _ = sim.predict(state)
         plain = make(rest_decision=False)
-        plain.load_state_dict({k: v[:6] if k.startswith("network.decoder.lin2") else v
-                               for k, v in sim.state_dict().items()})  # fmt: skip
+        plain.load_state_dict(
+            {
+                k: v[:6] if k.startswith("network.decoder.lin2") else v
+                for k, v in sim.state_dict().items()
+            }
+        )
         vel_plain, angvel_plain = plain(state)
         assert_close(vel, vel_plain) and assert_close(angvel, angvel_plain)
         assert float(vel[:2].abs().max()) > 0

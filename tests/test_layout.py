@@ -72,8 +72,15 @@ def test_the_shipped_weights_hold_a_flat_config_and_load_in_todays_layout():
 
 
 def test_a_flat_model_lacking_the_later_keys_gets_its_own_models_values():
-    old = OmegaConf.create({"_target_": "physgnn.simulator.LearnedSimulator", "H": 2, "M": 3,
-                            "connectivity": "vi", "neighbor_backend": "torch"})  # fmt: skip
+    old = OmegaConf.create(
+        {
+            "_target_": "physgnn.simulator.LearnedSimulator",
+            "H": 2,
+            "M": 3,
+            "connectivity": "vi",
+            "neighbor_backend": "torch",
+        }
+    )
     today = model_of_today(old)
     assert today._target_ == "physgnn.models.learned.LearnedSimulator"
     assert today.network == NODES["network"] | {"M": 3, "aggregation": "sum"}

@@ -14,12 +14,18 @@ def hard_row(run, scene, source="hard", diverged_at=None, **values):
 
 
 def test_rows_per_step_in_order_with_the_measures_of_each_checkpoint(tmp_path):
-    metrics = [metrics_row("m/step004500", "test", 2.0), metrics_row("m/step004500", "test", 4.0),
-               metrics_row("m/step002250", "test", 9.0), metrics_row("m/step002250", "ood", 99.0),
-               metrics_row("runs/default/x", "test", 1.0)]  # fmt: skip
-    hard = [hard_row("m/step002250", "ood_cubes", max_pen_sphere=0.7),
-            hard_row("m/step002250", "resting_pile", rest_drift=27.0),
-            hard_row("m/step004500", "ood_cubes", max_pen_sphere=0.6)]  # fmt: skip
+    metrics = [
+        metrics_row("m/step004500", "test", 2.0),
+        metrics_row("m/step004500", "test", 4.0),
+        metrics_row("m/step002250", "test", 9.0),
+        metrics_row("m/step002250", "ood", 99.0),
+        metrics_row("runs/default/x", "test", 1.0),
+    ]
+    hard = [
+        hard_row("m/step002250", "ood_cubes", max_pen_sphere=0.7),
+        hard_row("m/step002250", "resting_pile", rest_drift=27.0),
+        hard_row("m/step004500", "ood_cubes", max_pen_sphere=0.6),
+    ]
     fall = [
         {"run": "m/step002250", "z_error_pct": -2.0},
         {"run": "m/step002250", "z_error_pct": 4.0},
@@ -36,9 +42,11 @@ def test_rows_per_step_in_order_with_the_measures_of_each_checkpoint(tmp_path):
 
 
 def test_a_diverged_rollout_has_no_mse_and_is_named(tmp_path):
-    metrics = [metrics_row("m/step002250", "test", 2.0),
-               metrics_row("m/step002250", "ood", 1.0, diverged_at=12),
-               metrics_row("m/step002250", "ood", 50.0)]  # fmt: skip
+    metrics = [
+        metrics_row("m/step002250", "test", 2.0),
+        metrics_row("m/step002250", "ood", 1.0, diverged_at=12),
+        metrics_row("m/step002250", "ood", 50.0),
+    ]
     hard = [
         hard_row("m/step002250", "tight_pack", diverged_at=40, max_pen_sphere=0.1),
         hard_row("m/step002250", "ood_cubes", "ood", diverged_at=12, max_pen_sphere=0.2),

@@ -136,9 +136,15 @@ def test_push_forward_rolls_the_model_and_targets_the_true_frame():
     for _ in range(2):  # the same two steps by hand
         v, w = lit.simulator(expected)
         expected.pos, expected.quat, expected.vel, expected.angvel = step(
-            expected.pos, expected.quat, expected.vel, expected.angvel, v, w,
-            state.scene_dt, lit.simulator.rotating(expected),
-        )  # fmt: skip
+            expected.pos,
+            expected.quat,
+            expected.vel,
+            expected.angvel,
+            v,
+            w,
+            state.scene_dt,
+            lit.simulator.rotating(expected),
+        )
     assert_close(out.pos, expected.pos)
     assert_close(out.vel, expected.vel)
     assert_close(out.target_vel, (frames.pos[6] - out.pos) / 0.1, rtol=1e-4, atol=1e-4)
@@ -363,8 +369,11 @@ def test_regime_scale_gives_resting_spheres_the_rest_scale_and_fast_ones_one():
     sigma = float(sim.speed_scale)
     assert sigma == pytest.approx(7.0**0.5)  # RMS of the velocity std (1, 2, 4)
     # at rest; fast; 1 m/s; spinning at 2 rad/s with r 0.5 (1 m/s at the surface)
-    state = scene([[0, 0, 0.5], [3, 0, 3], [6, 0, 3], [9, 0, 3]],
-                  [[0, 0, 0], [10, 0, 0], [0, 0.6, -0.8], [0, 0, 0]], [0.5] * 4)  # fmt: skip
+    state = scene(
+        [[0, 0, 0.5], [3, 0, 3], [6, 0, 3], [9, 0, 3]],
+        [[0, 0, 0], [10, 0, 0], [0, 0.6, -0.8], [0, 0, 0]],
+        [0.5] * 4,
+    )
     state.angvel[3, 0] = torch.tensor([0.0, 2.0, 0.0])
     scale = regime_scale(state, sim, 0.05)
     assert scale.shape == (4, 1, 1)

@@ -12,8 +12,9 @@ import subprocess
 import sys
 
 import pytest
-from processes import ROOT, start, wait_for
+from processes import start, wait_for
 
+import physgnn.generate as generate_command
 import physgnn.train as train_command
 from physgnn.evaluation.runs import EvalError, find_runs
 from physgnn.files import InUseError, exclusive
@@ -65,22 +66,27 @@ def test_a_lock_of_another_host_is_refused_with_the_way_to_free_it(tmp_path):
             pass
 
 
-def test_two_generates_into_one_folder_one_writes_the_other_is_refused(tmp_path):
+def test_two_generates_into_one_folder_one_writes_the_other_is_refused(
+    tmp_path, monkeypatch, capsys
+):
+    """The first a child process, the second this one (the command as its console runs it)."""
     outputs = tmp_path / "outputs"
     common = ["data=tiny", f"paths.outputs={outputs}", "progress=false", "workers=1"]
-    first = start(["physgnn.generate", *common, "data.splits.train=400",
-                   f"hydra.run.dir={tmp_path}/a"])  # fmt: skip
+    first = start(
+        ["physgnn.generate", *common, "data.splits.train=400", f"hydra.run.dir={tmp_path}/a"]
+    )
     lock = outputs / "data" / "tiny.lock"
     wait_for(lock, first)
-    second = subprocess.run(
-        [sys.executable, "-m", "physgnn.generate", *common, "data.seed=7",
-         f"hydra.run.dir={tmp_path}/b"],
-        cwd=ROOT, capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
-    first.send_signal(signal.SIGTERM)
-    first.communicate(timeout=60)
-    lines = second.stderr.strip().splitlines()
-    assert second.returncode == 2 and len(lines) == 1, second.stderr[-2000:]
+    argv = ["physgnn.generate", *common, "data.seed=7", f"hydra.run.dir={tmp_path}/b"]
+    monkeypatch.setattr(sys, "argv", argv)
+    try:
+        with pytest.raises(SystemExit) as exit_info:
+            generate_command.main()
+    finally:
+        first.send_signal(signal.SIGTERM)
+        first.communicate(timeout=60)
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert exit_info.value.code == 2 and len(lines) == 1, lines
     assert lines[0].startswith(f"error: data.dir {outputs / 'data' / 'tiny'} is in use: ")
     assert f"pid {first.pid} on {socket.gethostname()}" in lines[0]
     assert not lock.exists()  # the first released it when it stopped
@@ -90,8 +96,12 @@ def test_evaluating_a_run_still_training_is_refused_in_one_line(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
     trainer = subprocess.Popen(["sleep", "30"])  # stands for the training process
-    info = {"status": "running", "pid": trainer.pid, "host": socket.gethostname(),
-            "started": "2026-11-23T10:00:00"}  # fmt: skip
+    info = {
+        "status": "running",
+        "pid": trainer.pid,
+        "host": socket.gethostname(),
+        "started": "2026-11-23T10:00:00",
+    }
     (run / "run.json").write_text(json.dumps(info))
     try:
         with pytest.raises(EvalError) as err:
@@ -106,9 +116,16 @@ def test_a_run_dir_leaves_no_stray_hydra_folder(tiny_dataset, tmp_path, monkeypa
     outputs = tmp_path / "outputs"
     shutil.copytree(tiny_dataset, outputs / "data" / "tiny")
     run_dir = tmp_path / "run"
-    args = ["data=tiny", f"paths.outputs={outputs}", f"run_dir={run_dir}", "model.network.hidden=8",
-            "model.network.M=1", "trainer.max_epochs=1", "datamodule.pairs_per_epoch=8",
-            "trainer.enable_progress_bar=false"]  # fmt: skip
+    args = [
+        "data=tiny",
+        f"paths.outputs={outputs}",
+        f"run_dir={run_dir}",
+        "model.network.hidden=8",
+        "model.network.M=1",
+        "trainer.max_epochs=1",
+        "datamodule.pairs_per_epoch=8",
+        "trainer.enable_progress_bar=false",
+    ]
     monkeypatch.setattr(sys, "argv", ["physgnn.train", *args])
     train_command.main()
     assert sorted(p.name for p in outputs.iterdir()) == ["data"]  # no runs/<experiment>/<now>/

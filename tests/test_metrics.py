@@ -24,12 +24,20 @@ def traj_of(pos, radius, mass=None, planes=GROUND_ONLY, dt=0.1, effects=None):
     vel = np.zeros((t, n, 3))
     vel[1:] = (pos[1:] - pos[:-1]) / dt
     return Trajectory(
-        name="hand", pos=pos, quat=quat, vel=vel, angvel=np.zeros((t, n, 3)),
+        name="hand",
+        pos=pos,
+        quat=quat,
+        vel=vel,
+        angvel=np.zeros((t, n, 3)),
         radius=np.asarray(radius, np.float64),
         mass=np.ones(n) if mass is None else np.asarray(mass, np.float64),
-        material=np.zeros(n, int), planes=planes[0], plane_kind=planes[1],
-        materials=np.zeros((1, 4)), dt=dt, effects=effects or Effects(),
-    )  # fmt: skip
+        material=np.zeros(n, int),
+        planes=planes[0],
+        plane_kind=planes[1],
+        materials=np.zeros((1, 4)),
+        dt=dt,
+        effects=effects or Effects(),
+    )
 
 
 def pen(pos, radius, planes=GROUND_ONLY, tol=0.0):

@@ -29,8 +29,12 @@ def test_every_subpackage_is_in_the_wheel_list():
     found = find_packages(str(ROOT), include=["physgnn*"])
     conf = ROOT / "conf"  # data folders: each config group, the shipped weights
     groups = [".".join(p.relative_to(conf).parts) for p in conf.rglob("*") if any(p.glob("*.yaml"))]
-    data = ["physgnn.conf", *(f"physgnn.conf.{g}" for g in groups), "physgnn.pretrained",
-            "physgnn.pretrained.checkpoints"]  # fmt: skip
+    data = [
+        "physgnn.conf",
+        *(f"physgnn.conf.{g}" for g in groups),
+        "physgnn.pretrained",
+        "physgnn.pretrained.checkpoints",
+    ]
     assert sorted(listed) == sorted([*found, *data])
 
 
@@ -75,8 +79,17 @@ def test_every_kind_of_command_answers_help(name, monkeypatch, capsys):
 
 # Left out of the copy a wheel is built from: outputs, environments and build leftovers (a
 # stale build/lib would put files into the wheel that the checkout no longer has).
-NOT_SOURCES = shutil.ignore_patterns(".git", ".venv", "outputs", "build", "dist", "*.egg-info",
-                                     "__pycache__", ".*_cache", ".hypothesis")  # fmt: skip
+NOT_SOURCES = shutil.ignore_patterns(
+    ".git",
+    ".venv",
+    "outputs",
+    "build",
+    "dist",
+    "*.egg-info",
+    "__pycache__",
+    ".*_cache",
+    ".hypothesis",
+)
 
 
 def _wheel(tmp: Path) -> Path:
@@ -84,8 +97,21 @@ def _wheel(tmp: Path) -> Path:
     checkout itself gets no build/ folder)."""
     source = tmp / "source"
     shutil.copytree(ROOT, source, ignore=NOT_SOURCES)
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps",
-                    "--no-build-isolation", "-w", str(tmp), str(source)], check=True)  # fmt: skip
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(tmp),
+            str(source),
+        ],
+        check=True,
+    )
     (wheel,) = tmp.glob("physgnn-*.whl")
     return wheel
 
@@ -121,8 +147,9 @@ def test_the_wheel_generates_trains_and_simulates_from_another_folder(tmp_path):
     script = tmp_path / "venv" / "bin" / "physgnn"
 
     def run(*args: str) -> str:
-        out = subprocess.run([str(a) for a in args], cwd=elsewhere, capture_output=True,
-                             text=True, timeout=600)  # fmt: skip
+        out = subprocess.run(
+            [str(a) for a in args], cwd=elsewhere, capture_output=True, text=True, timeout=600
+        )
         assert out.returncode == 0, out.stderr[-2000:]
         return out.stdout
 
@@ -132,11 +159,28 @@ def test_the_wheel_generates_trains_and_simulates_from_another_folder(tmp_path):
         assert run(script, name, "--help").strip(), name
     out = elsewhere / "outputs"
     run(script, "generate", "data=tiny", "workers=1", "progress=false")
-    run(script, "train", "data=tiny", "model.network.M=1", "model.network.hidden=16",
-        "trainer.max_epochs=1", "datamodule.pairs_per_epoch=8", "datamodule.batch_size=8",
-        "run_dir=outputs/runs/one", "trainer.enable_progress_bar=false")  # fmt: skip
+    run(
+        script,
+        "train",
+        "data=tiny",
+        "model.network.M=1",
+        "model.network.hidden=16",
+        "trainer.max_epochs=1",
+        "datamodule.pairs_per_epoch=8",
+        "datamodule.batch_size=8",
+        "run_dir=outputs/runs/one",
+        "trainer.enable_progress_bar=false",
+    )
     assert (out / "runs" / "one" / "run.json").is_file()
-    run(python, "-m", "physgnn.simulate", "scene=throw", "run=outputs/runs/one", "frames=8",
-        "video=false", "out=sim")  # fmt: skip
+    run(
+        python,
+        "-m",
+        "physgnn.simulate",
+        "scene=throw",
+        "run=outputs/runs/one",
+        "frames=8",
+        "video=false",
+        "out=sim",
+    )
     assert (elsewhere / "sim" / "simulate.h5").is_file()
     assert (out / "data" / "tiny" / "train.h5").is_file()

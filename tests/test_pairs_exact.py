@@ -56,9 +56,15 @@ def data_dir(tmp_path_factory):
 
 def module(data_dir, seed: int, future: int) -> StatePairDataModule:
     return StatePairDataModule(
-        str(data_dir), "hand", H=2, batch_size=4, pairs_per_epoch=10, val_pairs=5,
-        seed=seed, pushforward_steps=future,
-    )  # fmt: skip
+        str(data_dir),
+        "hand",
+        H=2,
+        batch_size=4,
+        pairs_per_epoch=10,
+        val_pairs=5,
+        seed=seed,
+        pushforward_steps=future,
+    )
 
 
 def reference_loaders(data_dir, seed: int, future: int) -> tuple[PygLoader, PygLoader]:
@@ -124,10 +130,15 @@ def short_training(fit) -> tuple[Losses, dict]:
     lit = LitSimulator(simulator, adam, noise_std=0.05, seed=3, pushforward_steps=2)
     losses = Losses()
     trainer = L.Trainer(
-        max_epochs=2, logger=False, enable_checkpointing=False, enable_progress_bar=False,
-        enable_model_summary=False, deterministic=True, num_sanity_val_steps=0,
+        max_epochs=2,
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        deterministic=True,
+        num_sanity_val_steps=0,
         callbacks=[losses],
-    )  # fmt: skip
+    )
     fit(trainer, lit)
     return losses, simulator.state_dict()
 

@@ -181,10 +181,21 @@ def test_report_draws_the_same_work_when_pybullet_rows_are_there(tmp_path):
     write_csv(tmp_path / "metrics.csv", rows)
     assert "No pybullet rows" in report.write_report(tmp_path).read_text()
     engine = [
-        make_row(f"pybullet-{k}", "pybullet", f"substeps={k}", None, r["split"], r["trajectory"],
-                 1.0 / k, fps=1000.0 / k) | {"substeps": k}
-        for k in (1, 10) for r in rows if r["run"] == "ground_truth"
-    ]  # fmt: skip
+        make_row(
+            f"pybullet-{k}",
+            "pybullet",
+            f"substeps={k}",
+            None,
+            r["split"],
+            r["trajectory"],
+            1.0 / k,
+            fps=1000.0 / k,
+        )
+        | {"substeps": k}
+        for k in (1, 10)
+        for r in rows
+        if r["run"] == "ground_truth"
+    ]
     write_csv(tmp_path / "metrics.csv", rows + engine)
     text = report.write_report(tmp_path).read_text()
     assert "![pareto_chamfer](figures/pareto_chamfer.png)" in text

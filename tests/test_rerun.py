@@ -42,8 +42,9 @@ def test_recording_holds_truth_prediction_planes_and_energy(tmp_path):
     np.testing.assert_allclose(column(spheres, ":centers")[5], truth.pos[5], rtol=1e-6)
     moved = column(chunks["/prediction/spheres"], ":centers")[7]
     np.testing.assert_allclose(moved, truth.pos[7] + 0.25, rtol=1e-6)
-    np.testing.assert_allclose(column(spheres, ":half_sizes")[0], np.repeat(truth.radius, 3, 0)
-                               .reshape(3, 3), rtol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        column(spheres, ":half_sizes")[0], np.repeat(truth.radius, 3, 0).reshape(3, 3), rtol=1e-6
+    )
     assert len(column(chunks["/planes"], ":half_sizes")[0]) == len(truth.planes)
     energy = metrics.energy_series(truth.pos, truth.vel, truth.mass, truth.radius)
     np.testing.assert_allclose(

@@ -25,14 +25,20 @@ def linear_traj(p0, v0, frames=12, name="lin", effects=None, radius=0.5):
     quat = np.zeros((frames, n, 4), np.float32)
     quat[..., 0] = 1
     return Trajectory(
-        name=name, pos=pos.astype(np.float32), quat=quat,
+        name=name,
+        pos=pos.astype(np.float32),
+        quat=quat,
         vel=np.broadcast_to(v0, (frames, n, 3)).astype(np.float32),
         angvel=np.zeros((frames, n, 3), np.float32),
-        radius=np.full(n, radius, np.float32), mass=np.ones(n, np.float32),
-        material=np.zeros(n, np.int64), planes=ground_plane()[None],
-        plane_kind=np.zeros(1, np.int64), materials=np.zeros((1, 4), np.float32), dt=DT,
+        radius=np.full(n, radius, np.float32),
+        mass=np.ones(n, np.float32),
+        material=np.zeros(n, np.int64),
+        planes=ground_plane()[None],
+        plane_kind=np.zeros(1, np.int64),
+        materials=np.zeros((1, 4), np.float32),
+        dt=DT,
         effects=effects or Effects(),
-    )  # fmt: skip
+    )
 
 
 class Constant(nn.Module):

@@ -21,8 +21,17 @@ from physgnn.report.table import COLUMNS
 
 def row(run, experiment, mse20, fps, split="test", substeps=None, trajectory="t0"):
     r = dict.fromkeys(COLUMNS)
-    r.update(run=run, experiment=experiment, overrides="", split=split, trajectory=trajectory,
-             mse20=mse20, chamfer=mse20, fps=fps, substeps=substeps)  # fmt: skip
+    r.update(
+        run=run,
+        experiment=experiment,
+        overrides="",
+        split=split,
+        trajectory=trajectory,
+        mse20=mse20,
+        chamfer=mse20,
+        fps=fps,
+        substeps=substeps,
+    )
     return r
 
 
@@ -61,14 +70,20 @@ def test_a_fake_learned_run_lands_where_its_cost_and_error_put_it():
     assert on_front == ["pybullet-1", "baseline: default", "pybullet-5", "pybullet-20"]
     table = same_work.split_table([fast, slow, *ENGINE_ROWS], "test")
     marks = {ln.split(" | ")[0][2:]: ln.split(" | ")[-2] for ln in table.splitlines()[2:]}
-    assert marks == {"baseline: default": "✓", "slower: default": "", "pybullet-1": "✓",
-                     "pybullet-5": "✓", "pybullet-20": "✓"}  # fmt: skip
+    assert marks == {
+        "baseline: default": "✓",
+        "slower: default": "",
+        "pybullet-1": "✓",
+        "pybullet-5": "✓",
+        "pybullet-20": "✓",
+    }
 
 
 def test_a_diverged_learned_run_is_never_on_the_front():
     best = row("runs/best", "baseline", 1e-6, 1e6) | {"diverged_at": 7}
-    assert "baseline: default" not in {p.label for p in same_work.front(
-        same_work.points([best, *ENGINE_ROWS], "test", "mse20"))}  # fmt: skip
+    assert "baseline: default" not in {
+        p.label for p in same_work.front(same_work.points([best, *ENGINE_ROWS], "test", "mse20"))
+    }
 
 
 def test_the_view_reads_only_its_split_and_says_when_pybullet_is_missing():
@@ -79,8 +94,13 @@ def test_the_view_reads_only_its_split_and_says_when_pybullet_is_missing():
 
 
 def learned_run(dataset, H):
-    return RunInfo(name="runs/x", experiment="baseline", run_dir=dataset, dataset=dataset,
-                   simulator=SimpleNamespace(H=H))  # fmt: skip
+    return RunInfo(
+        name="runs/x",
+        experiment="baseline",
+        run_dir=dataset,
+        dataset=dataset,
+        simulator=SimpleNamespace(H=H),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -92,8 +112,13 @@ def test_pybullet_at_the_truths_settings_from_frame_0_is_the_truth(tiny, tiny_da
     jobs = engine_work.engine_jobs([learned_run(tiny_dataset, 0)], several=False)
     rows = engine_work.engine_rows(jobs, tiny, [40], processes=1, tol=0.0)
     assert [r["run"] for r in rows] == ["pybullet-40"] * 5 and {r["substeps"] for r in rows} == {40}
-    assert [r["trajectory"] for r in rows] == ["traj_00000", "ood_cubes", "ood_cubes_ramps",
-                                               "ood_resting_hit", "ood_spaced_drop"]  # fmt: skip
+    assert [r["trajectory"] for r in rows] == [
+        "traj_00000",
+        "ood_cubes",
+        "ood_cubes_ramps",
+        "ood_resting_hit",
+        "ood_spaced_drop",
+    ]
     for r in rows:
         assert r["mse"] == r["chamfer"] == 0.0 and r["fps"] > 0  # (20 frames: no mse20)
 
@@ -113,7 +138,8 @@ def test_pybullet_starts_where_the_learned_run_starts(tiny, tiny_dataset):
     pooled = engine_work.engine_rows(jobs, tiny, [1], processes=2, tol=0.0)
     for a, b in zip(alone, pooled, strict=True):
         assert {k: a[k] for k in ("mse", "chamfer", "energy_gain")} == {
-            k: b[k] for k in ("mse", "chamfer", "energy_gain")}  # fmt: skip
+            k: b[k] for k in ("mse", "chamfer", "energy_gain")
+        }
     assert len({r["fps"] for r in pooled if r["split"] == "ood"}) == 1
 
 
@@ -122,7 +148,8 @@ def test_engine_settings_come_from_the_truth_with_the_substeps_replaced(tiny, ti
     settings = engine_work.engine_of(truth, 3)
     assert settings["substeps"] == 3 and settings["contact_erp"] == 0.005
     assert engine_work.engine_of(truth.__class__(**{**truth.__dict__, "attrs": {}}), 3) == {
-        "substeps": 3}  # fmt: skip
+        "substeps": 3
+    }
     assert set(FRAME_KEYS) <= set(truth.__dict__)
 
 
@@ -139,4 +166,6 @@ def test_bad_pybullet_settings_are_one_line(settings, text):
         engine_work.check_settings(OmegaConf.create(settings))
     assert engine_work.check_settings(None) is None
     assert engine_work.check_settings(OmegaConf.create({"substeps": [1, 5], "processes": 3})) == (
-        [1, 5], 3)  # fmt: skip
+        [1, 5],
+        3,
+    )

@@ -65,8 +65,9 @@ def test_defaults_and_density():
 def test_any_plane_orientation_is_kept():
     d = base()
     n = np.array([1.0, -2.0, 3.0]) / np.sqrt(14)
-    d["planes"] = [{"centre": [0, 0, 5], "normal": [1, -2, 3], "reference": [2, 1, 0],
-                    "half_lengths": [2, 1]}]  # fmt: skip
+    d["planes"] = [
+        {"centre": [0, 0, 5], "normal": [1, -2, 3], "reference": [2, 1, 0], "half_lengths": [2, 1]}
+    ]
     row = scene_from_dict(d).planes[1]
     np.testing.assert_allclose(row[3:6], n, atol=1e-6)
     np.testing.assert_allclose(row[6:9], np.array([2, 1, 0]) / np.sqrt(5), atol=1e-6)
@@ -124,15 +125,17 @@ def test_the_overlap_check_holds_no_n_by_n_array():
 
 def test_zero_normal():
     d = base()
-    d["planes"] = [{"centre": [0, 0, 5], "normal": [0, 0, 0], "reference": [1, 0, 0],
-                    "half_lengths": [2, 1]}]  # fmt: skip
+    d["planes"] = [
+        {"centre": [0, 0, 5], "normal": [0, 0, 0], "reference": [1, 0, 0], "half_lengths": [2, 1]}
+    ]
     assert "planes[0].normal: has length 0" in _error(d)
 
 
 def test_sphere_inside_a_plane():
     d = base()
-    d["planes"] = [{"centre": [0, 0, 1.2], "normal": [0, 0, 1], "reference": [1, 0, 0],
-                    "half_lengths": [2, 1]}]  # fmt: skip
+    d["planes"] = [
+        {"centre": [0, 0, 1.2], "normal": [0, 0, 1], "reference": [1, 0, 0], "half_lengths": [2, 1]}
+    ]
     assert "sphere 0" in _error(d) and "inside a plane" in _error(d)
 
 

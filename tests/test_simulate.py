@@ -103,15 +103,17 @@ def test_default_out_follows_paths_outputs_as_every_command(scene_file, tmp_path
     [
         ([], "scene: missing (scene=NAME: an example or a scene family of conf/scene/"),
         (["scene=throw", "scene_file=x.yaml"], "scene: both given: give one"),
-        (["scene_file=x.yaml", "frame=3"],
-         "frame=3: frame is not a key of the simulate config: did you mean frames?"),
+        (
+            ["scene_file=x.yaml", "frame=3"],
+            "frame=3: frame is not a key of the simulate config: did you mean frames?",
+        ),
         (["scene=x.yaml"], "scene=x.yaml: no 'x.yaml' in the config group scene (options: "),
         (["scene=my/x.yaml"], "a YAML scene file of yours is scene_file=my/x.yaml"),
         (["scene_file=/nonexistent.yaml"], "does not exist"),
         (["scene_file=x.yaml", "constraints=-1"], "constraints must be a whole number >= 0"),
         (["scene=ood_spaced_drop", "seed=-1"], "seed must be a whole number >= 0"),
     ],
-)  # fmt: skip
+)
 def test_errors_are_one_line(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
         main(argv)
@@ -123,8 +125,11 @@ def test_scene_names_an_example_or_a_family_of_the_scene_group(tmp_path):
     """``scene=head_on`` is the example file conf/scene/head_on.yaml, as ``scene_file=`` reads
     it; ``scene=ood_spaced_drop`` one scene of that family, drawn with ``seed``."""
     runs = {}
-    for name, args in {"group": ["scene=head_on"], "file": [f"scene_file={EXAMPLE}"],
-                       "family": ["scene=ood_spaced_drop", "seed=3"]}.items():  # fmt: skip
+    for name, args in {
+        "group": ["scene=head_on"],
+        "file": [f"scene_file={EXAMPLE}"],
+        "family": ["scene=ood_spaced_drop", "seed=3"],
+    }.items():
         cfg = compose_config(
             "simulate", [*args, "frames=4", "video=false", f"out={tmp_path / name}"]
         )

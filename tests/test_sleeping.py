@@ -46,13 +46,19 @@ def _scene_state(pos, vel, radius=0.5, angvel=None):
     vel = torch.tensor(vel, dtype=torch.float32)
     ang = torch.zeros(n, 3) if angvel is None else torch.tensor(angvel, dtype=torch.float32)
     return SceneState(
-        pos=pos, quat=Q.identity(n), vel=vel[:, None], angvel=ang[:, None],
-        radius=torch.full((n,), radius), mass=torch.ones(n),
+        pos=pos,
+        quat=Q.identity(n),
+        vel=vel[:, None],
+        angvel=ang[:, None],
+        radius=torch.full((n,), radius),
+        mass=torch.ones(n),
         material=torch.zeros(n, dtype=torch.long),
-        planes=torch.as_tensor(ground_plane())[None], plane_kind=torch.zeros(1, dtype=torch.long),
-        plane_batch=torch.zeros(1, dtype=torch.long), dt=torch.tensor([0.1]),
+        planes=torch.as_tensor(ground_plane())[None],
+        plane_kind=torch.zeros(1, dtype=torch.long),
+        plane_batch=torch.zeros(1, dtype=torch.long),
+        dt=torch.tensor([0.1]),
         effects=torch.ones(1, 5, dtype=torch.bool),
-    )  # fmt: skip
+    )
 
 
 def _roll(sim, state, steps):
@@ -112,9 +118,10 @@ def test_nothing_asleep_is_bit_identical_and_calls_with_the_same_state():
 def test_touching_a_moving_sphere_keeps_the_whole_chain_awake():
     # 0–1–2 touch in a row; 2 spins fast in place (r·|ω| = 5 m/s); 3 rests alone far away.
     state = _scene_state(
-        [[0, 0, 0.5], [1, 0, 0.5], [2, 0, 0.5], [10, 0, 0.5]], [[0, 0, 0]] * 4,
+        [[0, 0, 0.5], [1, 0, 0.5], [2, 0, 0.5], [10, 0, 0.5]],
+        [[0, 0, 0]] * 4,
         angvel=[[0, 0, 0], [0, 0, 0], [0, 0, 10], [0, 0, 0]],
-    )  # fmt: skip
+    )
 
     class Frozen(Billiard):  # a simulator that keeps the state as it is
         def __call__(self, s):
@@ -211,13 +218,20 @@ def _traj(n, seed):
     t = 3
     pos = np.repeat(rng.uniform(-5, 5, (1, n, 3)), t, 0).astype(np.float32)
     return Trajectory(
-        name=f"t{seed}", pos=pos, quat=np.tile(np.array([1, 0, 0, 0], np.float32), (t, n, 1)),
-        vel=np.zeros((t, n, 3), np.float32), angvel=np.zeros((t, n, 3), np.float32),
-        radius=np.full(n, 0.5, np.float32), mass=np.arange(1, n + 1, dtype=np.float32),
-        material=np.zeros(n, np.int64), planes=ground_plane()[None],
-        plane_kind=np.zeros(1, np.int64), materials=Material().as_array()[None], dt=0.1,
+        name=f"t{seed}",
+        pos=pos,
+        quat=np.tile(np.array([1, 0, 0, 0], np.float32), (t, n, 1)),
+        vel=np.zeros((t, n, 3), np.float32),
+        angvel=np.zeros((t, n, 3), np.float32),
+        radius=np.full(n, 0.5, np.float32),
+        mass=np.arange(1, n + 1, dtype=np.float32),
+        material=np.zeros(n, np.int64),
+        planes=ground_plane()[None],
+        plane_kind=np.zeros(1, np.int64),
+        materials=Material().as_array()[None],
+        dt=0.1,
         effects=Effects(),
-    )  # fmt: skip
+    )
 
 
 def test_subset_state_keeps_scenes_planes_and_recomputes_ptr():
@@ -253,11 +267,19 @@ def _line_trajectory(frames: int = 30) -> Trajectory:
     vel[:, 1, 0] = 2.0
     quat = np.tile(np.array([1, 0, 0, 0], np.float32), (frames, 2, 1))
     return Trajectory(
-        name="line", pos=pos, quat=quat, vel=vel, angvel=np.zeros_like(vel),
-        radius=np.full(2, 0.5, np.float32), mass=np.ones(2, np.float32),
-        material=np.zeros(2, np.int64), planes=ground_plane()[None],
-        plane_kind=np.zeros(1, np.int64), materials=Material().as_array()[None], dt=0.1,
-    )  # fmt: skip
+        name="line",
+        pos=pos,
+        quat=quat,
+        vel=vel,
+        angvel=np.zeros_like(vel),
+        radius=np.full(2, 0.5, np.float32),
+        mass=np.ones(2, np.float32),
+        material=np.zeros(2, np.int64),
+        planes=ground_plane()[None],
+        plane_kind=np.zeros(1, np.int64),
+        materials=Material().as_array()[None],
+        dt=0.1,
+    )
 
 
 def test_rollout_with_sleeping_holds_sleepers_exactly_and_wakes_them_when_hit():
@@ -338,10 +360,12 @@ def test_sleep_state_survives_a_scene_leaving_the_batch():
 
 @pytest.mark.parametrize("name, key", [("eval", "rollout.sleep"), ("sleep_study", "sleep")])
 def test_configs_are_off_by_default_and_agree_with_the_class_defaults(name, key):
-    from hydra import compose, initialize
+    from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    with initialize(version_base="1.3", config_path="../conf"):
+    from physgnn import CONF_DIR
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose(name)
     if name == "eval":
         assert cfg.rollout.sleeping is False  # off until measured (README: sleeping spheres)

@@ -50,11 +50,19 @@ def resting_layer(n: int = 3, frames: int = 30) -> Trajectory:
     quat[..., 0] = 1
     zeros = np.zeros((frames, k, 3), np.float32)
     return Trajectory(
-        name="layer", pos=np.broadcast_to(p, (frames, k, 3)).astype(np.float32), quat=quat,
-        vel=zeros, angvel=zeros, radius=np.full(k, R, np.float32), mass=np.ones(k, np.float32),
-        material=np.zeros(k, np.int64), planes=ground_plane()[None],
-        plane_kind=np.zeros(1, np.int64), materials=Material().as_array()[None], dt=DT,
-    )  # fmt: skip
+        name="layer",
+        pos=np.broadcast_to(p, (frames, k, 3)).astype(np.float32),
+        quat=quat,
+        vel=zeros,
+        angvel=zeros,
+        radius=np.full(k, R, np.float32),
+        mass=np.ones(k, np.float32),
+        material=np.zeros(k, np.int64),
+        planes=ground_plane()[None],
+        plane_kind=np.zeros(1, np.int64),
+        materials=Material().as_array()[None],
+        dt=DT,
+    )
 
 
 def gaps(pos):
@@ -124,11 +132,16 @@ def test_max_penetration_by_hand():
             "max_pen_static": 0.1,
             "mean_pen_sphere": 0.2,
             "tunnelled": 0,
-        }  # fmt: skip
+        }
     )
     apart = metrics.max_penetration(pos[:, :1] + [0, 0, 3], np.full(1, R), planes, kinds)
-    assert apart == {"max_pen_sphere": 0.0, "max_pen_ground": 0.0, "max_pen_static": 0.0,
-                     "mean_pen_sphere": 0.0, "tunnelled": 0}  # fmt: skip
+    assert apart == {
+        "max_pen_sphere": 0.0,
+        "max_pen_ground": 0.0,
+        "max_pen_static": 0.0,
+        "mean_pen_sphere": 0.0,
+        "tunnelled": 0,
+    }
     # Sphere 2 passes behind the wall (centre at x = 2.2 over its footprint), sphere 0 sinks
     # below the ground: both tunnelled; depths r + 0.2 and r + 0.1 over the diameter 1.
     crossed = pos.copy()
@@ -258,14 +271,26 @@ def train_cfg(tiny_dataset, run_dir, *overrides):
 def sgd_step(tiny_dataset, run_dir, clip) -> float:
     """Norm of the parameter change of one SGD step (lr 1) with ``gradient_clip_val=clip``."""
     cfg = train_cfg(
-        tiny_dataset, run_dir, "model.network.M=1", "model.network.hidden=16",
-        "+trainer.max_steps=1", "trainer.max_epochs=1", "trainer.max_time=null",
-        "trainer.enable_progress_bar=false", "trainer.enable_model_summary=false",
+        tiny_dataset,
+        run_dir,
+        "model.network.M=1",
+        "model.network.hidden=16",
+        "+trainer.max_steps=1",
+        "trainer.max_epochs=1",
+        "trainer.max_time=null",
+        "trainer.enable_progress_bar=false",
+        "trainer.enable_model_summary=false",
         "+trainer.limit_val_batches=0",
-        "datamodule.batch_size=4", "datamodule.pairs_per_epoch=4", "datamodule.val_pairs=4",
-        "lit.optimizer._target_=torch.optim.SGD", "lit.optimizer.lr=1.0", "lit.noise_std=0",
-        "~logger", "callbacks=none", f"trainer.gradient_clip_val={clip}",
-    )  # fmt: skip
+        "datamodule.batch_size=4",
+        "datamodule.pairs_per_epoch=4",
+        "datamodule.val_pairs=4",
+        "lit.optimizer._target_=torch.optim.SGD",
+        "lit.optimizer.lr=1.0",
+        "lit.noise_std=0",
+        "~logger",
+        "callbacks=none",
+        f"trainer.gradient_clip_val={clip}",
+    )
     torch.manual_seed(0)
     datamodule, lit, trainer = build(cfg)
     assert trainer.gradient_clip_val == (None if clip == "null" else float(clip))
@@ -328,6 +353,9 @@ TINY_HARD = [
     "hard.scenes.tight_pack.k=2",
     "hard.scenes.tight_pack.n_frames=8",
 ]
+# What these evals do not check: videos, the sleeping comparison, pybullet on the same work
+# (and its Pareto figures: tests/test_eval.py), the invariance checks (test_invariance_checks.py)
+QUIET = ["videos=false", "sleeping_compare=false", "pybullet=null", "invariance=null"]
 
 
 class Falling(GravityOnlySimulator):
@@ -365,8 +393,7 @@ def fake_eval(tmp_path, monkeypatch, *overrides, entry=None):
     with initialize_config_dir(CONF_DIR, version_base="1.3"):
         cfg = compose(
             "eval",
-            [f"paths.outputs={outputs}", "videos=false", "sleeping_compare=false", *TINY_HARD]
-            + list(overrides),
+            [f"paths.outputs={outputs}", *QUIET, *TINY_HARD] + list(overrides),
         )
     if entry is not None:
         return entry(cfg)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 
@@ -13,6 +14,7 @@ from scipy import stats
 from simdata import trajectory
 from torch import nn
 
+import physgnn.ablation.jobs
 from physgnn import CONF_DIR
 from physgnn.ablation import aggregate, verdicts
 from physgnn.ablation.jobs import (
@@ -27,33 +29,70 @@ from physgnn.ablation.measure import FIGURES, measure_trajectory
 from physgnn.ablation.registry import append_record, done_ids, read_registry
 from physgnn.ablation.report import write_study_report
 from physgnn.ablation.study import run_study
+from physgnn.cli import compose_config
 from physgnn.metrics import trajectory_metrics
 from physgnn.models.baselines import GravityOnlySimulator
 
-SWEEPS = ["ablation_components", "ablation_H", "ablation_M", "ablation_connectivity",
-          "ablation_lambda"]  # fmt: skip
+SWEEPS = [
+    "ablation_components",
+    "ablation_H",
+    "ablation_M",
+    "ablation_connectivity",
+    "ablation_lambda",
+]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def each_training_config_composed_once():
+    """A study composes the training config of every sweep point (dozens of Hydra composes),
+    and the tests here ask for the same points again and again: each is composed once in this
+    module and handed out as a copy."""
+    composed = {}
+
+    def once(name, overrides=None):
+        key = (name, tuple(overrides or ()))
+        if key not in composed:
+            composed[key] = compose_config(name, overrides)
+        return copy.deepcopy(composed[key])
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(physgnn.ablation.jobs, "compose_config", once)
+        yield
 
 
 def study_cfg(tmp_path, *overrides):
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        return compose("study", overrides=[
-            f"paths.outputs={tmp_path}", f"registry={tmp_path}/registry.jsonl",
-            f"results_dir={tmp_path}/results", *overrides])  # fmt: skip
+        return compose(
+            "study",
+            overrides=[
+                f"paths.outputs={tmp_path}",
+                f"registry={tmp_path}/registry.jsonl",
+                f"results_dir={tmp_path}/results",
+                *overrides,
+            ],
+        )
 
 
 def test_the_default_study_adds_the_contact_switches_to_the_reports_sweeps(tmp_path):
     sweeps = list(study_cfg(tmp_path).sweeps)
     assert sweeps == [*SWEEPS, "ablation_contacts"]
     extra = [c.key for c in study_configs(sweeps)][18:]
-    assert extra == ["model.contact_passes=0", "model.pair_impulses=False",
-                     "model.recent_contact=True", "lit.truth_contacts=False",
-                     "model.plane_materials=False",
-                     "model.contact_features=False", "model.material_features=False",
-                     "model.gravity_prior=False", "lit.lambda_contact=0",
-                     "lit.contact_noise_depth=0", "model.network.layer_norm=True",
-                     "model.contact_memory=True",
-                     "lit.pushforward_steps=0",
-                     "lit.pushforward_growth=450 lit.pushforward_steps=4"]  # fmt: skip
+    assert extra == [
+        "model.contact_passes=0",
+        "model.pair_impulses=False",
+        "model.recent_contact=True",
+        "lit.truth_contacts=False",
+        "model.plane_materials=False",
+        "model.contact_features=False",
+        "model.material_features=False",
+        "model.gravity_prior=False",
+        "lit.lambda_contact=0",
+        "lit.contact_noise_depth=0",
+        "model.network.layer_norm=True",
+        "model.contact_memory=True",
+        "lit.pushforward_steps=0",
+        "lit.pushforward_growth=450 lit.pushforward_steps=4",
+    ]
 
 
 def test_the_five_sweeps_are_18_configurations_the_baseline_shared():
@@ -63,14 +102,20 @@ def test_the_five_sweeps_are_18_configurations_the_baseline_shared():
     base = configs[0]
     assert base.key == "baseline" and base.overrides == []
     # the default connects by approach, the connectivity sweep's first point
-    assert base.points == {"ablation_components": "baseline", "ablation_H": "2",
-                           "ablation_M": "5", "ablation_connectivity": "approach",
-                           "ablation_lambda": "0"}  # fmt: skip
+    assert base.points == {
+        "ablation_components": "baseline",
+        "ablation_H": "2",
+        "ablation_M": "5",
+        "ablation_connectivity": "approach",
+        "ablation_lambda": "0",
+    }
     by_key = {c.key: c for c in configs}
     # the variant m1 and the sweep's M = 1 are one configuration, trained once
     assert by_key["model.network.M=1"].points == {"ablation_components": "m1", "ablation_M": "1"}
-    assert by_key["lit.lambda_energy=10"].points == {"ablation_components": "energy",
-                                                     "ablation_lambda": "10"}  # fmt: skip
+    assert by_key["lit.lambda_energy=10"].points == {
+        "ablation_components": "energy",
+        "ablation_lambda": "10",
+    }
     assert by_key["model.H=0"].overrides == ["+variant=h0"]  # datamodule.H follows, not a key
     assert by_key["model.graph.connectivity=vi"].points == {"ablation_connectivity": "vi"}
     gns = [k for k in keys if "use_surfaces=False" in k]
@@ -87,7 +132,8 @@ def test_the_five_sweeps_are_18_configurations_the_baseline_shared():
     table2 = [c.key for c in configs if next(iter(c.points)) == "ablation_components"]
     assert len(table2) == 8  # the baseline's seeds, then Table 2's rows, seed by seed
     assert [(j.config.key, j.seed) for j in jobs[:24]] == [("baseline", s) for s in (0, 1, 2)] + [
-        (k, s) for s in (0, 1, 2) for k in table2[1:]]  # fmt: skip
+        (k, s) for s in (0, 1, 2) for k in table2[1:]
+    ]
     assert {j.config.key for j in jobs[24:]} == set(keys) - set(table2)
 
 
@@ -140,20 +186,37 @@ def rec(key, seed, ood, test=None, share=None):
     """A registry record; ``ood`` = [(mse, diverged_at)] per trajectory."""
 
     def rows(items):
-        return [{"mse": None if d is not None else m, "chamfer": None if d is not None else m,
-                 "energy_gain": None if d is not None else 0.1 * m, "diverged_at": d,
-                 "energy_error": None if d is not None else abs(0.1 * m - 0.05),
-                 "max_depth_sphere": None if d is not None else 0.01 * m,
-                 "energy_gain_truth": 0.05, "fps": 10.0} for m, d in items]  # fmt: skip
+        return [
+            {
+                "mse": None if d is not None else m,
+                "chamfer": None if d is not None else m,
+                "energy_gain": None if d is not None else 0.1 * m,
+                "diverged_at": d,
+                "energy_error": None if d is not None else abs(0.1 * m - 0.05),
+                "max_depth_sphere": None if d is not None else 0.01 * m,
+                "energy_gain_truth": 0.05,
+                "fps": 10.0,
+            }
+            for m, d in items
+        ]
 
     logged = {"train/energy_share": share} if share is not None else {}
-    return {"key": key, "seed": seed, "status": "finished", "budget": {},
-            "splits": {"ood": rows(ood), "test": rows(test or ood)}, "logged": logged}  # fmt: skip
+    return {
+        "key": key,
+        "seed": seed,
+        "status": "finished",
+        "budget": {},
+        "splits": {"ood": rows(ood), "test": rows(test or ood)},
+        "logged": logged,
+    }
 
 
 def test_a_diverged_rollout_makes_its_seed_infinite_never_a_prefix_average():
-    records = [rec("x", 0, [(1.0, None), (3.0, None)]), rec("x", 1, [(0.5, 12), (5.0, None)]),
-               rec("x", 2, [(4.0, None), (6.0, None)])]  # fmt: skip
+    records = [
+        rec("x", 0, [(1.0, None), (3.0, None)]),
+        rec("x", 1, [(0.5, 12), (5.0, None)]),
+        rec("x", 2, [(4.0, None), (6.0, None)]),
+    ]
     assert aggregate.seed_value(records[1], "ood", "mse") == math.inf
     stat = aggregate.over_seeds(records, "ood", "mse")
     assert (stat.seeds, stat.diverged, stat.finite) == (3, 1, False)
@@ -179,7 +242,8 @@ def test_verdicts_follow_their_stated_rules():
     assert p == pytest.approx(stats.ttest_ind(a, b, equal_var=False).pvalue)
     groups = {"baseline": base, "m": stable, "d": many}
     assert verdicts.best(groups, {"baseline": "baseline", "m1": "m", "h0": "d"}).startswith(
-        "reproduced")  # fmt: skip
+        "reproduced"
+    )
     lower = [rec("l", s, [(1.0 + 0.1 * s, None), (1.0, None)]) for s in range(3)]
     close = [rec("c", s, [(2.0 + 0.3 * (s - 1), None), (2.1, None)]) for s in range(3)]
     groups |= {"l": lower, "c": close}
@@ -222,8 +286,10 @@ def test_dry_run_lists_every_job_and_trains_nothing(tmp_path, capsys):
 
 def test_report_only_rebuilds_the_page_and_trains_nothing(tmp_path):
     cfg = study_cfg(tmp_path, "report_only=true", "sweeps=[ablation_connectivity]", "seeds=[0]")
-    append_record(tmp_path / "registry.jsonl", rec("baseline", 0, [(1.0, None)]) | {
-        "budget": study_budget(cfg)})  # fmt: skip
+    append_record(
+        tmp_path / "registry.jsonl",
+        rec("baseline", 0, [(1.0, None)]) | {"budget": study_budget(cfg)},
+    )
     page = run_study(cfg)
     assert page == tmp_path / "results" / "README.md"
     assert "**1 done**, 0 failed, 3 left" in page.read_text()
@@ -237,8 +303,15 @@ def test_a_tiny_study_runs_resumes_from_the_registry_and_survives_failures(
     import shutil
 
     shutil.copytree(tiny_dataset, tmp_path / "data" / "tiny")
-    tiny = ["sweeps=[ablation_connectivity]", "seeds=[0]", "preset=tiny", "budget.steps=2",
-            "budget.steps_per_epoch=1", "budget.batch_size=4", "horizon=12"]  # fmt: skip
+    tiny = [
+        "sweeps=[ablation_connectivity]",
+        "seeds=[0]",
+        "preset=tiny",
+        "budget.steps=2",
+        "budget.steps_per_epoch=1",
+        "budget.batch_size=4",
+        "horizon=12",
+    ]
     broken = study_cfg(tmp_path, *tiny, "budget.extra=['model.network.M=0']")
     with pytest.raises(Exception, match="4 of 4 runs failed"):
         run_study(broken)
@@ -251,13 +324,17 @@ def test_a_tiny_study_runs_resumes_from_the_registry_and_survives_failures(
     report = run_study(cfg)  # of this budget: tried again, like the two never run
     records = [r for r in read_registry(tmp_path / "registry.jsonl") if r["budget"] == budget]
     assert sorted(r["key"] for r in records) == [
-        "baseline", "model.graph.connectivity=epsilon", "model.graph.connectivity=vi",
-        "model.graph.connectivity=vmax"]  # fmt: skip
+        "baseline",
+        "model.graph.connectivity=epsilon",
+        "model.graph.connectivity=vi",
+        "model.graph.connectivity=vmax",
+    ]
     assert {r["status"] for r in records} == {"finished"}
     assert all(len(r["splits"]["ood"]) == 4 and r["steps"] == 2 for r in records)
     assert all(r["curve"] and r["curve"][0]["step"] >= 1 for r in records)  # learning curve
-    assert all(r["checkpoint"]["step"] in (1, 2) and r["checkpoint"]["val_loss"] > 0
-               for r in records)  # the measured checkpoint  # fmt: skip
+    assert all(
+        r["checkpoint"]["step"] in (1, 2) and r["checkpoint"]["val_loss"] > 0 for r in records
+    )  # the measured checkpoint
     base = next(r for r in records if r["key"] == "baseline")  # measured with the stage too
     assert len(base["splits_constraints"]["ood"]) == 4
     assert all("splits_constraints" not in r for r in records if r["key"] != "baseline")
@@ -280,10 +357,19 @@ def test_the_slurm_launcher_runs_the_same_jobs(tiny_dataset, tmp_path):
     import shutil
 
     shutil.copytree(tiny_dataset, tmp_path / "data" / "tiny")
-    cfg = study_cfg(tmp_path, "sweeps=[ablation_connectivity]", "seeds=[1]", "preset=tiny",
-                    "budget.steps=1", "budget.steps_per_epoch=1", "budget.batch_size=4",
-                    "horizon=8", "launcher.name=slurm", "launcher.cluster=debug",
-                    "launcher.poll_s=0.1")  # fmt: skip
+    cfg = study_cfg(
+        tmp_path,
+        "sweeps=[ablation_connectivity]",
+        "seeds=[1]",
+        "preset=tiny",
+        "budget.steps=1",
+        "budget.steps_per_epoch=1",
+        "budget.batch_size=4",
+        "horizon=8",
+        "launcher.name=slurm",
+        "launcher.cluster=debug",
+        "launcher.poll_s=0.1",
+    )
     run_study(cfg)
     records = read_registry(tmp_path / "registry.jsonl")
     assert len(records) == 4 and {r["status"] for r in records} == {"finished"}
@@ -302,12 +388,20 @@ def test_the_report_is_rebuilt_from_the_registry_alone(tmp_path):
             lam = float(config.points.get("ablation_lambda", "nan"))
             r = rec(config.key, seed, [(mse, gone), (mse, None)], share=0.01 if lam else 0.0)
             r["logged"] |= {"train/loss": 2.0, "train/loss_energy": 0.01 / (1 + (lam or 0))}
-            r |= {"budget": budget, "overrides": config.overrides, "threads": 1,
-                  "machine": {"cpu": "test cpu", "gpu": None}, "commit": "abc",
-                  "date": "2026-01-01 10:00", "wall_s": 60.0,
-                  "checkpoint": {"file": "best-epoch089.ckpt", "step": 2250, "val_loss": 0.5},
-                  "curve": [{"step": 250 * k, "mse": mse / k, "max_depth": 0.1,
-                             "energy_gain": 0.2} for k in (1, 2)]}  # fmt: skip
+            r |= {
+                "budget": budget,
+                "overrides": config.overrides,
+                "threads": 1,
+                "machine": {"cpu": "test cpu", "gpu": None},
+                "commit": "abc",
+                "date": "2026-01-01 10:00",
+                "wall_s": 60.0,
+                "checkpoint": {"file": "best-epoch089.ckpt", "step": 2250, "val_loss": 0.5},
+                "curve": [
+                    {"step": 250 * k, "mse": mse / k, "max_depth": 0.1, "energy_gain": 0.2}
+                    for k in (1, 2)
+                ],
+            }
             if config.key == "baseline":  # the constraint stage halves its OOD MSE
                 r["splits_constraints"] = rec("", seed, [(mse / 2, None), (mse / 2, None)])[
                     "splits"
@@ -322,7 +416,7 @@ def test_the_report_is_rebuilt_from_the_registry_alone(tmp_path):
     assert row.endswith(
         "| 1/6 (median step 7) | +∞: diverged more (p = 1) | diverges | inconclusive at this "
         "budget: 1/6 diverged vs the baseline's 0/6 (p = 0.5) |"
-    )  # fmt: skip
+    )
     base = next(line for line in lines if line.startswith("| Baseline |"))
     assert (
         "| 4.01 ± 1.00e-02 |" in base

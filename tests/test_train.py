@@ -109,8 +109,9 @@ def test_of_several_best_checkpoints_the_best_scored_is_measured(tmp_path):
         state = {"callbacks": {key: {"current_score": torch.tensor(score)}}}
         torch.save(state, folder / f"best-epoch{epoch:03d}.ckpt")
     assert checkpoint_of(tmp_path).name == "best-epoch049.ckpt"
-    torch.save({"callbacks": {key: {"current_score": torch.tensor(6.8)}}},
-               folder / "best-epoch089.ckpt")  # fmt: skip
+    torch.save(
+        {"callbacks": {key: {"current_score": torch.tensor(6.8)}}}, folder / "best-epoch089.ckpt"
+    )
     assert checkpoint_of(tmp_path).name == "best-epoch089.ckpt"  # a tie: the latest
 
 

@@ -103,8 +103,9 @@ def eval_config(outputs: Path, *overrides):
 
 
 def simulate(out: Path, scene: str, *extra: str) -> None:
-    simulate_command.main([f"scene_file={SCENES / scene}", "frames=3", "video=false", f"out={out}",
-                           *extra])  # fmt: skip
+    simulate_command.main(
+        [f"scene_file={SCENES / scene}", "frames=3", "video=false", f"out={out}", *extra]
+    )
 
 
 def scene_in(out: Path) -> tuple[str, str]:
