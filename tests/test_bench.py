@@ -399,10 +399,15 @@ def test_crossover_judges_the_front_and_the_matched_setting():
     assert crossover.judged([_sim("learned", 0.001, 1.0), *engine])["matched_substeps"] is None
     # a diverged rollout is never on the front
     assert not crossover.judged([_sim("learned", 0.05, 200.0, diverged=9), *engine])["on_front"]
-    on = lambda n, front: {"n_spheres": n, "on_front": front}  # noqa: E731
-    assert crossover.front_from([on(154, False), on(1000, True), on(3000, True)]) == 1000
-    assert crossover.front_from([on(154, True), on(1000, False), on(3000, True)]) == 3000
-    assert crossover.front_from([on(154, True), on(1000, True), on(3000, False)]) is None
+
+    def sizes(*fronts: bool) -> list[dict]:
+        return [
+            {"n_spheres": n, "on_front": f} for n, f in zip((154, 1000, 3000), fronts, strict=True)
+        ]
+
+    assert crossover.front_from(sizes(False, True, True)) == 1000
+    assert crossover.front_from(sizes(True, False, True)) == 3000
+    assert crossover.front_from(sizes(True, True, False)) is None
 
 
 def test_quick_bench_runs_the_crossover_on_landed_piles(quick):

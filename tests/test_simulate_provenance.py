@@ -30,7 +30,6 @@ def test_the_prediction_says_what_made_it_and_how_fast(tiny_run, tmp_path):
     assert result["ms_per_frame"]["pybullet"] > 0 and result["ms_per_frame"]["learned"] > 0
     with h5py.File(out / "simulate.h5") as f:
         pred, truth = dict(f["prediction"].attrs), dict(f["truth"].attrs)
-    number = lambda v: json.loads(v) if isinstance(v, str) else v  # noqa: E731 (extra attrs: JSON)
     assert pred["made_by"] == "physgnn learned simulator" and number(pred["H"]) == 2
     assert pred["checkpoint"].startswith("best-") and number(pred["constraints"]) == 2
     assert number(pred["diverged_at"]) == -1 and pred["engine"] == "" and pred["substeps"] == 0
@@ -77,3 +76,8 @@ def test_a_long_simulation_reports_its_frames(tmp_path, monkeypatch):
     monkeypatch.setattr(S, "engine_simulate", watched)
     truth = S.simulate_with_progress(load_scene(write(tmp_path, SCENE)))
     assert seen == list(range(2, truth.n_frames + 1))
+
+
+def number(value):
+    """An extra attribute's value: the extra attrs are written as JSON text."""
+    return json.loads(value) if isinstance(value, str) else value
