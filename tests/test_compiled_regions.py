@@ -1,6 +1,6 @@
-"""Compiled regions (``lit.compile=true`` on counted graphs): the graph rules and the step after
-the graph build each run as one region with dynamic shapes; results equal eager's to float
-rounding; a training step dispatches at most 1 500 aten ops outside them.
+"""Compiled regions (``lit.compile.enabled=true`` on counted graphs): the graph rules and the
+step after the graph build each run as one region with dynamic shapes; results equal eager's to
+float rounding; a training step dispatches at most 1 500 aten ops outside them.
 
 The regions are compiled with ``aot_eager`` (dynamo and AOT autograd, no code generation): what
 runs inside or outside a region does not depend on the backend, and it compiles in seconds.

@@ -113,7 +113,7 @@ TINY_DDP = ["trainer=ddp_cpu", "trainer.devices=2", "data=tiny", "seed=5", "mode
             "model.network.hidden=8", "trainer.max_epochs=3", "trainer.max_time=null",
             "trainer.enable_progress_bar=false", "trainer.enable_model_summary=false",
             "datamodule.batch_size=4", "datamodule.pairs_per_epoch=16", "datamodule.val_pairs=8",
-            "lit.pushforward_after=0", "callbacks.rollout.every_n_epochs=1"]  # fmt: skip
+            "lit.pushforward.after=0", "callbacks.rollout.every_n_epochs=1"]  # fmt: skip
 HANG_S = 120  # a run still going after this long hangs
 
 
@@ -182,9 +182,9 @@ def test_two_ddp_processes_match_one_on_the_same_global_batch(three_sphere_datas
     common = ["model.network.M=1", "model.network.hidden=16", "trainer.max_epochs=2",
               "trainer.max_time=null", "trainer.enable_progress_bar=false",
               "trainer.enable_model_summary=false", "datamodule.pairs_per_epoch=32",
-              "datamodule.val_pairs=8", "lit.noise_std=0",
-              "lit.contact_noise_depth=0", "model.gravity_prior=false",
-              "lit.pushforward_steps=0", f"data.dir={three_sphere_dataset}"]  # fmt: skip
+              "datamodule.val_pairs=8", "lit.noise.std=0",
+              "lit.noise.contact_depth=0", "model.gravity_prior=false",
+              "lit.pushforward.steps=0", f"data.dir={three_sphere_dataset}"]  # fmt: skip
     one = train(config(three_sphere_dataset, tmp_path / "one", *common, "datamodule.batch_size=8"))
     two_dir = tmp_path / "two"
     cmd = [sys.executable, "-m", "physgnn.train", "trainer=ddp_cpu", "trainer.devices=2",

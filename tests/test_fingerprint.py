@@ -43,11 +43,11 @@ CONFIG = [
     "model.relative_pairs=false", "model.mass_ratio=false", "model.network.aggregation=sum",
     "model.rest_decision=false", "model.rest_speed=0.01",
     # the recipe: noise, push-forward (from step 2 of 4), contact terms, Adam, schedule
-    "lit.noise_std=0.03", "lit.pushforward_steps=2", "lit.pushforward_after=2",
-    "lit.pushforward_growth=0", "lit.lambda_energy=0.0", "lit.lambda_contact=1.0",
-    "lit.contact_tol=0.02", "lit.contact_noise_depth=0.2", "lit.contact_noise_prob=0.3",
-    "lit.contact_touch=0.05", "lit.noise_rest_scale=1.0", "lit.lambda_rest=0.0",
-    "lit.optimizer.lr=1.0e-3", "lit.scheduler.final_lr_factor=0.0644846109465322",
+    "lit.noise.std=0.03", "lit.pushforward.steps=2", "lit.pushforward.after=2",
+    "lit.pushforward.growth=0", "lit.loss.lambda_energy=0.0", "lit.loss.lambda_contact=1.0",
+    "lit.loss.contact_tol=0.02", "lit.noise.contact_depth=0.2", "lit.noise.contact_prob=0.3",
+    "lit.noise.contact_touch=0.05", "lit.noise.rest_scale=1.0", "lit.loss.lambda_rest=0.0",
+    "lit.optimizer.lr=1.0e-3", "lit.scheduler.decay_per_epoch=0.97", "lit.scheduler.epochs=90",
     # 4 steps of 4 pairs, no callbacks, no logger
     "datamodule.batch_size=4", "datamodule.pairs_per_epoch=16", "datamodule.val_pairs=8",
     "trainer.max_epochs=1", "trainer.max_time=null", "trainer.enable_progress_bar=false",

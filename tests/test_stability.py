@@ -263,7 +263,7 @@ def sgd_step(tiny_dataset, run_dir, clip) -> float:
         "trainer.enable_progress_bar=false", "trainer.enable_model_summary=false",
         "+trainer.limit_val_batches=0",
         "datamodule.batch_size=4", "datamodule.pairs_per_epoch=4", "datamodule.val_pairs=4",
-        "lit.optimizer._target_=torch.optim.SGD", "lit.optimizer.lr=1.0", "lit.noise_std=0",
+        "lit.optimizer._target_=torch.optim.SGD", "lit.optimizer.lr=1.0", "lit.noise.std=0",
         "~logger", "callbacks=none", f"trainer.gradient_clip_val={clip}",
     )  # fmt: skip
     torch.manual_seed(0)
