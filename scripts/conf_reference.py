@@ -17,7 +17,17 @@ import yaml
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 # config groups whose options set keys, one table per option
-GROUPS = ["data", "model", "trainer", "callbacks", "logger", "debug", "paths", "hydra/launcher"]
+GROUPS = [
+    "lit",
+    "data",
+    "model",
+    "trainer",
+    "callbacks",
+    "logger",
+    "debug",
+    "paths",
+    "hydra/launcher",
+]
 # config groups listed by name and their first comment line (overrides and scenes)
 LISTED = {
     "experiment": "sweeps and long runs: `python -m physgnn.train +experiment=NAME`",

@@ -58,7 +58,8 @@ def one_line_exit(monkeypatch, capsys, module, *args) -> str:
         ),
         (
             "lit.noise.rest_scale=nan",
-            "lit.noise.rest_scale must be a factor in (0, 1] (1: full noise at rest), got nan",
+            "lit.noise.rest_scale must be a factor in (0, 1] (1: full noise at rest), got nan "
+            "(the default: lit.noise.rest_scale=0.05)",
         ),
         (
             "trainer.max_epochs=1.5",
