@@ -353,7 +353,6 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
             "lit.scheduler.decay_per_epoch=-1",
             "lit.scheduler.decay_per_epoch must be a number > 0 (lr x decay_per_epoch^epochs at",
         ),
-        ("lit.noise_std=0.01", "lit.noise_std is now lit.noise.std: write lit.noise.std=0.01"),
         ("trainer.max_epochs=0", "trainer.max_epochs=0 trains nothing: give at least 1"),
         ("lit.optimizer.lr=-1", "lit.optimizer.lr must be a number > 0, got -1 (conf/lit/"),
         ("seed=-5", "seed must be a whole number from 0 to 4294967295, got -5 (conf/train.yaml"),
@@ -388,6 +387,16 @@ def test_config_mistakes_name_the_key_and_are_recorded(tiny_dataset, tmp_path, m
     info = read_run_json(tmp_path)  # the run folder says what went wrong ...
     assert info["status"] == "failed" and message in info["error"]
     assert message in (tmp_path / "train.log").read_text()  # ... and so does its log
+
+
+def test_a_flat_recipe_key_is_one_line_before_anything_is_written(
+    tiny_dataset, tmp_path, monkeypatch, capsys
+):
+    args = hydra_args(tiny_dataset, tmp_path)
+    code, line = run_main(monkeypatch, capsys, *args, "lit.noise_std=0.01")
+    assert code == 2
+    assert line == "error: lit.noise_std is now lit.noise.std: write lit.noise.std=0.01"
+    assert not (tmp_path / "run.json").exists()
 
 
 def test_physgnn_outputs_naming_a_file_is_one_line(tmp_path, monkeypatch, capsys):
