@@ -19,6 +19,7 @@ from torch.testing import assert_close
 from physgnn import CONF_DIR
 from physgnn.benchmark.gpu_readiness import training_step_counts
 from physgnn.benchmark.syncs import profiling_ops
+from physgnn.cli import compose_config
 from physgnn.models.capture import ShapeBoundCall, compile_simulator
 from physgnn.rollout import rollout
 from tests.test_fixed_capacity import tiny, training_batch  # noqa: F401 (fixture)
@@ -55,7 +56,7 @@ def test_a_compiled_simulator_rolls_out_as_the_eager_one(tiny):  # noqa: F811
 
 def test_compiled_regions_give_the_eager_losses_and_gradients(tiny):  # noqa: F811
     trajectories, stats = tiny
-    recipe = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness.lit
+    recipe = compose_config("bench").gpu_readiness.lit  # the training recipe, the bench's deltas
     eager, compiled = default_pair(stats)
     lits = [instantiate(recipe, simulator=s) for s in (eager, compiled)]
     lits[1].compile_regions(backend="aot_eager")
@@ -80,7 +81,7 @@ def test_a_compiled_training_step_dispatches_at_most_the_budget(tiny):  # noqa: 
     """The default recipe through Lightning (noise, contact noise, push-forward up to 2, the
     loss, backward, clipping, Adam): eager it dispatches far more than the budget."""
     trajectories, stats = tiny
-    cfg = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness
+    cfg = compose_config("bench").gpu_readiness
     model = OmegaConf.merge(OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml"), cfg.model)
     c = OmegaConf.create({"steps": 4, "warmup_steps": 2, "batch_size": 16})
     compiled = training_step_counts(model, cfg.lit, trajectories, stats, c, compiled=True)
