@@ -1,7 +1,6 @@
-"""Compiled regions (``lit.compile=true`` on counted graphs): the graph rules and the step after
-the graph build each run as one region with dynamic shapes; results equal eager's to float
-rounding; a training step dispatches at most 1 500 aten ops outside them (slow here; the fast
-suite checks it on the quick bench).
+"""Compiled regions (``lit.compile.enabled=true`` on counted graphs): the graph rules and the
+step after the graph build each run as one region with dynamic shapes; results equal eager's to
+float rounding; a training step dispatches at most 1 500 aten ops outside them.
 
 The regions are compiled with ``aot_eager`` (dynamo and AOT autograd, no code generation): what
 runs inside or outside a region does not depend on the backend, and it compiles in seconds.
@@ -22,6 +21,7 @@ from torch.testing import assert_close
 from physgnn import CONF_DIR
 from physgnn.benchmark.gpu_readiness import training_step_counts
 from physgnn.benchmark.syncs import profiling_ops
+from physgnn.cli import compose_config
 from physgnn.models.capture import ShapeBoundCall, compile_simulator
 from physgnn.rollout import rollout
 
@@ -55,7 +55,7 @@ def test_a_compiled_simulator_rolls_out_as_the_eager_one(tiny_train):
 
 def test_compiled_regions_give_the_eager_losses_and_gradients(tiny_train):
     trajectories, stats = tiny_train
-    recipe = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness.lit
+    recipe = compose_config("bench").gpu_readiness.lit  # the training recipe, the bench's deltas
     eager, compiled = default_pair(stats)
     lits = [instantiate(recipe, simulator=s) for s in (eager, compiled)]
     lits[1].compile_regions(backend="aot_eager")
@@ -83,7 +83,7 @@ def test_a_compiled_training_step_dispatches_at_most_the_budget(tiny_train):
     compile takes minutes on 2 busy cores): the fast suite checks the same budget on the quick
     bench's compiled training step (tests/test_bench.py), the same model and recipe."""
     trajectories, stats = tiny_train
-    cfg = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness
+    cfg = compose_config("bench").gpu_readiness
     model = OmegaConf.merge(OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml"), cfg.model)
     c = OmegaConf.create({"steps": 4, "warmup_steps": 2, "batch_size": 16})
     compiled = training_step_counts(model, cfg.lit, trajectories, stats, c, compiled=True)

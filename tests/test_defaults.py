@@ -1,10 +1,12 @@
-"""One source of truth: every literal value of conf/train.yaml's ``lit``, ``lit.scheduler`` and
-``datamodule`` nodes equals the default of the constructor argument of that name
-(interpolations such as ``${seed}`` and nested nodes such as the optimiser are the config's
-alone)."""
+"""One source of truth: every literal value of the training recipe's nodes
+(``conf/lit/default.yaml``: ``lit.scheduler``; the groups ``lit.noise`` ... with exactly their
+dataclass's fields) and of conf/train.yaml's ``datamodule`` equals the default of the
+constructor argument of that name (interpolations such as ``${seed}`` and nested nodes such as
+the optimiser are the config's alone)."""
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 from pathlib import Path
 
@@ -15,9 +17,12 @@ from physgnn import CONF_DIR
 from physgnn.training.callbacks import RolloutCallback
 from physgnn.training.datamodule import StatePairDataModule
 from physgnn.training.lit import LitSimulator
+from physgnn.training.recipe import Compile, InputNoise, LossTerms, PushForward
 from physgnn.training.schedule import RunLengthDecay
 
 TRAIN = Path(CONF_DIR) / "train.yaml"
+RECIPE = Path(CONF_DIR) / "lit" / "default.yaml"
+GROUPS = {"noise": InputNoise, "pushforward": PushForward, "loss": LossTerms, "compile": Compile}
 
 
 def literal_values(node) -> dict:
@@ -33,11 +38,12 @@ def literal_values(node) -> dict:
 
 
 @pytest.mark.parametrize(
-    ("node", "cls"),
-    [("lit", LitSimulator), ("lit.scheduler", RunLengthDecay), ("datamodule", StatePairDataModule)],
+    ("path", "node", "cls"),
+    [(RECIPE, "scheduler", RunLengthDecay), (TRAIN, "datamodule", StatePairDataModule)]
+    + [(RECIPE, name, cls) for name, cls in GROUPS.items()],
 )
-def test_constructor_defaults_equal_train_yaml(node, cls):
-    cfg = OmegaConf.select(OmegaConf.load(TRAIN), node)
+def test_constructor_defaults_equal_the_yaml(path, node, cls):
+    cfg = OmegaConf.select(OmegaConf.load(path), node)
     params = inspect.signature(cls).parameters
     literals = literal_values(cfg)
     assert literals, f"{node} has no literal value to compare"
@@ -46,6 +52,14 @@ def test_constructor_defaults_equal_train_yaml(node, cls):
         assert params[key].default == value, (
             f"{node}.{key}: code {params[key].default}, YAML {value}"
         )
+
+
+@pytest.mark.parametrize(("name", "cls"), GROUPS.items())
+def test_each_recipe_group_is_one_node_with_exactly_its_fields(name, cls):
+    node = OmegaConf.load(RECIPE)[name]
+    assert node._target_ == f"{cls.__module__}.{cls.__name__}"
+    assert [k for k in node if k != "_target_"] == [f.name for f in dataclasses.fields(cls)]
+    assert inspect.signature(LitSimulator).parameters[name].default == cls()
 
 
 def test_the_rollout_callback_defaults_equal_its_yaml_and_the_default_preset():

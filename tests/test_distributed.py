@@ -149,7 +149,7 @@ TINY_DDP = [
     "datamodule.batch_size=4",
     "datamodule.pairs_per_epoch=16",
     "datamodule.val_pairs=8",
-    "lit.pushforward_after=0",
+    "lit.pushforward.after=0",
     "callbacks.rollout.every_n_epochs=1",
 ]
 HANG_S = 120  # a run still going after this long hangs
@@ -240,10 +240,10 @@ def test_two_ddp_processes_match_one_on_the_same_global_batch(three_sphere_datas
         "trainer.enable_model_summary=false",
         "datamodule.pairs_per_epoch=32",
         "datamodule.val_pairs=8",
-        "lit.noise_std=0",
-        "lit.contact_noise_depth=0",
+        "lit.noise.std=0",
+        "lit.noise.contact_depth=0",
         "model.gravity_prior=false",
-        "lit.pushforward_steps=0",
+        "lit.pushforward.steps=0",
         f"data.dir={three_sphere_dataset}",
     ]
     one = train(config(three_sphere_dataset, tmp_path / "one", *common, "datamodule.batch_size=8"))

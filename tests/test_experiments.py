@@ -61,7 +61,8 @@ def test_the_long_run_is_ten_default_budgets_with_milestones(tiny_dataset, tmp_p
     steps = cfg.trainer.max_epochs * cfg.datamodule.pairs_per_epoch // cfg.datamodule.batch_size
     assert steps == SINGLE["long"] == 10 * 2250
     # the default's decay over 90 epochs (0.97^90), spread over the 900
-    assert cfg.lit.scheduler.final_lr_factor == 0.97**90  # tests/test_schedule.py
+    decay = cfg.lit.scheduler
+    assert decay.decay_per_epoch**decay.epochs == 0.97**90  # tests/test_schedule.py
     _, _, trainer = build(cfg)
     kept = [c for c in trainer.callbacks if getattr(c, "dirpath", "").endswith("milestones")]
     assert len(kept) == 1 and kept[0]._every_n_train_steps == 2250 and kept[0].save_top_k == -1
@@ -97,7 +98,7 @@ def test_experiment_composes_and_every_job_instantiates(name, tiny_dataset, tmp_
             "model.H": lit.simulator.H,
             "model.network.M": lit.simulator.M,
             "model.graph.connectivity": lit.simulator.graph_builder.connectivity,
-            "lit.lambda_energy": lit.lambda_energy,
+            "lit.loss.lambda_energy": lit.loss_terms.lambda_energy,
         }
         assert built[key] == OmegaConf.select(job_cfg, key) == parse(value)
 
@@ -109,8 +110,8 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
         "m1": {"model.network.M": 1},
         "epsilon": {"model.graph.connectivity": "epsilon"},
         "h0": {"model.H": 0},
-        "energy": {"lit.lambda_energy": 10.0},
-        "no_noise": {"lit.noise_std": 0.0},
+        "energy": {"lit.loss.lambda_energy": 10.0},
+        "no_noise": {"lit.noise.std": 0.0},
         "no_third_law": {"model.network.third_law": False},
         "gns": {
             "model.network.third_law": False,
@@ -124,23 +125,23 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
         "absolute_mass": {"model.mass_ratio": False},
         "sum_aggregation": {"model.network.aggregation": "sum"},
         "no_rest_decision": {"model.rest_decision": False},
-        "uniform_noise": {"lit.noise_rest_scale": 1.0},
+        "uniform_noise": {"lit.noise.rest_scale": 1.0},
         "no_dense_data": {},  # the data only (below)
     }
     stats = build(baseline)[0].stats()
     for variant, changes in expected.items():
         cfg = compose_train([*base, f"+variant={variant}"])
         lit = instantiate(cfg.lit, simulator=instantiate(cfg.model, stats=stats))
-        assert lit.simulator.M == cfg.model.network.M and lit.noise_std == cfg.lit.noise_std
+        assert lit.simulator.M == cfg.model.network.M and lit.noise.std == cfg.lit.noise.std
         for section in ("model", "lit"):  # the keys of the network and the graph too
             default = dotted_model(baseline[section])
             for key, value in dotted_model(cfg[section]).items():
                 want = changes.get(f"{section}.{key}", default[key])
                 assert value == want, (variant, key)
     assert baseline.model.network.M == 5 and baseline.model.H == 2
-    assert baseline.lit.lambda_energy == 0
-    assert baseline.model.graph.connectivity == "approach" and baseline.lit.noise_std == 0.03
-    assert baseline.model.network.aggregation == "mean" and baseline.lit.noise_rest_scale == 0.05
+    assert baseline.lit.loss.lambda_energy == 0
+    assert baseline.model.graph.connectivity == "approach" and baseline.lit.noise.std == 0.03
+    assert baseline.model.network.aggregation == "mean" and baseline.lit.noise.rest_scale == 0.05
     nodense = compose_train([*base, "+variant=no_dense_data"]).data
     assert nodense.fit_scene.dense_fraction == 0.0 and nodense.dir.endswith("small_nodense")
 

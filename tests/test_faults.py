@@ -234,16 +234,16 @@ def test_a_second_ctrl_c_stops_at_once(tiny_dataset, tmp_path):
 def test_failing_jobs_never_stop_a_sweep(tiny_dataset, tmp_path, monkeypatch, capsys):
     outputs = outputs_of(tiny_dataset)
     sweep = tmp_path / "sweep"
-    args = ["-m", "lit.noise_std=abc,1e30,0.01", "data=tiny", f"paths.outputs={outputs}"]
+    args = ["-m", "lit.noise.std=abc,1e30,0.01", "data=tiny", f"paths.outputs={outputs}"]
     monkeypatch.setattr(sys, "argv", ["physgnn.train", *args, f"hydra.sweep.dir={sweep}", *SHORT])
     with pytest.raises(SystemExit) as exit_info:
         train_command.main()
     assert exit_info.value.code == 1
     summary = json.loads((sweep / "sweep.json").read_text())
     assert [j["status"] for j in summary["jobs"]] == ["failed", "diverged", "finished"]
-    assert summary["jobs"][0]["error"] == "ConfigError: lit.noise_std must be a number, got 'abc'"
+    assert summary["jobs"][0]["error"] == "ConfigError: lit.noise.std must be a number, got 'abc'"
     err = capsys.readouterr().err
-    assert "error: lit.noise_std must be a number, got 'abc' (this job failed;" in err
+    assert "error: lit.noise.std must be a number, got 'abc' (this job failed;" in err
     assert err.strip().splitlines()[-1].startswith("error: 2 job(s) of the sweep did not finish")
 
 
@@ -369,11 +369,11 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
         ("model.network.M=abc", "model.network.M must be a whole number, got 'abc'"),
         ("datamodule.batch_size=1.5", "datamodule.batch_size must be a whole number, got 1.5"),
         (
-            "lit.scheduler.final_lr_factor=-1",
-            "lit.scheduler.final_lr_factor must be a number > 0 (lr x final_lr_factor at the end",
+            "lit.scheduler.decay_per_epoch=-1",
+            "lit.scheduler.decay_per_epoch must be a number > 0 (lr x decay_per_epoch^epochs at",
         ),
         ("trainer.max_epochs=0", "trainer.max_epochs=0 trains nothing: give at least 1"),
-        ("lit.optimizer.lr=-1", "lit.optimizer.lr must be a number > 0, got -1 (conf/train.yaml"),
+        ("lit.optimizer.lr=-1", "lit.optimizer.lr must be a number > 0, got -1 (conf/lit/"),
         ("seed=-5", "seed must be a whole number from 0 to 4294967295, got -5 (conf/train.yaml"),
         (
             "trainer.strategy=ddp",
@@ -407,6 +407,16 @@ def test_config_mistakes_name_the_key_and_are_recorded(
     info = read_run_json(tmp_path)  # the run folder says what went wrong ...
     assert info["status"] == "failed" and message in info["error"]
     assert message in (tmp_path / "train.log").read_text()  # ... and so does its log
+
+
+def test_a_flat_recipe_key_is_one_line_before_anything_is_written(
+    tiny_dataset, tmp_path, monkeypatch, capsys
+):
+    args = hydra_args(tiny_dataset, tmp_path)
+    code, line = run_main(monkeypatch, capsys, *args, "lit.noise_std=0.01")
+    assert code == 2
+    assert line == "error: lit.noise_std is now lit.noise.std: write lit.noise.std=0.01"
+    assert not (tmp_path / "run.json").exists()
 
 
 def test_physgnn_outputs_naming_a_file_is_one_line(tmp_path, monkeypatch, capsys):
@@ -461,7 +471,7 @@ def test_zero_std_in_stats_names_the_file_and_key(tiny_dataset, tmp_path, monkey
 
 def test_an_exploding_model_names_no_checkpoint_folder_that_is_not_there(tiny_dataset, tmp_path):
     with pytest.raises(Exception, match="the model exploded.*; no checkpoint was saved$"):
-        train(config(tiny_dataset, tmp_path, *SHORT, "lit.noise_std=1e30"))
+        train(config(tiny_dataset, tmp_path, *SHORT, "lit.noise.std=1e30"))
     assert not (tmp_path / "checkpoints").exists()
 
 

@@ -88,11 +88,11 @@ def test_an_eval_switch_that_is_not_true_or_false_is_refused(tmp_path, key):
     "override,message",
     [
         (
-            "lit.compile_mode=fastest",
-            "lit.compile_mode must be one of default, reduce-overhead, "
+            "lit.compile.mode=fastest",
+            "lit.compile.mode must be one of default, reduce-overhead, "
             "max-autotune, max-autotune-no-cudagraphs, got 'fastest'",
         ),
-        ("lit.compile_shapes=0", "lit.compile_shapes must be a whole number >= 1"),
+        ("lit.compile.shapes=0", "lit.compile.shapes must be a whole number >= 1"),
         (
             "trainer.precision=fp8",
             "trainer.precision must be one of transformer-engine, "
@@ -105,7 +105,7 @@ def test_compile_and_precision_words_are_one_line_while_compile_is_off(
     tiny_dataset, tmp_path, monkeypatch, capsys, override, message
 ):
     args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={tmp_path}"]
-    code, line = run_main(monkeypatch, capsys, *args, *SHORT, "lit.compile=false", override)
+    code, line = run_main(monkeypatch, capsys, *args, *SHORT, "lit.compile.enabled=false", override)
     assert code == 2 and line.startswith(f"error: {message}")
 
 

@@ -16,6 +16,7 @@ from torch.testing import assert_close
 from physgnn import CONF_DIR
 from physgnn.benchmark.gpu_readiness import training_step_counts
 from physgnn.benchmark.syncs import counting
+from physgnn.cli import compose_config
 from physgnn.graph.builder import CONNECTIVITIES, GraphBuilder
 from physgnn.nn.padding import bucket
 from physgnn.training.contacts import perturb_contacts
@@ -97,7 +98,7 @@ def simulators(stats, **overrides):
 def test_predictions_and_losses_equal_the_counted_graphs(tiny_train):
     trajectories, stats = tiny_train
     counted, fixed = simulators(stats)
-    recipe = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness.lit
+    recipe = compose_config("bench").gpu_readiness.lit  # the training recipe, the bench's deltas
     lit = [instantiate(recipe, simulator=s) for s in (counted, fixed)]
     batch = training_batch(trajectories, counted.H)
     with torch.no_grad():
@@ -121,7 +122,7 @@ def test_contact_noise_pushes_only_the_accepted_contacts():
 
 def test_a_training_step_on_fixed_capacity_graphs_reads_back_at_most_the_finiteness(tiny_train):
     trajectories, stats = tiny_train
-    cfg = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness
+    cfg = compose_config("bench").gpu_readiness
     model = OmegaConf.merge(OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml"), cfg.model)
     model.graph.fixed_capacity = True
     c = OmegaConf.create({"steps": 6, "warmup_steps": 1, "batch_size": 16})

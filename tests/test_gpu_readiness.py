@@ -4,7 +4,6 @@ build, and the sync budgets of a training step and a rollout frame."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 import torch
@@ -15,9 +14,9 @@ from omegaconf import OmegaConf
 from torch.testing import assert_close
 
 import physgnn.graph.builder as builder_module
-from physgnn import CONF_DIR
 from physgnn.benchmark.gpu_readiness import rollout_frame_counts, training_step_counts
 from physgnn.benchmark.syncs import counting
+from physgnn.cli import compose_config
 from physgnn.data.dataset import read_split
 from physgnn.data.pairs import PairDataset
 from physgnn.graph.builder import GraphBuilder
@@ -132,10 +131,9 @@ def test_the_finite_watch_names_the_first_bad_step_in_time():
 
 @pytest.fixture(scope="module")
 def bench_cfg():
-    cfg = OmegaConf.load(Path(CONF_DIR) / "bench.yaml").gpu_readiness
-    model = OmegaConf.merge(OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml"), cfg.model)
-    model.pop("defaults", None)
-    return cfg, model
+    bench = compose_config("bench")  # its lit: the training recipe with the bench's deltas
+    cfg = bench.gpu_readiness
+    return cfg, OmegaConf.merge(bench.model, cfg.model)
 
 
 def test_a_training_step_stays_within_its_sync_budget(tiny_dataset, bench_cfg):

@@ -1,29 +1,65 @@
-"""The model config's layout: runs whose model holds the network's and the graph builder's keys
-flat (an earlier physgnn's, the shipped weights) load as today's nested ``network`` and
-``graph`` nodes, and the study reads their registry keys in today's spelling."""
+"""The config's layout: runs whose model holds the network's and the graph builder's keys flat,
+or whose ``lit`` holds the recipe's keys flat (an earlier physgnn's, the shipped weights), load
+as today's nested nodes and groups; their overrides resume, a flat key typed today is one line
+naming its new spelling, and the study reads their registry keys in today's spelling."""
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
 import pytest
 import torch
+from hydra.utils import instantiate
 from omegaconf import OmegaConf
 from simdata import batch, trajectory
 
 from physgnn.ablation.jobs import current_fingerprint, defaults_fingerprint
 from physgnn.ablation.registry import append_record, read_registry
 from physgnn.cli import compose_config
+from physgnn.errors import ConfigError
+from physgnn.training.checks import check_resume_argv, check_resume_overrides
 from physgnn.training.layout import (
     EARLIER_MODEL,
     FLAT_KEYS,
     NODES,
     flat_layout,
     key_of_today,
+    lit_of_today,
     model_of_today,
 )
+from physgnn.training.lit import LitSimulator
+from physgnn.training.recipe import Compile, InputNoise, LossTerms, PushForward
 from physgnn.training.runs import PRETRAINED_DIR, RunError, load_run
+from physgnn.training.schedule import RunLengthDecay
+
+# A recipe of the flat layout, written by hand as an earlier physgnn saved it
+FLAT_LIT = {
+    "_target_": "physgnn.training.lit.LitSimulator",
+    "lambda_energy": 0.5,
+    "noise_std": 0.01,
+    "seed": "${seed}",
+    "pushforward_steps": 3,
+    "pushforward_after": 10,
+    "pushforward_growth": 5,
+    "lambda_contact": 2.0,
+    "contact_tol": 0.03,
+    "contact_noise_depth": 0.1,
+    "contact_noise_prob": 0.4,
+    "contact_touch": 0.06,
+    "noise_rest_scale": 0.5,
+    "lambda_rest": 0.25,
+    "compile": False,
+    "compile_mode": "default",
+    "compile_shapes": 8,
+    "optimizer": {"_target_": "torch.optim.Adam", "_partial_": True, "lr": 0.002},
+    "scheduler": {
+        "_target_": "physgnn.training.schedule.RunLengthDecay",
+        "_partial_": True,
+        "final_lr_factor": 0.25,
+    },
+}
 
 
 def flat_model(model) -> dict:
@@ -110,13 +146,91 @@ def test_keys_translate_both_ways_and_the_default_keeps_its_fingerprint():
     assert current_fingerprint() == "2ae034a7d1"
 
 
+def test_a_run_of_the_flat_recipe_loads_with_todays_groups(tiny_run, tmp_path):
+    run = Path(shutil.copytree(tiny_run, tmp_path / "run"))
+    config = run / ".hydra" / "config.yaml"
+    cfg = OmegaConf.load(config)
+    cfg.lit = FLAT_LIT
+    OmegaConf.save(cfg, config)
+    simulator, cfg, _ = load_run(run)
+    lit = instantiate(cfg.lit, simulator=simulator)
+    assert lit.seed == cfg.seed and isinstance(lit, LitSimulator)
+    assert lit.noise == InputNoise(0.01, 0.5, 0.1, 0.4, 0.06)
+    assert lit.pushforward == PushForward(3, 10, 5)
+    # a run without truth_contacts had the previous default: the state's own motion
+    assert lit.loss_terms == LossTerms(0.5, 2.0, 0.03, 0.25, False)
+    assert cfg.lit.compile == {
+        "_target_": f"{Compile.__module__}.Compile",
+        "enabled": False,
+        "mode": "default",
+        "shapes": 8,
+    }
+    decay = lit.scheduler_factory(torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=1))
+    assert isinstance(decay, RunLengthDecay) and decay.final_lr_factor == 0.25  # the same
+    assert lit_of_today(cfg.lit) == cfg.lit  # today's layout comes back as it is
+
+
+def test_the_shipped_weights_hold_a_flat_recipe_read_in_todays_groups():
+    assert "noise_std" in OmegaConf.load(PRETRAINED_DIR / ".hydra" / "config.yaml").lit
+    _, cfg, _ = load_run("pretrained")
+    assert cfg.lit.noise.std == 0.03 and cfg.lit.pushforward.steps == 2
+    assert cfg.lit.scheduler.gamma == 0.99696  # its per-epoch decay, as it was
+
+
+def test_a_flat_recipe_key_typed_today_is_one_line_naming_the_new_one():
+    with pytest.raises(
+        ConfigError,
+        match=r"^lit.noise_std is now lit.noise.std: write "
+        r"lit.noise.std=0.01$",
+    ):
+        check_resume_argv(["data=tiny", "lit.noise_std=0.01"])
+    with pytest.raises(ConfigError, match=r"^lit.compile is now lit.compile.enabled"):
+        check_resume_argv(["+lit.compile=true"])
+    with pytest.raises(ConfigError, match=r"lit.scheduler.decay_per_epoch=0.1 lit.schedul"):
+        check_resume_argv(["lit.scheduler.final_lr_factor=0.1"])
+    check_resume_argv(["lit.noise.std=0.01", "lit.compile.enabled=true"])  # today's: taken
+
+
+def test_an_interrupted_run_of_flat_overrides_resumes_with_todays_spelling(tmp_path):
+    (tmp_path / "checkpoints").mkdir()
+    (tmp_path / "checkpoints" / "last.ckpt").write_bytes(b"")
+    info = {"status": "interrupted", "overrides": ["lit.noise_std=0.01", "model.M=3"]}
+    (tmp_path / "run.json").write_text(json.dumps(info))
+    check_resume_overrides(tmp_path, ["lit.noise.std=0.01", "model.network.M=3"])
+    with pytest.raises(ConfigError, match="missing: lit.noise.std=0.01; new: lit.noise.std=0.02"):
+        check_resume_overrides(tmp_path, ["lit.noise.std=0.02", "model.network.M=3"])
+
+
+def test_recipe_keys_translate_both_ways():
+    assert key_of_today("lit.noise_std=0") == "lit.noise.std=0"
+    assert key_of_today("lit.compile_mode") == "lit.compile.mode"
+    assert key_of_today("lit.noise.std=0") == "lit.noise.std=0"
+    flat = {
+        "lit.noise.std": 0,
+        "lit.noise._target_": "x",
+        "lit.compile.enabled": True,
+        "datamodule.pushforward_steps": "${lit.pushforward.steps}",
+    }
+    assert flat_layout(flat) == {
+        "lit.noise_std": 0,
+        "lit.compile": True,
+        "datamodule.pushforward_steps": "${lit.pushforward_steps}",
+    }
+
+
 def test_registry_records_of_the_flat_layout_read_with_todays_keys(tmp_path):
     path = tmp_path / "registry.jsonl"
-    keys = ["model.M=1", "model.aggregation=sum model.boundary_features=True", "baseline"]
+    keys = [
+        "model.M=1",
+        "model.aggregation=sum model.boundary_features=True",
+        "baseline",
+        "lit.pushforward_growth=450 lit.pushforward_steps=4",
+    ]
     for key in keys:
         append_record(path, {"key": key, "seed": 0, "budget": {"steps": 1}, "status": "finished"})
     assert [r["key"] for r in read_registry(path)] == [
         "model.network.M=1",
         "model.boundary_features=True model.network.aggregation=sum",
         "baseline",
+        "lit.pushforward.growth=450 lit.pushforward.steps=4",
     ]

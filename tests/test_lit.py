@@ -15,6 +15,7 @@ from torch_geometric.data import Batch
 from torch_geometric.loader import DataLoader
 
 from physgnn.data.state import SceneState
+from physgnn.errors import ConfigError
 from physgnn.models.capture import ShapeBoundCall
 from physgnn.physics.scene import Effects
 from physgnn.training.lit import (
@@ -27,6 +28,7 @@ from physgnn.training.lit import (
     rest_loss,
 )
 from physgnn.training.noise import noise_seed
+from physgnn.training.recipe import Compile, InputNoise, LossTerms, PushForward
 
 ADAM = functools.partial(torch.optim.Adam, lr=1e-3)
 
@@ -83,9 +85,8 @@ def test_masked_mse_by_hand():
 def test_energy_term_enters_the_loss_with_lambda():
     # the report's model: no gravity prior, so the flying spheres are the network's (mse > 0)
     state = batch([trajectory(3, seed=2)])
-    off = dict(lambda_contact=0.0)
-    plain = make_lit(REPORT_MODEL, lambda_energy=0.0, **off)
-    weighted = make_lit(REPORT_MODEL, lambda_energy=0.5, **off)
+    plain = make_lit(REPORT_MODEL, loss=LossTerms(lambda_energy=0.0, lambda_contact=0.0))
+    weighted = make_lit(REPORT_MODEL, loss=LossTerms(lambda_energy=0.5, lambda_contact=0.0))
     a, b = plain.losses(state), weighted.losses(state)
     assert float(a["loss_mse"].detach()) > 0
     assert_close(a["loss"], a["loss_mse"])
@@ -97,7 +98,7 @@ def test_energy_term_enters_the_loss_with_lambda():
 
 def test_noise_only_in_training_shaped_like_a_rollout_with_correcting_targets():
     # the same noise for every sphere, and no contact noise (which moves positions)
-    lit = make_lit(noise_std=0.1, noise_rest_scale=1.0, contact_noise_depth=0.0)
+    lit = make_lit(noise=InputNoise(std=0.1, rest_scale=1.0, contact_depth=0.0))
     still = trajectory(40, seed=4, effects=Effects(rotation=False))
     state = batch([trajectory(40, seed=3), still])
     seen = []
@@ -200,8 +201,10 @@ def test_scheduler_is_stepped_per_epoch():
 
 
 def test_negative_hyperparameters_rejected():
-    with pytest.raises(ValueError, match="must be >= 0"):
-        make_lit(noise_std=-1.0)
+    with pytest.raises(ConfigError, match=r"^lit.noise.std must be a number >= 0 .*got -1.0"):
+        InputNoise(std=-1.0)
+    with pytest.raises(ConfigError, match=r"^lit.pushforward.after must be a whole number >= 0"):
+        PushForward(after=-1)
 
 
 def test_noise_is_reproducible_from_a_seeded_generator():
@@ -215,18 +218,18 @@ def test_noise_is_reproducible_from_a_seeded_generator():
 
 
 def test_compile_keeps_the_weights_and_checkpoint_keys():
-    """``compile=True`` compiles in place (lazily, on the first call) the graph rules, the
+    """``Compile(enabled=True)`` compiles in place (lazily, on the first call) the graph rules, the
     simulator's step after the graph build and the losses after theirs, or with graphs padded
     to buckets the network alone: same parameters, same state_dict keys, so checkpoints load
     either way."""
-    eager, compiled = make_lit(), make_lit(compile=True)
+    eager, compiled = make_lit(), make_lit(compile=Compile(enabled=True))
     sim = compiled.simulator
     assert isinstance(sim.head, ShapeBoundCall) and isinstance(
         compiled.graph_losses, ShapeBoundCall
     )
     assert isinstance(sim.graph_builder.rules, ShapeBoundCall)
     assert not isinstance(eager.simulator.head, ShapeBoundCall)
-    padded = make_lit({"pad_to_buckets": True}, compile=True)
+    padded = make_lit({"pad_to_buckets": True}, compile=Compile(enabled=True))
     assert isinstance(padded.simulator.network.forward, ShapeBoundCall)
     assert not isinstance(padded.simulator.head, ShapeBoundCall)
     assert list(compiled.state_dict()) == list(eager.state_dict())
@@ -238,7 +241,7 @@ def test_compile_keeps_the_weights_and_checkpoint_keys():
 def test_compiled_regions_give_the_eager_losses_and_gradients():
     state = batch([trajectory(3, seed=0), trajectory(4, seed=1)])
     results = []
-    for lit in (make_lit(), make_lit(compile=True)):
+    for lit in (make_lit(), make_lit(compile=Compile(enabled=True))):
         loss = lit.losses(state)["loss"]
         loss.backward()
         # parameters of an interaction the batch lacks (no pp edge) get no gradient
@@ -265,7 +268,7 @@ class AtStep(LitSimulator):
 
 def test_push_forward_growth_lengthens_the_unroll_step_by_step():
     sim = learned(H=1, M=1, hidden=8)
-    lit = AtStep(sim, ADAM, pushforward_steps=3, pushforward_after=10, pushforward_growth=5)
+    lit = AtStep(sim, ADAM, pushforward=PushForward(steps=3, after=10, growth=5))
     highs = {}
     for step in (9, 10, 14, 15, 20, 40):
         lit.at = step
@@ -288,7 +291,7 @@ class AtRank(AtStep):
 
 
 def test_each_ddp_process_draws_its_own_noise_and_all_the_same_unroll():
-    lit = AtRank(learned(H=1, M=1, hidden=8), ADAM, seed=3, pushforward_after=0)
+    lit = AtRank(learned(H=1, M=1, hidden=8), ADAM, seed=3, pushforward=PushForward(after=0))
     draws = {}
     for lit.at in range(20):
         for lit.rank in range(3):
@@ -309,15 +312,20 @@ def test_each_ddp_process_draws_its_own_noise_and_all_the_same_unroll():
 
 
 def test_contact_settings_out_of_range_are_refused():
-    with pytest.raises(ValueError, match="lit.lambda_contact"):
-        make_lit(lambda_contact=-1.0)
-    with pytest.raises(ValueError, match="contact_noise_prob"):
-        make_lit(contact_noise_prob=1.5)
+    with pytest.raises(ConfigError, match=r"^lit.loss.lambda_contact must be a number >= 0"):
+        LossTerms(lambda_contact=-1.0)
+    prob = r"^lit.noise.contact_prob must be a probability in \[0, 1\] .*\(the default: "
+    with pytest.raises(ConfigError, match=prob + r"lit.noise.contact_prob=0.3\)$"):
+        InputNoise(contact_prob=1.5)
+    with pytest.raises(ConfigError, match=r"^lit.noise.rest_scale must be a factor in \(0, 1\]"):
+        InputNoise(rest_scale=float("nan"))
+    with pytest.raises(ConfigError, match=r"^lit.compile.mode must be one of default, "):
+        Compile(mode="fastest")
 
 
 def test_losses_with_the_contact_terms_are_finite_and_the_penalty_counts():
     state = batch([trajectory(3, seed=0), trajectory(2, seed=1)])
-    lit = make_lit(REPORT_MODEL, lambda_contact=2.0)
+    lit = make_lit(REPORT_MODEL, loss=LossTerms(lambda_contact=2.0))
     losses = lit.losses(state)
     expected = losses["loss_mse"] + 2.0 * losses["loss_contact"]
     assert_close(losses["loss"], expected)
@@ -337,7 +345,7 @@ def resting_pair_and_a_faller():
 
 def test_default_losses_add_the_rest_term_over_the_spheres_in_reach():
     state = resting_pair_and_a_faller()
-    lit = make_lit(lambda_contact=2.0, lambda_rest=0.5)
+    lit = make_lit(loss=LossTerms(lambda_contact=2.0, lambda_rest=0.5))
     sim = lit.simulator
     losses = lit.losses(state)
     expected = losses["loss_mse"] + 2.0 * losses["loss_contact"] + 0.5 * losses["loss_rest"]

@@ -52,13 +52,14 @@ def one_line_exit(monkeypatch, capsys, module, *args) -> str:
             "model.network.hidden must be a whole number >= 1 (units per layer), got 0",
         ),
         (
-            "lit.noise_std=-1",
-            "lit.noise_std must be a number >= 0 (input noise, normalised units; 0: none), got -1",
+            "lit.noise.std=-1",
+            "lit.noise.std must be a number >= 0 (normalised units; 0: no noise), got -1 (the "
+            "default: lit.noise.std=0.03)",
         ),
         (
-            "lit.noise_rest_scale=nan",
-            "lit.noise_rest_scale must be a number > 0 and <= 1 (a "
-            "factor; 1: full noise at rest), got nan",
+            "lit.noise.rest_scale=nan",
+            "lit.noise.rest_scale must be a factor in (0, 1] (1: full noise at rest), got nan "
+            "(the default: lit.noise.rest_scale=0.05)",
         ),
         (
             "trainer.max_epochs=1.5",
@@ -180,7 +181,7 @@ def test_a_broken_run_config_is_one_line_naming_it(run_copy):
 
 def test_a_path_in_a_sweep_override_names_one_flat_job_folder(tiny_dataset, tmp_path, monkeypatch):
     sweep = tmp_path / "sweep"
-    args = ["-m", "data=tiny", f"data.dir={tiny_dataset}", "lit.noise_std=-1,-2"]
+    args = ["-m", "data=tiny", f"data.dir={tiny_dataset}", "lit.noise.std=-1,-2"]
     monkeypatch.setattr(
         sys,
         "argv",
@@ -191,7 +192,7 @@ def test_a_path_in_a_sweep_override_names_one_flat_job_folder(tiny_dataset, tmp_
     assert exit_info.value.code == 1
     flat = str(tiny_dataset).replace("/", "_")
     jobs = sorted(p.name for p in sweep.iterdir() if p.is_dir())
-    assert jobs == [f"{n}_data.dir={flat},data=tiny,lit.noise_std=-{n + 1}" for n in (0, 1)]
+    assert jobs == [f"{n}_data.dir={flat},data=tiny,lit.noise.std=-{n + 1}" for n in (0, 1)]
     assert job_dirname("x=/a/" + "b" * 300) == "x=_a_" + "b" * 195
 
 

@@ -23,6 +23,7 @@ from physgnn.data.state import TrajectoryFrames
 from physgnn.physics.scene import Effects
 from physgnn.training.datamodule import StatePairDataModule
 from physgnn.training.lit import LitSimulator
+from physgnn.training.recipe import InputNoise, PushForward
 
 
 class PerPairReference(torch.utils.data.Dataset):
@@ -127,7 +128,9 @@ def short_training(fit) -> tuple[Losses, dict]:
     torch.manual_seed(0)
     simulator = learned(H=2, M=2, hidden=16)
     adam = functools.partial(torch.optim.Adam, lr=1e-2)
-    lit = LitSimulator(simulator, adam, noise_std=0.05, seed=3, pushforward_steps=2)
+    lit = LitSimulator(
+        simulator, adam, seed=3, noise=InputNoise(std=0.05), pushforward=PushForward(steps=2)
+    )
     losses = Losses()
     trainer = L.Trainer(
         max_epochs=2,

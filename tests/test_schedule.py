@@ -52,7 +52,9 @@ def test_the_default_long_and_gpu_runs_end_at_one_factor(overrides, epochs):
 
 def test_the_default_decays_by_exactly_0_97_per_epoch():
     cfg = compose_train([])
-    _, lrs = rates(instantiate(cfg.lit.scheduler), trainer_of(cfg))
+    entry, lrs = rates(instantiate(cfg.lit.scheduler), trainer_of(cfg))
+    # the factor the recipe's literal 0.0644846109465322 was: 0.97^90, bit for bit
+    assert entry["scheduler"].final_lr_factor == 0.0644846109465322 == 0.97**90
     optimizer = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=LR)
     before = torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=0.97)
     expected = [LR]
@@ -64,7 +66,7 @@ def test_the_default_decays_by_exactly_0_97_per_epoch():
 
 
 def test_a_step_budget_decays_per_step():
-    decay = functools.partial(RunLengthDecay, final_lr_factor=0.01)
+    decay = functools.partial(RunLengthDecay, decay_per_epoch=0.01, epochs=1)
     entry, lrs = rates(decay, SimpleNamespace(max_epochs=-1, max_steps=300))
     assert entry["interval"] == "step" and len(lrs) == 301
     assert lrs[-1] / LR == pytest.approx(0.01, rel=1e-12)
@@ -76,11 +78,13 @@ def test_a_step_budget_decays_per_step():
 
 
 def test_a_run_without_end_is_one_line():
-    decay = functools.partial(RunLengthDecay, final_lr_factor=0.01)
+    decay = functools.partial(RunLengthDecay, decay_per_epoch=0.01, epochs=1)
     with pytest.raises(ConfigError, match="set trainer.max_epochs or trainer.max_steps"):
         rates(decay, SimpleNamespace(max_epochs=-1, max_steps=-1))
-    with pytest.raises(ConfigError, match="final_lr_factor must be a number > 0"):
-        rates(functools.partial(RunLengthDecay, final_lr_factor=0.0), trainer_of(compose_train([])))
+    with pytest.raises(ConfigError, match="decay_per_epoch must be a number > 0"):
+        rates(functools.partial(RunLengthDecay, decay_per_epoch=0.0), trainer_of(compose_train([])))
+    with pytest.raises(ConfigError, match=r"^lit.scheduler.epochs must be a whole number >= 1"):
+        rates(functools.partial(RunLengthDecay, epochs=0), trainer_of(compose_train([])))
 
 
 def fresh(trainer) -> tuple:
@@ -128,6 +132,6 @@ def test_a_resumed_run_keeps_its_schedule_a_longer_one_ends_at_the_final_factor(
 def test_a_gamma_given_to_the_run_length_decay_is_one_line():
     # the command line refuses it before (physgnn/cli/overrides.py); train(cfg) here
     cfg = compose_train(["+lit.scheduler.gamma=0.995"])
-    refused = r"gamma is not an argument of RunLengthDecay \(known: final_lr_factor\)$"
+    refused = r"gamma is not an argument of RunLengthDecay \(known: decay_per_epoch, epochs\)$"
     with pytest.raises(ConfigError, match=refused):
         check_arguments(cfg)

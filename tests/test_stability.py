@@ -286,7 +286,7 @@ def sgd_step(tiny_dataset, run_dir, clip) -> float:
         "datamodule.val_pairs=4",
         "lit.optimizer._target_=torch.optim.SGD",
         "lit.optimizer.lr=1.0",
-        "lit.noise_std=0",
+        "lit.noise.std=0",
         "~logger",
         "callbacks=none",
         f"trainer.gradient_clip_val={clip}",

@@ -81,17 +81,17 @@ def test_the_default_study_adds_the_contact_switches_to_the_reports_sweeps(tmp_p
         "model.contact_passes=0",
         "model.pair_impulses=False",
         "model.recent_contact=True",
-        "lit.truth_contacts=False",
+        "lit.loss.truth_contacts=False",
         "model.plane_materials=False",
         "model.contact_features=False",
         "model.material_features=False",
         "model.gravity_prior=False",
-        "lit.lambda_contact=0",
-        "lit.contact_noise_depth=0",
+        "lit.loss.lambda_contact=0",
+        "lit.noise.contact_depth=0",
         "model.network.layer_norm=True",
         "model.contact_memory=True",
-        "lit.pushforward_steps=0",
-        "lit.pushforward_growth=450 lit.pushforward_steps=4",
+        "lit.pushforward.steps=0",
+        "lit.pushforward.growth=450 lit.pushforward.steps=4",
     ]
 
 
@@ -112,7 +112,7 @@ def test_the_five_sweeps_are_18_configurations_the_baseline_shared():
     by_key = {c.key: c for c in configs}
     # the variant m1 and the sweep's M = 1 are one configuration, trained once
     assert by_key["model.network.M=1"].points == {"ablation_components": "m1", "ablation_M": "1"}
-    assert by_key["lit.lambda_energy=10"].points == {
+    assert by_key["lit.loss.lambda_energy=10"].points == {
         "ablation_components": "energy",
         "ablation_lambda": "10",
     }

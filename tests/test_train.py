@@ -148,7 +148,7 @@ def test_non_numeric_trainer_value_is_one_line(monkeypatch, capsys, tiny_dataset
 
 def test_exploding_model_stops_with_one_line(monkeypatch, capsys, tiny_dataset, tmp_path):
     args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"hydra.run.dir={tmp_path}"]
-    code, line = run_main(monkeypatch, capsys, *args, *SHORT, "lit.noise_std=1e30")
+    code, line = run_main(monkeypatch, capsys, *args, *SHORT, "lit.noise.std=1e30")
     assert code == 1 and line.startswith("error: non-finite training loss")
     assert json.loads((tmp_path / "run.json").read_text())["status"] == "diverged"
 

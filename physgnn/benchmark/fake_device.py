@@ -95,12 +95,12 @@ def _models(data: Path, hidden: int, fixed_capacity: bool = False):
     model = OmegaConf.load(conf / "model" / "baseline.yaml")
     model.pop("defaults", None)
     model.network.hidden, model.graph.fixed_capacity = hidden, fixed_capacity
-    lit_cfg = OmegaConf.load(conf / "train.yaml").lit
-    lit_cfg.seed, lit_cfg.pushforward_after, lit_cfg.contact_noise_prob = 0, 0, 1.0
+    lit_cfg = OmegaConf.load(conf / "lit" / "default.yaml")
+    lit_cfg.seed, lit_cfg.pushforward.after, lit_cfg.noise.contact_prob = 0, 0, 1.0
     torch.manual_seed(0)
     simulator = instantiate(model, stats=stats)
     lit = instantiate(lit_cfg, simulator=simulator)
-    lit._unroll_length = lambda: lit.pushforward_steps  # the longest push-forward
+    lit._unroll_length = lambda: lit.pushforward.steps  # the longest push-forward
     lit._noise_generator = lambda: None  # a generator of the fake device cannot be made
     return simulator, lit
 

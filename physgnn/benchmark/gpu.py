@@ -6,8 +6,8 @@ Run by ``make bench`` when torch sees a CUDA device (otherwise one line says it 
   (input noise, contact noise, push-forward of U{0..K} steps, the loss, backward, clipping,
   Adam) at the default batch, for each ``variant``: ``eager``; ``tf32`` (fp32 matrix products
   as TF32, ``matmul_precision=high``); ``bf16`` (autocast to bfloat16, as
-  ``trainer.precision=bf16-mixed``); ``compiled`` (``lit.compile=true``'s regions, dynamic
-  shapes, :meth:`~physgnn.training.lit.LitSimulator.compile_regions`); ``captured`` (graphs
+  ``trainer.precision=bf16-mixed``); ``compiled`` (``lit.compile.enabled=true``'s regions,
+  dynamic shapes, :meth:`~physgnn.training.lit.LitSimulator.compile_regions`); ``captured`` (graphs
   of fixed capacity, nothing read back while they are built, padded to buckets, and the
   network compiled with ``mode="reduce-overhead"``: CUDA graphs);
 - **rollout**: frames per second of the baseline through :func:`physgnn.rollout.rollout` on
@@ -117,7 +117,7 @@ def training_row(cfg, trajectories: list, stats: dict, device, variant: str) -> 
     c = cfg.gpu
     _reset_peak(device)
     lit = _lit(cfg, stats, device, variant)
-    pairs = PairDataset(trajectories, lit.simulator.H, future=int(c.lit.pushforward_steps))
+    pairs = PairDataset(trajectories, lit.simulator.H, future=int(c.lit.pushforward.steps))
     pairs = pairs.to(device)
     total, size = int(c.warmup_steps + c.steps), int(c.batch_size)
     batches = pair_loader(pairs, size, EpochSampler(len(pairs), total * size, seed=0))
@@ -141,7 +141,7 @@ def training_row(cfg, trajectories: list, stats: dict, device, variant: str) -> 
 
 
 def _optimiser_step(lit, batch, step: int) -> None:
-    lit._unroll_length = lambda: lit.pushforward_steps if step % 2 else 0  # mean of U{0..2}
+    lit._unroll_length = lambda: lit.pushforward.steps if step % 2 else 0  # mean of U{0..2}
     loss = lit.training_step(batch, step)
     lit.optimizer.zero_grad(set_to_none=True)
     loss.backward()

@@ -9,7 +9,7 @@ so the arithmetic does not hide the overhead). The neighbour backend is ``torch`
 ``auto`` picks on CUDA without torch-cluster. Counts are the maxima over the steps (push-forward
 lengths vary), times means.
 
-Compiled (``lit.compile=true``'s regions, :meth:`~physgnn.training.lit.LitSimulator.
+Compiled (``lit.compile.enabled=true``'s regions, :meth:`~physgnn.training.lit.LitSimulator.
 compile_regions`): only ``kernels`` can be counted, as the aten ops dispatched outside the
 compiled regions (:class:`~physgnn.benchmark.syncs.OpsOutsideRegions`; dynamo runs eager under
 the sync counter). They are the same for every compile backend, so the regions are compiled
@@ -93,7 +93,7 @@ def training_step_counts(
     lit = instantiate(lit_cfg, simulator=simulator)
     if compiled:
         lit.compile_regions(backend="aot_eager")
-    data = PairDataset(trajectories, simulator.H, future=int(lit_cfg.pushforward_steps))
+    data = PairDataset(trajectories, simulator.H, future=int(lit_cfg.pushforward.steps))
     total = int(c.warmup_steps + 2 * c.steps)
     loader = pair_loader(data, int(c.batch_size), EpochSampler(len(data), total * c.batch_size, 0))
     counter = StepCounter(int(c.warmup_steps), record_where=True, profile=compiled)

@@ -135,7 +135,7 @@ def build_simulators(cfg: DictConfig, stats: dict) -> dict[str, tuple[object, li
     sims = {}
     for name, c in cfg.learned.configs.items():
         sim = make_simulator(cfg.model, OmegaConf.to_container(c.overrides), stats)
-        if c.get("compile"):  # as lit.compile=true: two regions, dynamic shapes
+        if c.get("compile"):  # as lit.compile.enabled=true: two regions, dynamic shapes
             compile_simulator(sim)
         if c.get("constraints"):  # the learned step followed by the constraint stage
             sim = ConstrainedSimulator(sim, int(c.constraints))

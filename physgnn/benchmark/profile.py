@@ -81,7 +81,7 @@ def _one_step(lit, optimizer, batches, timer: StepTimer, step: int, c) -> tuple[
 
     batch = next(batches).to(device)
     mark()
-    batch = add_noise(batch, simulator, lit.noise_std, generator)
+    batch = add_noise(batch, simulator, lit.noise.std, generator)
     mark()
     batch = push_forward(batch, simulator, int(c.pushforward))
     mark()

@@ -84,7 +84,8 @@ def gpu_readiness_section(result: dict) -> list[str]:
         "and host ms with a network of "
         "hidden size 4, torch neighbour backend (physgnn/benchmark/gpu_readiness.py; the "
         "source lines of the syncs are in bench_extra.json). Compiled: the aten ops dispatched "
-        "outside the compiled regions of lit.compile=true (syncs and time not counted there).",
+        "outside the compiled regions of lit.compile.enabled=true (syncs and time not counted "
+        "there).",
         md_table(["", "syncs", "copies", "kernels", "host ms"], body),
     ]
 

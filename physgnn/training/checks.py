@@ -4,6 +4,7 @@ feed, the step budget, the checkpoint to resume from and whether it fits the mod
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import socket
 import types
@@ -17,7 +18,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
 from physgnn.files import process_alive
-from physgnn.training.layout import dotted_model, model_of_today
+from physgnn.training.layout import check_renamed, dotted_model, key_of_today, model_of_today
 from physgnn.training.ranges import check_range
 from physgnn.training.runs import RUN_JSON, load_checkpoint, read_run_json, run_status
 
@@ -79,7 +80,9 @@ def check_arguments(
 ) -> None:
     """Every key of each ``_target_`` section (and of the ``_target_`` nodes within it:
     ``model.network``) is an argument of its constructor, of the annotated type
-    (``model.network.M=abc``: ``model.network.M must be a whole number, got 'abc'``)."""
+    (``model.network.M=abc``: ``model.network.M must be a whole number, got 'abc'``); a node
+    whose target is a dataclass (``lit.noise``) is made here, so that its own range checks
+    speak before Hydra would wrap them."""
     for section in sections:
         node = OmegaConf.select(cfg, section)
         if isinstance(node, DictConfig) and "_target_" in node:
@@ -109,6 +112,8 @@ def _check_node(node: DictConfig, section: str) -> None:
         if not _fits(value, hints.get(key)):
             raise ConfigError(f"{section}.{key} must be {_words(hints[key])}, got {value!r}")
         check_range(f"{section}.{key}", value, hints.get(key))
+    if dataclasses.is_dataclass(target):
+        target(**{k: OmegaConf.select(node, k) for k in node if k not in HYDRA_KEYS})
 
 
 def check_optimizer(lit_cfg: DictConfig | None) -> None:
@@ -119,7 +124,7 @@ def check_optimizer(lit_cfg: DictConfig | None) -> None:
         return
     if not isinstance(lr, int | float) or isinstance(lr, bool) or not 0 < lr < float("inf"):
         raise ConfigError(
-            f"lit.optimizer.lr must be a number > 0, got {lr!r} (conf/train.yaml: "
+            f"lit.optimizer.lr must be a number > 0, got {lr!r} (conf/lit/default.yaml: "
             "lit.optimizer.lr, default 1.0e-3)"
         )
 
@@ -220,7 +225,8 @@ def check_resume_overrides(run_dir: Path, overrides: list[str]) -> None:
     refused (the run would mix two configs and its record lose the first)."""
     if not resumed_here(run_dir):
         return
-    then = {o for o in read_run_json(run_dir).get("overrides") or [] if _changeable(o)}
+    then = {key_of_today(o) for o in read_run_json(run_dir).get("overrides") or []}
+    then = {o for o in then if _changeable(o)}  # a run of an earlier layout: today's spelling
     now = {o for o in overrides if _changeable(o)}
     if then != now:
         gone, new = sorted(then - now), sorted(now - then)
@@ -233,8 +239,11 @@ def check_resume_overrides(run_dir: Path, overrides: list[str]) -> None:
 
 
 def check_resume_argv(argv: list[str]) -> None:
-    """:func:`check_resume_overrides` on a command line, before Hydra rewrites the run's
-    ``.hydra`` folder: ``run_dir=X`` naming an interrupted run."""
+    """A flat recipe key of an earlier physgnn refused naming today's
+    (:func:`~physgnn.training.layout.check_renamed`), then :func:`check_resume_overrides` on a
+    command line, before Hydra rewrites the run's ``.hydra`` folder: ``run_dir=X`` naming an
+    interrupted run."""
+    check_renamed(argv)
     given = dict(arg.lstrip("+").split("=", 1) for arg in argv if "=" in arg)
     if given.get("run_dir"):
         check_resume_overrides(Path(given["run_dir"]), [a for a in argv if "=" in a])

@@ -6,11 +6,19 @@ Today's layout (``conf/model/baseline.yaml``) nests the network and the graph bu
 of their own, ``model.network`` and ``model.graph``, each built by Hydra from its ``_target_``.
 Runs of an earlier physgnn hold them as flat keys of ``model`` (``model.M``,
 ``model.connectivity``, ``model.neighbor_backend``): :func:`model_of_today` moves them.
+
+Likewise the training recipe: today's ``lit`` holds four groups (``lit.noise``,
+``lit.pushforward``, ``lit.loss``, ``lit.compile``: :mod:`physgnn.training.recipe`) and its
+scheduler decays by ``decay_per_epoch`` over ``epochs``; earlier runs hold flat keys
+(``lit.noise_std``) and a ``final_lr_factor``: :func:`lit_of_today` moves them, and a flat key
+typed on today's command line is refused naming its new spelling (:func:`check_renamed`).
 """
 
 from __future__ import annotations
 
 from omegaconf import DictConfig, OmegaConf
+
+from physgnn.errors import ConfigError
 
 # Model targets of runs trained before the package was split into subpackages.
 MOVED_TARGETS = {"physgnn.simulator.LearnedSimulator": "physgnn.models.learned.LearnedSimulator"}
@@ -58,6 +66,39 @@ FLAT_KEYS = {
 }
 
 
+RECIPE = "physgnn.training.recipe"
+# The recipe's groups of today (conf/lit/default.yaml), with the Hydra keys that build them.
+LIT_NODES = {
+    "noise": {"_target_": f"{RECIPE}.InputNoise"},
+    "pushforward": {"_target_": f"{RECIPE}.PushForward"},
+    "loss": {"_target_": f"{RECIPE}.LossTerms"},
+    "compile": {"_target_": f"{RECIPE}.Compile"},
+}
+# Each flat lit key of an earlier run: its group and its name there.
+LIT_KEYS = {
+    "noise_std": ("noise", "std"),
+    "noise_rest_scale": ("noise", "rest_scale"),
+    "contact_noise_depth": ("noise", "contact_depth"),
+    "contact_noise_prob": ("noise", "contact_prob"),
+    "contact_touch": ("noise", "contact_touch"),
+    "pushforward_steps": ("pushforward", "steps"),
+    "pushforward_after": ("pushforward", "after"),
+    "pushforward_growth": ("pushforward", "growth"),
+    "lambda_energy": ("loss", "lambda_energy"),
+    "lambda_contact": ("loss", "lambda_contact"),
+    "contact_tol": ("loss", "contact_tol"),
+    "lambda_rest": ("loss", "lambda_rest"),
+    "truth_contacts": ("loss", "truth_contacts"),
+    "compile": ("compile", "enabled"),
+    "compile_mode": ("compile", "mode"),
+    "compile_shapes": ("compile", "shapes"),
+}
+# Recipe keys that runs before the contact changes lack, with the value their recipe had (the
+# loss's graph on the state's own motion: docs/TRAINING.md).
+PREVIOUS_LIT = {"truth_contacts": False}
+RUN_LENGTH_DECAY = "physgnn.training.schedule.RunLengthDecay"
+
+
 def model_of_today(model: DictConfig) -> DictConfig:
     """``model`` (a run's ``model`` node) in today's layout: a moved target renamed; a flat
         model (no ``network`` node: an earlier physgnn's) with the keys it lacks at its own model's
@@ -81,22 +122,40 @@ def model_of_today(model: DictConfig) -> DictConfig:
 
 
 def key_of_today(key: str) -> str:
-    """``"model.M=1"`` → ``"model.network.M=1"``: a dotted key (or ``key=value``) of the flat
-    layout in today's; any other key comes back as it is."""
+    """``"model.M=1"`` → ``"model.network.M=1"``, ``"lit.noise_std=0"`` → ``"lit.noise.std=0"``:
+    a dotted key (or ``key=value``) of the flat layout in today's; any other key comes back as
+    it is."""
     name, sep, value = key.partition("=")
     if name.startswith("model.") and name.count(".") == 1 and name[6:] in FLAT_KEYS:
         name = "model." + ".".join(FLAT_KEYS[name[6:]])
-    return name + sep + value
+    return (renamed_key(name) or name) + sep + value
 
 
 def flat_layout(keys: dict) -> dict:
-    """``{dotted key: value}`` of a composed config with its model keys in the flat layout
-    (``model.network.M`` → ``model.M``, the nodes' Hydra keys dropped): the inverse of
-    :func:`key_of_today`, so that what names a configuration does not change with its
-    spelling."""
+    """``{dotted key: value}`` of a composed config with its model and recipe keys in the flat
+    layout (``model.network.M`` → ``model.M``, ``lit.noise.std`` → ``lit.noise_std``, the
+    nodes' Hydra keys dropped, a run-length decay's ``decay_per_epoch`` and ``epochs`` as the
+    ``final_lr_factor`` they make): the inverse of :func:`key_of_today`, so that what names a
+    configuration does not change with its spelling."""
     before = {f"model.{node}.{name}": f"model.{key}" for key, (node, name) in FLAT_KEYS.items()}
+    before |= {f"lit.{node}.{name}": f"lit.{key}" for key, (node, name) in LIT_KEYS.items()}
     hydra = {f"model.{node}.{key}" for node, keys in NODES.items() for key in keys}
-    return {before.get(k, k): v for k, v in keys.items() if k not in hydra}
+    hydra |= {f"lit.{node}.{key}" for node, keys in LIT_NODES.items() for key in keys}
+    flat = {before.get(k, k): _flat_reference(v) for k, v in keys.items() if k not in hydra}
+    if flat.get("lit.scheduler._target_") == RUN_LENGTH_DECAY:
+        decay, epochs = flat.pop("lit.scheduler.decay_per_epoch"), flat.pop("lit.scheduler.epochs")
+        flat["lit.scheduler.final_lr_factor"] = float(decay) ** int(epochs)
+    return flat
+
+
+def _flat_reference(value):
+    """An interpolation of a recipe key in the flat layout (``${lit.pushforward.steps}`` →
+    ``${lit.pushforward_steps}``); any other value as it is."""
+    if isinstance(value, str) and value.startswith("${lit."):
+        name = value[2:-1]
+        flat = {f"lit.{node}.{key}": f"lit.{old}" for old, (node, key) in LIT_KEYS.items()}
+        return "${" + flat.get(name, name) + "}"
+    return value
 
 
 def dotted_model(model: DictConfig) -> dict:
@@ -108,3 +167,48 @@ def dotted_model(model: DictConfig) -> dict:
         else:
             out[key] = value
     return out
+
+
+def lit_of_today(lit: DictConfig) -> DictConfig:
+    """``lit`` (a run's ``lit`` node) in today's layout: flat recipe keys (an earlier physgnn's:
+    no ``noise`` group) moved into their groups (:data:`LIT_KEYS`, the keys such a run lacks
+    at its recipe's values: :data:`PREVIOUS_LIT`), and a run-length decay's
+    ``final_lr_factor`` f written as ``decay_per_epoch: f, epochs: 1`` (the same factor). A
+    ``lit`` of today's layout comes back as it is."""
+    flat = OmegaConf.to_container(lit, resolve=False)
+    if not isinstance(flat.get("noise"), dict):
+        flat = PREVIOUS_LIT | flat
+        nested = {k: v for k, v in flat.items() if k not in LIT_KEYS}
+        nested |= {node: dict(keys) for node, keys in LIT_NODES.items()}
+        for key, (node, name) in LIT_KEYS.items():
+            if key in flat:
+                nested[node][name] = flat[key]
+        flat = nested
+    scheduler = flat.get("scheduler")
+    if isinstance(scheduler, dict) and "final_lr_factor" in scheduler:
+        factor = scheduler.pop("final_lr_factor")
+        scheduler |= {"decay_per_epoch": factor, "epochs": 1}
+    return OmegaConf.create(flat)
+
+
+def renamed_key(name: str) -> str | None:
+    """Today's spelling of a flat recipe key (``lit.noise_std`` → ``lit.noise.std``), None for
+    any other key."""
+    if name.startswith("lit.") and name[4:] in LIT_KEYS:
+        return "lit." + ".".join(LIT_KEYS[name[4:]])
+    return None
+
+
+def check_renamed(argv: list[str]) -> None:
+    """A flat recipe key of an earlier physgnn on a command line (``lit.noise_std=0.01``, a
+    ``final_lr_factor``) is refused in one line naming today's key."""
+    for arg in argv:
+        name, sep, value = arg.lstrip("+~").partition("=")
+        new = renamed_key(name)
+        if new:
+            raise ConfigError(f"{name} is now {new}: write {new}{sep}{value}")
+        if name == "lit.scheduler.final_lr_factor":
+            raise ConfigError(
+                f"{name} is now lit.scheduler.decay_per_epoch ** lit.scheduler.epochs: write "
+                f"lit.scheduler.decay_per_epoch={value} lit.scheduler.epochs=1 for the same factor"
+            )

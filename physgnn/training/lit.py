@@ -8,13 +8,13 @@ Loss of a batch of state pairs:
 - The rest term (with the simulator's ``rest_decision``, :mod:`physgnn.models.rest`): binary
   cross-entropy of the seventh output against "at rest next frame", over the spheres in reach.
 - Velocity noise is scaled to each sphere's regime (:func:`physgnn.training.noise.regime_scale`,
-  ``noise_rest_scale``): a resting sphere gets a small share of it, so rest stays resolvable.
+  ``noise.rest_scale``): a resting sphere gets a small share of it, so rest stays resolvable.
 
 - MSE over the 6 normalised outputs of every sphere (:mod:`physgnn.models.learned` explains the
   target); the 3 angular outputs of spheres whose scene has rotation off are left out, and
   with the simulator's gravity prior so is every sphere out of reach of a contact (its next
   velocity is ballistic, not the network's). The loss's graph is also built on the target
-  velocities (``truth_contacts``): a sphere that touches something in the truth is in reach.
+  velocities (``loss.truth_contacts``): a sphere that touches something in the truth is in reach.
 - The contact penalty and the contact noise: :mod:`physgnn.training.contacts` (lengths in
   units of the simulator's ``length_scale``, the mean sphere diameter).
 - ``E`` = kinetic + potential energy of a scene (:mod:`physgnn.physics.energy`, potential
@@ -31,7 +31,7 @@ Loss of a batch of state pairs:
   noisy position back onto the truth, ``v*_{t+1} = (p_{t+1} − p̃_t)/dt`` (as GNS does with
   accelerations): the model learns to undo its own drift, e.g. to push apart spheres that a
   rollout let overlap. ``ω_{t+1}`` stays the clean one.
-- Push-forward (training only, ``pushforward_steps`` = K > 0): each batch first runs
+- Push-forward (training only, ``pushforward.steps`` = K > 0): each batch first runs
   ``k ~ U{0..K}`` steps of the model itself, without gradients, from the noisy state, then
   takes the loss of the next step against ``(p_{t+k+1} − p̂_{t+k})/dt`` and ``ω_{t+k+1}``. The
   model so sees, and learns to correct, the states its own rollouts reach.
@@ -40,6 +40,7 @@ Loss of a batch of state pairs:
 from __future__ import annotations
 
 import random
+from dataclasses import asdict
 
 import lightning as L
 import torch
@@ -52,6 +53,7 @@ from physgnn.training.epoch_means import EpochMeans
 from physgnn.training.finite import FiniteWatch, NonFiniteLossError  # noqa: F401 (its home)
 from physgnn.training.losses import energy_increase, masked_mse, rest_loss
 from physgnn.training.noise import add_noise, noise_seed, regime_scale  # noqa: F401 (re-exported)
+from physgnn.training.recipe import Compile, InputNoise, LossTerms, PushForward
 from physgnn.training.schedule import lr_scheduler
 
 
@@ -65,27 +67,23 @@ def push_forward(state, simulator: LearnedSimulator, steps: int):
     for _ in range(steps):  # the rollout's own integration step
         vel_next, angvel_next = simulator(out)
         out.pos, out.quat, out.vel, out.angvel = step(
-            out.pos, out.quat, out.vel, out.angvel, vel_next, angvel_next, dt,
+            out.pos,
+            out.quat,
+            out.vel,
+            out.angvel,
+            vel_next,
+            angvel_next,
+            dt,
             simulator.rotating(out),
-        )  # fmt: skip
+        )
     out.target_vel = (state.future_pos[:, steps] - out.pos) / dt[:, None]
     out.target_angvel = state.future_angvel[:, steps]
     return out
 
 
-def _check_ranges(values: dict, contact_noise_prob: float, noise_rest_scale: float) -> None:
-    """Lengths, weights and step counts ``values`` >= 0, ``contact_noise_prob`` in [0, 1],
-    ``noise_rest_scale`` in (0, 1]; else a one-line ValueError naming the key."""
-    bad = [name for name, value in values.items() if value < 0]
-    if not 0 <= contact_noise_prob <= 1:
-        bad.append("contact_noise_prob")
-    if not 0 < noise_rest_scale <= 1:
-        bad.append("noise_rest_scale")
-    if bad:
-        raise ValueError(
-            f"lit.{bad[0]} out of range: lengths, weights and step counts must be >= 0, "
-            "contact_noise_prob in [0, 1], noise_rest_scale in (0, 1]"
-        )
+# The recipe's defaults (frozen: one instance serves every module)
+DEFAULT_NOISE, DEFAULT_PUSHFORWARD = InputNoise(), PushForward()
+DEFAULT_LOSS, DEFAULT_COMPILE = LossTerms(), Compile()
 
 
 class LitSimulator(L.LightningModule):
@@ -95,23 +93,14 @@ class LitSimulator(L.LightningModule):
     optional partial taking the optimizer, stepped once per epoch, or a
     :class:`~physgnn.training.schedule.RunLengthDecay` over the trainer's run length (the
     default: :mod:`physgnn.training.schedule`). ``seed`` seeds the noise (and the DDP process)
-    and the push-forward length of each step together with the step number.
-    ``pushforward_steps`` = K (0: one-step training only) starts at step ``pushforward_after``;
-    with ``pushforward_growth`` = G > 0 the longest unroll grows, 1 from ``pushforward_after``,
-    then one more every G steps up to K (longer unrolls once the model is good enough to make
-    them meaningful).
-    ``lambda_contact`` weighs the contact penalty (tolerance ``contact_tol``); contact noise
-    pushes contacts within ``contact_touch`` in by up to ``contact_noise_depth`` with
-    probability ``contact_noise_prob`` (0: off); all three lengths in units of the simulator's
-    ``length_scale`` (:mod:`physgnn.training.contacts`).
-    ``truth_contacts``: the loss's graph is built on the state's motion and on its target
-    velocities (:meth:`losses`), so every contact of the truth has its edges and its spheres
-    count in the loss (a sphere the truth moves into another is never left out as out of
-    reach); the rebuild passes of a rollout find these edges from the model's own provisional
-    velocities (:class:`~physgnn.models.learned.LearnedSimulator`, ``contact_passes``).
-    ``compile``: the regions of :meth:`compile_regions` are compiled (``compile_mode``; at
-    most ``compile_shapes`` shapes: :mod:`physgnn.models.capture`); weights and checkpoints are
-    the same as without (docs/PERFORMANCE.md has what it gains and costs).
+    and the push-forward length of each step together with the step number. The recipe's
+    groups (:mod:`physgnn.training.recipe`, their defaults and units): ``noise`` (input and
+    contact noise), ``pushforward`` (the model's own unroll before the loss), ``loss`` (the
+    terms' weights; with ``truth_contacts`` the loss's graph is built on the state's motion and
+    on its target velocities, :meth:`losses`, so every contact of the truth has its edges and
+    its spheres count in the loss: the rebuild passes of a rollout find these edges from the
+    model's own provisional velocities, ``contact_passes``) and ``compile`` (the regions of
+    :meth:`compile_regions`; weights and checkpoints are the same as without).
     """
 
     def __init__(
@@ -119,54 +108,26 @@ class LitSimulator(L.LightningModule):
         simulator: LearnedSimulator,
         optimizer,
         scheduler=None,
-        lambda_energy: float = 0.0,
-        noise_std: float = 0.03,
         seed: int = 0,
-        pushforward_steps: int = 2,
-        pushforward_after: int = 400,
-        pushforward_growth: int = 0,
-        lambda_contact: float = 1.0,
-        contact_tol: float = 0.02,
-        contact_noise_depth: float = 0.2,
-        contact_noise_prob: float = 0.3,
-        contact_touch: float = 0.05,
-        noise_rest_scale: float = 0.05,
-        lambda_rest: float = 1.0,
-        compile: bool = False,
-        compile_mode: str = "default",
-        compile_shapes: int = 16,
-        truth_contacts: bool = True,
+        noise: InputNoise = DEFAULT_NOISE,
+        pushforward: PushForward = DEFAULT_PUSHFORWARD,
+        loss: LossTerms = DEFAULT_LOSS,
+        compile: Compile = DEFAULT_COMPILE,
     ):
         super().__init__()
-        values = dict(
-            lambda_energy=lambda_energy, noise_std=noise_std, pushforward_steps=pushforward_steps,
-            pushforward_after=pushforward_after, pushforward_growth=pushforward_growth,
-            lambda_contact=lambda_contact, lambda_rest=lambda_rest,
-            contact_tol=contact_tol, contact_noise_depth=contact_noise_depth,
-            contact_touch=contact_touch,
-        )  # fmt: skip
-        _check_ranges(values, contact_noise_prob, noise_rest_scale)
-        self.save_hyperparameters(ignore=["simulator", "optimizer", "scheduler"])
+        groups = {"noise": noise, "pushforward": pushforward, "loss": loss, "compile": compile}
+        self.save_hyperparameters({"seed": int(seed)} | {k: asdict(g) for k, g in groups.items()})
         self.simulator = simulator
         self.optimizer_factory = optimizer
         self.scheduler_factory = scheduler
-        self.lambda_energy = float(lambda_energy)
-        self.noise_std = float(noise_std)
         self.seed = int(seed)
-        self.pushforward_steps = int(pushforward_steps)
-        self.pushforward_after = int(pushforward_after)
-        self.pushforward_growth = int(pushforward_growth)
-        self.lambda_contact = float(lambda_contact)
-        self.noise_rest_scale, self.lambda_rest = float(noise_rest_scale), float(lambda_rest)
-        self.contact_tol, self.contact_noise_prob = float(contact_tol), float(contact_noise_prob)
-        self.contact_noise = (float(contact_noise_depth), float(contact_touch))
-        self.truth_contacts = bool(truth_contacts)
-        if compile:
-            self.compile_regions(compile_mode, compile_shapes)
+        self.noise, self.pushforward, self.loss_terms = noise, pushforward, loss
+        if compile.enabled:
+            self.compile_regions(compile.mode, compile.shapes)
         self._finite, self._train_means = FiniteWatch(), EpochMeans()
 
     def compile_regions(self, mode: str = "default", shapes: int = 16, **options) -> None:
-        """What ``compile=True`` compiles (``options``: ``backend``, as
+        """What ``compile.enabled`` compiles (``options``: ``backend``, as
         :func:`~physgnn.models.capture.compile_in_place`). Graphs padded to buckets (fixed
         shapes, what CUDA graphs replay): the network alone, static. Otherwise regions with
         dynamic shapes: the simulator's graph rules and its step after the graph build
@@ -183,7 +144,7 @@ class LitSimulator(L.LightningModule):
         the loss the energy term is (logged, so that a λ sweep shows whether the term mattered
         at all). With ``truth_contacts`` the graph is also built on the target velocities."""
         provisional = self.simulator.recalled(state)
-        provisional += (state.target_vel,) if self.truth_contacts else ()
+        provisional += (state.target_vel,) if self.loss_terms.truth_contacts else ()
         graph = self.simulator.graph_builder(state, provisional)
         return self.graph_losses(state, graph, provisional)
 
@@ -198,14 +159,21 @@ class LitSimulator(L.LightningModule):
         supported = None if where is None else where.supported
         vel_next, _ = sim.to_physical(state, pred, reach, supported)
         energy = energy_increase(state, vel_next).mean()
-        weighted = self.lambda_energy * energy
-        tol = self.contact_tol * sim.length_scale
+        terms = self.loss_terms
+        weighted = terms.lambda_energy * energy
+        tol = terms.contact_tol * sim.length_scale
         contact = contact_penalty(state, vel_next, graph, tol, sim.delta_speed_scale)
         rest = rest_loss(sim, state, pred, reach)
-        loss = mse + weighted + self.lambda_contact * contact + self.lambda_rest * rest
+        loss = mse + weighted + terms.lambda_contact * contact + terms.lambda_rest * rest
         share = (weighted / loss.clamp_min(1e-30)).detach()
-        return {"loss": loss, "loss_mse": mse, "loss_energy": energy, "energy_share": share,
-                "loss_contact": contact, "loss_rest": rest}  # fmt: skip
+        return {
+            "loss": loss,
+            "loss_mse": mse,
+            "loss_energy": energy,
+            "energy_share": share,
+            "loss_contact": contact,
+            "loss_rest": rest,
+        }
 
     def _log_all(self, prefix: str, losses: dict, batch_size: int) -> None:
         """Epoch means under the exact names ``{prefix}/loss`` etc. (weighted by scene count;
@@ -228,27 +196,27 @@ class LitSimulator(L.LightningModule):
         return generator.manual_seed(noise_seed(self.seed, self.global_step, self.global_rank))
 
     def _unroll_length(self) -> int:
-        """Push-forward steps of this batch, ``U{0..K}`` (0 before ``pushforward_after``; K
-        grown as the class doc says), drawn on the host from (seed, global step), the same in
-        every DDP process: no value of the device is read for it."""
-        if self.pushforward_steps == 0 or self.global_step < self.pushforward_after:
+        """Push-forward steps of this batch, ``U{0..K}`` (0 before ``pushforward.after``; K
+        grown as :class:`~physgnn.training.recipe.PushForward` says), drawn on the host from
+        (seed, global step), the same in every DDP process: no value of the device is read."""
+        push = self.pushforward
+        if push.steps == 0 or self.global_step < push.after:
             return 0
-        high = self.pushforward_steps + 1
-        if self.pushforward_growth > 0:
-            grown = 2 + (self.global_step - self.pushforward_after) // self.pushforward_growth
-            high = min(high, grown)
+        high = push.steps + 1
+        if push.growth > 0:
+            high = min(high, 2 + (self.global_step - push.after) // push.growth)
         return random.Random(noise_seed(self.seed, self.global_step)).randrange(high)
 
     def training_step(self, batch, batch_idx: int) -> torch.Tensor:
         generator = self._noise_generator()
-        if self.noise_std > 0:
-            scale = self.noise_rest_scale
-            batch = add_noise(batch, self.simulator, self.noise_std, generator, scale)
-        if self.contact_noise[0] > 0 and self.contact_noise_prob > 0:
+        noise = self.noise
+        if noise.std > 0:
+            batch = add_noise(batch, self.simulator, noise.std, generator, noise.rest_scale)
+        if noise.contacts:
             scale = self.simulator.length_scale  # a tensor: no read-back to the host
-            depth, touch = (scale * x for x in self.contact_noise)
+            depth, touch = scale * noise.contact_depth, scale * noise.contact_touch
             graph = self.simulator.graph_builder(batch)
-            batch = perturb_contacts(batch, graph, depth, touch, self.contact_noise_prob, generator)
+            batch = perturb_contacts(batch, graph, depth, touch, noise.contact_prob, generator)
         steps = self._unroll_length()
         if steps > 0:
             batch = push_forward(batch, self.simulator, steps)

@@ -20,38 +20,14 @@ RANGES = {
     "datamodule.pairs_per_epoch": (1, True, None, "training pairs per epoch"),
     "datamodule.val_pairs": (1, True, None, "validation pairs"),
     "datamodule.num_workers": (0, True, None, "loader processes; 0: none"),
-    "lit.noise_std": (0, True, None, "input noise, normalised units; 0: none"),
-    "lit.lambda_energy": (0, True, None, "a loss weight; 0: off"),
-    "lit.lambda_contact": (0, True, None, "a loss weight; 0: off"),
-    "lit.lambda_rest": (0, True, None, "a loss weight; 0: off"),
-    "lit.pushforward_steps": (0, True, None, "steps; 0: off"),
-    "lit.pushforward_after": (0, True, None, "steps"),
-    "lit.pushforward_growth": (0, True, None, "steps; 0: off"),
-    "lit.contact_tol": (0, True, None, "sphere diameters"),
-    "lit.contact_noise_depth": (0, True, None, "sphere diameters"),
-    "lit.contact_touch": (0, True, None, "sphere diameters"),
-    "lit.contact_noise_prob": (0, True, 1, "a probability; 0: off"),
-    "lit.noise_rest_scale": (0, False, 1, "a factor; 1: full noise at rest"),
-    "lit.compile_shapes": (1, True, None, "input shapes to compile"),
-}
-# The words a string argument takes (torch.compile's modes): checked whether or not it is used
-# now (lit.compile=false), so that a run does not fail the day it is switched on.
-CHOICES = {
-    "lit.compile_mode": (
-        "default",
-        "reduce-overhead",
-        "max-autotune",
-        "max-autotune-no-cudagraphs",
-    ),
 }
 
 
 def check_range(key: str, value, hint=None) -> None:
     """``value`` of ``key`` lies in its :data:`RANGES` (``model.network.M=0``:
     ``model.network.M must be a whole number >= 1 (message-passing steps), got 0``); NaN never
-    does. A key of :data:`CHOICES` takes one of its words."""
-    if key in CHOICES and value not in CHOICES[key]:
-        raise ConfigError(f"{key} must be one of {', '.join(CHOICES[key])}, got {value!r}")
+    does. The recipe's groups (``lit.noise`` ...) check their own ranges
+    (:mod:`physgnn.training.recipe`)."""
     if key not in RANGES or not isinstance(value, int | float) or isinstance(value, bool):
         return
     least, closed, most, what = RANGES[key]

@@ -19,7 +19,7 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn.errors import PhysgnnError, one_line
 from physgnn.files import process_alive, write_json
 from physgnn.models.learned import LearnedSimulator
-from physgnn.training.layout import model_of_today
+from physgnn.training.layout import lit_of_today, model_of_today
 
 RUN_JSON = "run.json"
 # The trained simulator shipped with physgnn, a run folder of weights only
@@ -120,9 +120,9 @@ def _own_score(path: Path) -> float:
 
 def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
     """``(simulator, cfg, info)`` of a finished run (or ``pretrained``): the simulator from
-    ``.hydra/config.yaml`` (its model in today's layout,
-    :func:`~physgnn.training.layout.model_of_today`) and the best (else last) checkpoint, in
-    eval mode on the CPU; ``info`` is run.json (plus ``checkpoint``, the file loaded). Weights
+    ``.hydra/config.yaml`` (its model and recipe in today's layout:
+    :mod:`physgnn.training.layout`) and the best (else last) checkpoint, in eval mode on the
+    CPU; ``info`` is run.json (plus ``checkpoint``, the file loaded). Weights
     of another format or that do not fit the model this physgnn builds from the config are
     refused in one line."""
     run_dir = resolve_run(run_dir)
@@ -135,6 +135,8 @@ def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
     cfg = read_run_config(config)
     cfg.run_dir = str(run_dir)
     cfg.model = model_of_today(cfg.model)  # a run of an earlier physgnn: its own model
+    if "lit" in cfg:
+        cfg.lit = lit_of_today(cfg.lit)  # ... and its own recipe, in today's groups
     path = checkpoint_of(run_dir)
     way_out = f"move {path.name} away to load {{other}} instead, or train the run again"
     state = load_checkpoint(path, way_out)["state_dict"]

@@ -1,10 +1,12 @@
 """The learning-rate decay, defined by the length of the run.
 
 :class:`RunLengthDecay` multiplies the rate by the same factor ``gamma`` each epoch, with
-``gamma = final_lr_factor ** (1 / epochs)``, so that every run ends at ``final_lr_factor`` × its
-initial rate, whatever its length: the default's 90 CPU epochs, ``+experiment=long``'s 900 and
-``trainer=gpu``'s 500 alike. The default ``final_lr_factor`` is ``0.97 ** 90``: on the default
-run, ``gamma`` is exactly 0.97, the rate of a per-epoch ``ExponentialLR(gamma=0.97)``.
+``gamma = final_lr_factor ** (1 / epochs of the run)``, so that every run ends at
+``final_lr_factor`` × its initial rate, whatever its length: the default's 90 CPU epochs,
+``+experiment=long``'s 900 and ``trainer=gpu``'s 500 alike. The recipe gives the factor as the
+decay of a run of its own length, ``final_lr_factor = decay_per_epoch ** epochs`` (default
+``0.97 ** 90``): on the default run, ``gamma`` is exactly 0.97, the rate of a per-epoch
+``ExponentialLR(gamma=0.97)``.
 
 The run's length is the trainer's (:func:`run_length`): ``trainer.max_epochs`` epochs, or, where
 ``trainer.max_steps`` ends the run first, that many optimiser steps with the decay stepped per
@@ -24,29 +26,27 @@ from torch.optim.lr_scheduler import ExponentialLR
 from physgnn.errors import ConfigError
 
 # The default's decay: 0.97 per epoch over its 90 epochs (÷15.5 over the run)
-FINAL_LR_FACTOR = 0.97**90
+DECAY_PER_EPOCH, EPOCHS = 0.97, 90
 
 
 class RunLengthDecay(ExponentialLR):
-    """Exponential decay to ``final_lr_factor`` × the initial rate over ``length`` epochs (or
-    steps, ``interval="step"``); ``length``, ``interval`` and ``progress`` (the epochs or steps
-    done, read when a checkpoint is restored) come from the trainer (:func:`lr_scheduler`),
-    ``final_lr_factor`` from the config."""
+    """Exponential decay to ``final_lr_factor = decay_per_epoch ** epochs`` × the initial rate
+    over ``length`` epochs (or steps, ``interval="step"``); ``length``, ``interval`` and
+    ``progress`` (the epochs or steps done, read when a checkpoint is restored) come from the
+    trainer (:func:`lr_scheduler`), ``decay_per_epoch`` and ``epochs`` from the config."""
 
     def __init__(
         self,
         optimizer,
-        final_lr_factor: float = FINAL_LR_FACTOR,
+        decay_per_epoch: float = DECAY_PER_EPOCH,
+        epochs: int = EPOCHS,
         length: int = 1,
         interval: str = "epoch",
         progress=None,
         last_epoch: int = -1,
     ):
-        if not final_lr_factor > 0:
-            raise ConfigError(
-                f"lit.scheduler.final_lr_factor must be a number > 0 (the rate's factor at the "
-                f"end of the run; 1 keeps it), got {final_lr_factor!r}"
-            )
+        check_decay(decay_per_epoch, epochs)
+        final_lr_factor = decay_per_epoch**epochs
         self.final_lr_factor, self.length, self.interval = final_lr_factor, length, interval
         self.progress = progress
         super().__init__(optimizer, gamma=final_lr_factor ** (1 / length), last_epoch=last_epoch)
@@ -109,19 +109,41 @@ def lr_scheduler(factory, optimizer, trainer) -> dict:
     return {"scheduler": scheduler, "interval": interval}
 
 
-def check_scheduler(lit_cfg: DictConfig | None) -> None:
-    """``lit.scheduler.final_lr_factor`` (the rate's factor at the end of the run) or ``gamma``
-    (an ``ExponentialLR``'s factor per epoch) is a number > 0: at 0 the rate vanishes, below it
-    turns negative (gradient ascent) and the run still "finishes"."""
-    for key, what in (
-        ("final_lr_factor", "lr x final_lr_factor at the end of the run; default 0.97^90"),
-        ("gamma", "lr x gamma^epoch"),
+def check_decay(decay_per_epoch, epochs) -> None:
+    """``decay_per_epoch`` a number > 0 (at 0 the rate vanishes, below it turns negative:
+    gradient ascent, and the run still "finishes") and ``epochs`` a whole number >= 1."""
+    if (
+        not isinstance(decay_per_epoch, int | float)
+        or isinstance(decay_per_epoch, bool)
+        or not (0 < decay_per_epoch < 1e3)
     ):
-        value = OmegaConf.select(lit_cfg, f"scheduler.{key}") if lit_cfg is not None else None
-        if value is None:
-            continue
-        if not isinstance(value, int | float) or isinstance(value, bool) or not 0 < value < 1e3:
-            raise ConfigError(
-                f"lit.scheduler.{key} must be a number > 0 ({what}; 1 keeps the rate), "
-                f"got {value!r}"
-            )
+        raise ConfigError(
+            f"lit.scheduler.decay_per_epoch must be a number > 0 (lr x decay_per_epoch^epochs "
+            f"at the end of the run; 1 keeps the rate), got {decay_per_epoch!r} (the default: "
+            f"lit.scheduler.decay_per_epoch={DECAY_PER_EPOCH})"
+        )
+    if not isinstance(epochs, int) or isinstance(epochs, bool) or epochs < 1:
+        raise ConfigError(
+            f"lit.scheduler.epochs must be a whole number >= 1 (the run length at which the "
+            f"rate falls by decay_per_epoch each epoch), got {epochs!r} (the default: "
+            f"lit.scheduler.epochs={EPOCHS})"
+        )
+
+
+def check_scheduler(lit_cfg: DictConfig | None) -> None:
+    """A :class:`RunLengthDecay`'s ``decay_per_epoch`` and ``epochs`` (:func:`check_decay`), or
+    an ``ExponentialLR``'s ``gamma`` (its factor per epoch) a number > 0, before anything is
+    built."""
+    node = OmegaConf.select(lit_cfg, "scheduler") if lit_cfg is not None else None
+    if node is None:
+        return
+    if "decay_per_epoch" in node or "epochs" in node:
+        check_decay(node.get("decay_per_epoch", DECAY_PER_EPOCH), node.get("epochs", EPOCHS))
+    gamma = node.get("gamma")
+    if gamma is not None and (
+        not isinstance(gamma, int | float) or isinstance(gamma, bool) or not 0 < gamma < 1e3
+    ):
+        raise ConfigError(
+            f"lit.scheduler.gamma must be a number > 0 (lr x gamma^epoch; 1 keeps the rate), "
+            f"got {gamma!r}"
+        )
