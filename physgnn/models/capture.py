@@ -94,7 +94,7 @@ class ShapeBoundCall:
             warnings.warn(
                 f"the compiled code met more than {self.max_shapes} input shapes; new ones "
                 "run eager. Pad graphs to buckets (model.pad_to_buckets=true) or raise "
-                "lit.compile_shapes",
+                "lit.compile.shapes",
                 stacklevel=2,
             )
         return self.eager(*args)
