@@ -9,7 +9,12 @@ import lightning as L
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.benchmark.learned import frame_states, make_simulator, time_cases
+from physgnn.benchmark.learned import (
+    frame_states,
+    make_simulator,
+    measuring_trainer,
+    time_cases,
+)
 from physgnn.benchmark.profile import step_flops
 from physgnn.benchmark.scenes import bench_run, resting_scene, with_effects, without_walls
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
@@ -55,19 +60,7 @@ def training_throughput(cfg: DictConfig, trajectories: list, stats: dict, matmul
     loader = pair_loader(data, c.batch_size, sampler)
     graphs = StepTimer()
     timer = ThroughputTimer(min(c.warmup_steps, c.steps - 1), graphs)
-    trainer = L.Trainer(
-        accelerator="cpu",
-        devices=1,
-        max_steps=c.steps,
-        max_epochs=1,
-        logger=False,
-        enable_checkpointing=False,
-        enable_progress_bar=False,
-        enable_model_summary=False,
-        num_sanity_val_steps=0,
-        limit_val_batches=0,
-        callbacks=[timer],
-    )
+    trainer = measuring_trainer(c.steps, [timer])
     with graphs.watch(simulator):
         trainer.fit(lit, train_dataloaders=loader)
     secs = max(timer.t1 - timer.t0, 1e-9)

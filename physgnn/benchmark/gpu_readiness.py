@@ -27,6 +27,7 @@ import torch
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
+from physgnn.benchmark.learned import measuring_trainer
 from physgnn.benchmark.syncs import counting, profiling_ops
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 from physgnn.models.capture import compile_simulator
@@ -97,20 +98,7 @@ def training_step_counts(
     total = int(c.warmup_steps + 2 * c.steps)
     loader = pair_loader(data, int(c.batch_size), EpochSampler(len(data), total * c.batch_size, 0))
     counter = StepCounter(int(c.warmup_steps), record_where=True, profile=compiled)
-    trainer = L.Trainer(
-        accelerator="cpu",
-        devices=1,
-        max_steps=total,
-        max_epochs=1,
-        logger=False,
-        enable_checkpointing=False,
-        enable_progress_bar=False,
-        enable_model_summary=False,
-        num_sanity_val_steps=0,
-        limit_val_batches=0,
-        callbacks=[counter],
-        gradient_clip_val=1.0,
-    )
+    trainer = measuring_trainer(total, [counter], gradient_clip_val=1.0)
     trainer.fit(lit, train_dataloaders=loader)
     after = counter.steps[int(c.warmup_steps) :]
     counted = [s for s in after if "kernels" in s]

@@ -190,3 +190,25 @@ def batched_rows(cfg: DictConfig, runs: dict, stats: dict) -> list[dict]:
         )
         print(f"batched {b:3d} x {n} spheres: {per_scene:8.2f} ms per scene-frame", flush=True)
     return rows
+
+
+def measuring_trainer(max_steps: int, callbacks: list, **options):
+    """A one-process CPU ``lightning.Trainer`` for ``max_steps`` timed or counted training
+    steps: no logger, checkpoints, progress bar, summary or validation; ``options``: further
+    Trainer arguments (e.g. ``gradient_clip_val``)."""
+    import lightning as L
+
+    return L.Trainer(
+        accelerator="cpu",
+        devices=1,
+        max_steps=max_steps,
+        max_epochs=1,
+        logger=False,
+        enable_checkpointing=False,
+        enable_progress_bar=False,
+        enable_model_summary=False,
+        num_sanity_val_steps=0,
+        limit_val_batches=0,
+        callbacks=callbacks,
+        **options,
+    )
