@@ -53,7 +53,9 @@ def test_truth_only_writes_hdf5_metrics_and_video(scene_file, tmp_path, capsys):
 def test_learned_rollout_from_the_same_start(scene_file, tmp_path, monkeypatch):
     sim = learned(H=1, M=1, hidden=8).eval()
     monkeypatch.setattr(
-        S, "learned", lambda run, truth, steps: (S.rollout_prediction(sim, truth), {"run": run})
+        S,
+        "learned",
+        lambda run, truth, steps, cache: (S.rollout_prediction(sim, truth), {"run": run}),
     )
     out = tmp_path / "out"
     args = [f"scene_file={scene_file}", f"out={out}", "run=R", "video=false"]

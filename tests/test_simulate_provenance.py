@@ -50,7 +50,7 @@ def test_a_scene_far_outside_training_is_named_in_one_warning_line(tiny_run, tmp
 def test_a_diverged_prediction_reports_no_metrics(tmp_path, monkeypatch, capsys):
     scene = write(tmp_path, SCENE)
 
-    def diverged(run, truth, steps):
+    def diverged(run, truth, steps, cache):
         cut = dataclasses.replace(truth.truncated(3), diverged_at=3)
         return cut, {"checkpoint": "ck", "run": "r", "H": 1, "constraints": 0}
 

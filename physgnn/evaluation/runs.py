@@ -15,6 +15,7 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn.data.dataset import DatasetError, read_split
 from physgnn.errors import PhysgnnError
 from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
+from physgnn.models.capture import compile_simulator
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.trajectory import Trajectory
 from physgnn.report.table import config_label
@@ -159,6 +160,8 @@ def load_runs(cfg: DictConfig, outputs: Path) -> tuple[list[RunInfo], list[str]]
         try:
             info.simulator, run_cfg, _ = training_runs.load_run(run_dir)
             info.simulator.eval()
+            if cfg.get("compile"):  # compiled by the warm-up rollout, before any timing
+                compile_simulator(info.simulator, cache_dir=cfg.paths.compile_cache)
             info.dataset = Path(cfg.dataset) if cfg.dataset else dataset_of(run_cfg)
         except Exception as e:
             note = f"{type(e).__name__}: {e}".splitlines()[0]

@@ -50,6 +50,7 @@ from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.scenefile import load_scene, scene_file, scene_to_dict
 from physgnn.metrics import check_tolerance
 from physgnn.metrics.checks import frames as checked_frames
+from physgnn.models.capture import compile_simulator, compiled_graphs
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.scene import Scene
 from physgnn.physics.trajectory import Trajectory
@@ -103,15 +104,19 @@ def rollout_prediction(simulator, truth: Trajectory) -> Trajectory:
     return rollout(simulator, [truth])[0]
 
 
-def learned(run_dir: str, truth: Trajectory, constraints: int = 0) -> tuple[Trajectory, dict]:
+def learned(
+    run_dir: str, truth: Trajectory, constraints: int = 0, compile_cache: str | None = None
+) -> tuple[Trajectory, dict]:
     """Roll the run's simulator out on ``truth`` (with ``constraints`` > 0, followed by the
-    constraint stage, :mod:`physgnn.models.constrained`); returns the prediction and where it
-    came from: ``{"checkpoint", "run", "H", "constraints", "ms_per_frame", "cfg"}``."""
+    constraint stage, :mod:`physgnn.models.constrained`; with a ``compile_cache`` folder,
+    compiled, :func:`compile_ahead`); returns the prediction and where it came from:
+    ``{"checkpoint", "run", "H", "constraints", "ms_per_frame", "compile_s", "cfg"}``."""
     folder = resolve_run(run_dir)
     if not folder.is_dir():
         raise SimulateError(f"run folder {run_dir} does not exist")
     simulator, cfg, info = load_run(folder)
     history = int(simulator.H)
+    compile_s = None if compile_cache is None else compile_ahead(simulator, truth, compile_cache)
     if constraints > 0:
         simulator = ConstrainedSimulator(simulator, constraints)
     if truth.n_spheres * truth.n_frames >= LONG:
@@ -121,13 +126,32 @@ def learned(run_dir: str, truth: Trajectory, constraints: int = 0) -> tuple[Traj
             file=sys.stderr,
             flush=True,
         )
+    graphs = compiled_graphs()
     start = time.perf_counter()
     pred = rollout_prediction(simulator, truth)
     steps = max(pred.n_frames - history - 1, 1)
+    if compile_s is not None and compiled_graphs() > graphs:
+        print(
+            f"note: ms_per_frame includes compiling {compiled_graphs() - graphs} more graph(s) "
+            "for edge counts the first frames did not have (0 or 1 pair); a second call "
+            "loads them from paths.compile_cache",
+            file=sys.stderr,
+        )
     source = {"checkpoint": str(info.get("checkpoint", run_dir)), "run": portable(folder)}
-    source |= {"H": history, "constraints": constraints, "cfg": cfg}
+    source |= {"H": history, "constraints": constraints, "cfg": cfg, "compile_s": compile_s}
     source["ms_per_frame"] = 1000 * (time.perf_counter() - start) / steps
     return pred, source
+
+
+def compile_ahead(simulator, truth: Trajectory, cache_dir: str) -> float:
+    """Seconds to compile ``simulator``'s step (:func:`~physgnn.models.capture.compile_simulator`,
+    its code kept in ``cache_dir``) on a few frames of ``truth``, so that the timed rollout
+    after it runs compiled code only."""
+    print("compiling the learned step ...", file=sys.stderr, flush=True)
+    start = time.perf_counter()
+    compile_simulator(simulator, cache_dir=cache_dir)
+    rollout(simulator, [truth.truncated(min(int(simulator.H) + 3, truth.n_frames))])
+    return time.perf_counter() - start
 
 
 def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dict:
@@ -177,7 +201,8 @@ def _simulate_into(cfg, scene_text, folders: tuple[Path, Path], how: tuple) -> d
         velocity="the engine's (pybullet)",
         ms_per_frame=1000 * (time.perf_counter() - start) / max(scene.n_frames - 1, 1),
     )
-    pred, source = (None, {}) if not cfg.get("run") else learned(str(cfg.run), truth, steps)
+    cache = cfg.paths.compile_cache if cfg.compile else None
+    pred, source = (None, {}) if not cfg.get("run") else learned(str(cfg.run), truth, steps, cache)
     warnings = outside(scene, source.get("cfg")) if pred is not None else []
     if warnings:
         print(f"warning: {warning_text(scene.name, warnings)}", file=sys.stderr)
@@ -189,6 +214,7 @@ def _simulate_into(cfg, scene_text, folders: tuple[Path, Path], how: tuple) -> d
         "n_frames": scene.n_frames,
         "run": source.get("checkpoint"),
         "constraints": steps,
+        "compile_s": source.get("compile_s"),
         "warnings": warnings,
         "ms_per_frame": {
             "pybullet": truth.attrs["ms_per_frame"],

@@ -23,7 +23,9 @@ warning.
 
 from __future__ import annotations
 
+import os
 import warnings
+from pathlib import Path
 
 import torch
 
@@ -38,13 +40,37 @@ def compile_in_place(module, *args, method: str = "forward", **options) -> None:
         setattr(module, method, ShapeBoundCall(module, *args, method=method, **options))
 
 
-def compile_simulator(simulator, mode: str = "default", max_shapes: int = 16, **options) -> None:
+def compile_simulator(
+    simulator, mode: str = "default", max_shapes: int = 16, cache_dir=None, **options
+) -> None:
     """A :class:`~physgnn.models.learned.LearnedSimulator`'s step compiled as two regions with
     dynamic shapes: its graph rules (``graph_builder.rules``) and everything after the graph
     build (``head``); the candidates, the edge-count read-back and the compaction between
-    them stay eager. ``options``: :class:`ShapeBoundCall`'s (``backend``)."""
+    them stay eager. ``cache_dir``: where the compiled code is kept on disk
+    (:func:`use_cache_dir`; None: torch's own folder). ``options``: :class:`ShapeBoundCall`'s
+    (``backend``)."""
+    if cache_dir is not None:
+        use_cache_dir(cache_dir)
     compile_in_place(simulator, mode, True, max_shapes, method="head", **options)
     compile_in_place(simulator.graph_builder, mode, True, max_shapes, method="rules", **options)
+
+
+def use_cache_dir(path) -> Path:
+    """Inductor's on-disk caches (compiled graphs, kernels) in ``path`` from now on, for this
+    process and the ones it starts (``TORCHINDUCTOR_CACHE_DIR``): a later process compiling the
+    same code loads them instead of generating and building it again, so it pays only dynamo's
+    tracing (docs/PERFORMANCE.md has the times). torch's default is a folder of the system's
+    temp dir, which a reboot may empty."""
+    path = Path(path).expanduser().resolve()
+    path.mkdir(parents=True, exist_ok=True)
+    os.environ["TORCHINDUCTOR_CACHE_DIR"] = str(path)
+    return path
+
+
+def compiled_graphs() -> int:
+    """How many graphs dynamo has compiled in this process so far (a compile, or a load from
+    the on-disk cache, for a new shape or guard)."""
+    return int(torch._dynamo.utils.counters["stats"]["unique_graphs"])
 
 
 class ShapeBoundCall:

@@ -37,7 +37,8 @@ class InteractionBlock(MessagePassing):
     ``"never"``: on the concatenated ``[E, 3h]`` input (the reference path);
     ``"always"``: as ``(W_i v)[i] + (W_j v)[j] + W_e e + b`` with the two node projections
     computed once per node (``2N`` rows instead of ``E``); ``"auto"``: the concat trick
-    when it is cheaper, i.e. when ``N < E``. Both paths give the same numbers up to float rounding.
+    when it is cheaper, i.e. when ``N < E``, and always in compiled code (one graph for every
+    size). Both paths give the same numbers up to float rounding.
 
     The hidden units are computed by ``edge_updater``, the messages from them (they are also
     the pp edge-latent update ``e_ij += m_ij``, so the caller needs them) and summed by
@@ -90,7 +91,8 @@ class InteractionBlock(MessagePassing):
 
     def uses_concat(self, num_nodes: int, num_msg: int) -> bool:
         if self.concat_trick == "auto":
-            return num_nodes < num_msg
+            # compiled code takes one path, so that sizes crossing over do not compile anew
+            return torch.compiler.is_compiling() or num_nodes < num_msg
         return self.concat_trick == "always"
 
     def flops(self, num_nodes: int, num_edges: int) -> int:
