@@ -1,7 +1,8 @@
 """Compiled rollouts for simulate and eval: the step compiled with its code kept on disk, the
 same results as eager to float rounding, and one compiled graph across the interaction's two
 algebraic paths. The inductor backend's times (minutes cold, seconds warm) are measured in
-docs/PERFORMANCE.md, not here: these tests compile with ``aot_eager``, which takes seconds."""
+docs/performance-log.md, not here: the fast tests compile with ``aot_eager``, which takes seconds,
+and one slow test with inductor."""
 
 from __future__ import annotations
 
@@ -10,7 +11,9 @@ import json
 import os
 
 import numpy as np
+import pytest
 import torch
+import yaml
 from torch.testing import assert_close
 from truthkit import SCENE
 
@@ -18,6 +21,7 @@ import physgnn.evaluation.runs as R
 import physgnn.evaluation.simulate as S
 from physgnn.cli import compose_config
 from physgnn.data.dataset import read_split
+from physgnn.groundtruth.scenefile import scene_from_dict
 from physgnn.models.capture import compile_simulator, compiled_graphs, use_cache_dir
 from physgnn.nn.interaction import InteractionBlock
 from physgnn.rollout import rollout
@@ -81,3 +85,21 @@ def test_eval_compiles_every_learned_run_when_asked(tiny_run, tmp_path, monkeypa
     calls.clear()
     R.load_runs(compose_config("eval", [f"runs={tiny_run}", f"paths.outputs={tmp_path}"]), tmp_path)
     assert calls == []  # eager by default
+
+
+@pytest.mark.slow
+def test_inductor_keeps_its_code_in_the_cache_and_steps_as_eager(tiny_run, tmp_path, monkeypatch):
+    monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path / "before"))
+    simulator = load_run(tiny_run)[0].eval()
+    truth = tiny_truth()
+    eager = rollout(simulator, [truth.truncated(simulator.H + 2)])[0]  # one step
+    compile_simulator(simulator, cache_dir=tmp_path / "cache")
+    compiled = rollout(simulator, [truth.truncated(simulator.H + 2)])[0]
+    assert_close(compiled.pos, eager.pos, rtol=0, atol=1e-5)
+    assert_close(compiled.vel, eager.vel, rtol=0, atol=1e-5)
+    assert any((tmp_path / "cache").rglob("*.py"))  # inductor's generated code, on disk
+
+
+def tiny_truth():
+    """The ground truth of the tiny scene file (pybullet)."""
+    return S.simulate_with_progress(scene_from_dict(yaml.safe_load(SCENE)))
