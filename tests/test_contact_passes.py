@@ -68,6 +68,24 @@ def test_a_rebuild_on_provisional_velocities_links_every_pair_that_touches_under
         assert edges_of(builder(state)) <= edges_of(graph)  # a rebuild only adds
 
 
+def test_a_rebuild_from_the_last_builds_candidates_is_the_whole_builds_graph():
+    """extend reuses the candidates and earlier masks where the allowance holds, and builds
+    anew where a faster velocity widens it: the graph is the whole build's, edge for edge."""
+    for seed, builder in zip(range(6), [GraphBuilder(), GraphBuilder(fixed_capacity=True)] * 3):
+        state = random_supported_state(seed)
+        ballistic = ballistic_velocity(state)
+        slower = 0.5 * ballistic  # every allowance holds: the cheap path
+        faster = ballistic.clone()
+        faster[0] = 3 * faster[0] + 1  # one allowance widens: a whole build
+        for velocities in ([slower], [slower, 0.9 * ballistic], [faster], [slower, faster]):
+            _, basis = builder.build(state, velocities[:-1])
+            graph, extended = builder.extend(state, basis, velocities)
+            whole, whole_basis = builder.build(state, velocities)
+            for field in ("pp_index", "pp_attr", "ps_index", "ps_attr", "allowance", "pp_mask"):
+                assert_close(getattr(graph, field), getattr(whole, field), rtol=0, atol=0)
+            assert_close(extended.masks, whole_basis.masks, rtol=0, atol=0)
+
+
 def test_a_sphere_falling_onto_a_resting_one_is_linked_once_the_resting_one_stops():
     # the upper sphere falls at 1 m/s 0.15 m above a sphere resting on the ground: ballistic,
     # both fall alike and the rule sees no approach; the lower one stops, the upper one moves

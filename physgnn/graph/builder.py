@@ -43,6 +43,9 @@ accept it under the ballistic motion *or* under any provisional one (the union, 
 grows from pass to pass), and the allowance is the largest of them. Under each velocity the
 superset property holds as above (tested against brute force); a simulator passes again while
 a rebuild adds edges (:class:`~physgnn.models.learned.LearnedSimulator`, ``contact_passes``).
+A rebuild with one more velocity (:meth:`GraphBuilder.extend`) reuses the last build's
+candidates and masks where that velocity widens no allowance (on the CPU: 1.11–1.14× faster
+frames of the default model, the same graph edge for edge).
 
 Effects (``state.effects``): no pp edges without ``sphere_contact``; no wall/static edges
 without ``surface_contact``; the ground edge exists when ``gravity`` or ``surface_contact``.
@@ -62,8 +65,10 @@ the ``ALL_PAIRS_*`` limits (a radius search reads sizes back anyway) is built co
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import torch
 
@@ -82,6 +87,20 @@ _SURFACE_CONTACT = EFFECT_NAMES.index("surface_contact")
 # pp candidates: all pairs of each scene (no read-back) up to these limits, then a radius search;
 # with the CPU's k-d tree, where a read-back costs nothing, the search from 8 pairs per sphere.
 ALL_PAIRS_MAX, ALL_PAIRS_PER_SPHERE, CPU_PAIRS_PER_SPHERE = 1 << 18, 64, 8
+
+
+@dataclass(frozen=True)
+class Basis:
+    """What a build compacts its graph from: the allowance ``[N]`` (float64), the candidates
+    ``(src [P], dst [P], plane [Q], sphere [Q])``, the rules' masks ``([P], [Q])`` under every
+    velocity so far, the ps offsets ``[Q, 3]`` and whether the pp candidates are the layout's
+    (:meth:`GraphBuilder.layout_candidates`)."""
+
+    allowance: torch.Tensor
+    candidates: tuple[torch.Tensor, ...]
+    masks: tuple[torch.Tensor, torch.Tensor]
+    offset: torch.Tensor
+    layout: bool
 
 
 class GraphBuilder:
@@ -126,6 +145,11 @@ class GraphBuilder:
         """The graph of ``state``; ``provisional``: next velocities ``[N, 3]`` of earlier
         passes (module doc, "Contacts within the frame"): a candidate is kept when the rules
         accept it under the state's own motion or under any of them."""
+        return self.build(state, provisional)[0]
+
+    def build(self, state, provisional: Sequence[torch.Tensor] = ()) -> tuple[Graph, Basis]:
+        """:meth:`__call__`'s graph and the :class:`Basis` it was compacted from, which
+        :meth:`extend` reuses."""
         batch, (spheres, planes) = scene_of_sphere(state), host_sizes(state)
         velocity = self.rule_velocity(state)  # once per build: the rules and the clip share it
         allowance = self.allowance(state, velocity=velocity)
@@ -139,7 +163,32 @@ class GraphBuilder:
         for vel in provisional:
             more = self.rules(state, vel, allowance, src, dst, plane, sphere, vel)
             pp_mask, ps_mask = pp_mask | more[0], ps_mask | more[1]
-        if self.fixed_capacity and layout:  # every candidate, its mask on both halves
+        basis = Basis(allowance, (src, dst, plane, sphere), (pp_mask, ps_mask), offset, layout)
+        return self._compacted(state, basis), basis
+
+    def extend(self, state, basis: Basis, provisional: Sequence[torch.Tensor]) -> tuple:
+        """:meth:`build` with ``provisional``, given ``basis``, the build's with all of them
+        but the last: the same graph and basis. Where a read-back costs nothing (the CPU's
+        k-d tree) and the last velocity leaves every allowance as it was, the candidates and
+        the earlier velocities' masks are the basis's and only the last velocity's rules run;
+        else (a GPU would wait to ask) a whole build."""
+        if self.fixed_capacity or resolve_backend(self.backend, state.pos) != "kdtree":
+            return self.build(state, provisional)
+        vel = provisional[-1]
+        allowance = torch.maximum(basis.allowance, self.allowance(state, velocity=vel))
+        if not torch.equal(allowance, basis.allowance):  # a wider reach: other candidates
+            return self.build(state, provisional)
+        pp_mask, ps_mask, _ = self.rules(state, vel, allowance, *basis.candidates, vel)
+        basis = dataclasses.replace(
+            basis, masks=(basis.masks[0] | pp_mask, basis.masks[1] | ps_mask)
+        )
+        return self._compacted(state, basis), basis
+
+    def _compacted(self, state, basis: Basis) -> Graph:
+        """The graph of the candidates ``basis`` accepts (module doc, "Counted or fixed
+        capacity")."""
+        (src, dst, plane, sphere), (pp_mask, ps_mask) = basis.candidates, basis.masks
+        if self.fixed_capacity and basis.layout:  # every candidate, its mask on both halves
             pp_keep, keep, masks = slice(None), slice(None), (pp_mask.repeat(2), ps_mask)
         else:
             n_pp, n_ps = torch.stack([pp_mask.sum(), ps_mask.sum()]).tolist()  # the one read-back
@@ -147,10 +196,10 @@ class GraphBuilder:
         pp_index, pp_attr = paired_edges(state.pos, src[pp_keep], dst[pp_keep])
         ps_index = torch.stack([plane[keep], sphere[keep]])
         if checks_on():
-            _check_ground(state, batch)
-        clip = self.reach(state, allowance) + self.clip_margin
-        ps_attr = ps_features(state, ps_index, offset[keep], clip)  # the PS blocks
-        return Graph(pp_index, pp_attr, ps_index, ps_attr, allowance, *masks)
+            _check_ground(state, scene_of_sphere(state))
+        clip = self.reach(state, basis.allowance) + self.clip_margin
+        ps_attr = ps_features(state, ps_index, basis.offset[keep], clip)  # the PS blocks
+        return Graph(pp_index, pp_attr, ps_index, ps_attr, basis.allowance, *masks)
 
     def rules(
         self, state, velocity, allowance, src, dst, plane, sphere, pair_velocity=None

@@ -345,11 +345,11 @@ class LearnedSimulator(nn.Module):
         while a rebuild on the provisional velocities adds edges, at most ``contact_passes``
         rebuilds (module doc)."""
         provisional = list(self.recalled(state))
-        graph = self.graph_builder(state, provisional)
+        graph, basis = self.graph_builder.build(state, provisional)
         vel, angvel = self.head(state, graph, tuple(provisional))
         for _ in range(self.contact_passes):
             provisional.append(vel)
-            wider = self.graph_builder(state, provisional)
+            wider, basis = self.graph_builder.extend(state, basis, provisional)
             if not wider.grew(graph):
                 break
             graph = wider

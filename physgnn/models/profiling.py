@@ -31,13 +31,22 @@ class _WatchedBuilder:
         return getattr(self.builder, name)
 
     def __call__(self, state, provisional=()):
+        return self.build(state, provisional)[0]
+
+    def build(self, state, provisional=()):
+        return self._timed(state, self.builder.build, state, provisional)
+
+    def extend(self, state, basis, provisional):
+        return self._timed(state, self.builder.extend, state, basis, provisional)
+
+    def _timed(self, state, build, *args):
         t0 = self.timer.clock(state.pos.device)
-        graph = self.builder(state, provisional)
+        graph, basis = build(*args)
         self.timer.graph += self.timer.clock(state.pos.device) - t0
         self.timer.sizes.append(
             (state.pos.shape[0], graph.pp_index.shape[1], graph.ps_index.shape[1])
         )
-        return graph
+        return graph, basis
 
 
 class StepTimer:
