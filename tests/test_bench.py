@@ -219,7 +219,10 @@ def test_step_timer_records_the_size_of_every_graph_it_watched():
     cfg = _cfg("quick=true")
     scene = bench_scenes.bench_scene(cfg.scene, 12, np.random.default_rng(0), 8.0, 4.0, 5)
     traj = simulate(scene, {"substeps": 2})
-    one_pass = {"network": {"hidden": 16, "M": 2}, "contact_passes": 0}  # one build per step
+    one_pass = {
+        "network": {"hidden": 16, "M": 2},
+        "contacts": {"contact_passes": 0},
+    }  # one build per step
     sim = make_simulator(cfg.model, one_pass, compute_stats([traj]))
     states = frame_states(traj, sim.H)[:2]
     timer = StepTimer()
