@@ -126,6 +126,16 @@ def test_a_flat_run_whose_weights_do_not_fit_names_todays_key(flat_run):
         load_run(flat_run)
 
 
+def test_a_run_whose_weights_do_not_fit_names_the_groups_key(flat_run):
+    config = flat_run / ".hydra" / "config.yaml"
+    config.write_text(
+        config.read_text().replace("\n  mass_ratio: true\n", "\n  mass_ratio: false\n")
+    )
+    match = r"\(model\.inputs\.mass_ratio is True in the weights, False in the"
+    with pytest.raises(RunError, match=match):
+        load_run(flat_run)
+
+
 def test_the_shipped_weights_hold_a_flat_config_and_load_in_todays_layout():
     assert "network" not in OmegaConf.load(PRETRAINED_DIR / ".hydra" / "config.yaml").model
     simulator, cfg, _ = load_run("pretrained")
