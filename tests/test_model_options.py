@@ -11,10 +11,12 @@ import pytest
 from omegaconf import OmegaConf
 
 from physgnn import CONF_DIR
+from physgnn.cli import compose_config
 from physgnn.errors import ConfigError
 from physgnn.models.learned import LearnedSimulator
 from physgnn.models.options import ContactHandling, ModelInputs
 from physgnn.nn.epd import EncodeProcessDecode
+from physgnn.training.checks import check_arguments
 
 BASELINE = Path(CONF_DIR) / "model" / "baseline.yaml"
 GROUPS = {"inputs": ModelInputs, "contacts": ContactHandling}
@@ -51,6 +53,19 @@ def test_a_value_out_of_range_is_one_line_naming_the_key(make, message):
     with pytest.raises(ConfigError, match=message) as err:
         make()
     assert "\n" not in str(err.value) and isinstance(err.value, ValueError)
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("model.contacts.contact_passes=-1", "^model.contacts.contact_passes must be a whole"),
+        ("model.inputs.boundary_radius=0", "^model.inputs.boundary_radius must be a number > 0"),
+        ("+model.contacts.passes=1", "^model.contacts.passes is not an argument of Contact"),
+    ],
+)
+def test_a_train_config_out_of_range_is_refused_before_anything_is_built(override, message):
+    with pytest.raises(ConfigError, match=message):
+        check_arguments(compose_config("train", [override]))
 
 
 def test_the_constructors_take_at_most_ten_arguments():
