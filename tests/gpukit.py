@@ -12,7 +12,7 @@ from physgnn.data.pairs import PairDataset
 # loss), finiteness; k is drawn on the host
 TRAIN_STEP_SYNCS = 7
 # the graph builds of a frame (one, plus a rebuild per pass that adds edges, at most
-# model.contact_passes) and the divergence test
+# model.contacts.contact_passes) and the divergence test
 ROLLOUT_FRAME_SYNCS = 4
 # the budget of aten ops a compiled training step dispatches outside its compiled regions
 OPS_PER_TRAINING_STEP = 1500

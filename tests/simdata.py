@@ -11,6 +11,7 @@ from torch_geometric.data import Batch
 from physgnn.data.state import TrajectoryFrames
 from physgnn.graph.builder import GraphBuilder
 from physgnn.models.learned import LearnedSimulator
+from physgnn.models.options import ContactHandling, ModelInputs
 from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.physics import quaternion as Q
 from physgnn.physics.scene import Effects, Material, ground_plane, make_plane
@@ -50,15 +51,21 @@ REPORT_MODEL = {
 
 
 def learned(stats: dict = STATS, **keys) -> LearnedSimulator:
-    """A LearnedSimulator from its model keys in the flat layout (``H=1, M=2, connectivity="vi"``;
-    ``physgnn.training.layout.FLAT_KEYS``): the network's and the graph builder's keys are
-    handed to them, the others to the simulator."""
-    nodes: dict[str, dict] = {"network": {}, "graph": {}}
+    """A LearnedSimulator from its model keys in the flat layout (``H=1, M=2, connectivity="vi",
+    contact_passes=0``; ``physgnn.training.layout.FLAT_KEYS``): the network's, the graph
+    builder's and the groups' keys are handed to them, the others to the simulator."""
+    nodes: dict[str, dict] = {"network": {}, "graph": {}, "inputs": {}, "contacts": {}}
     for key in [k for k in keys if k in FLAT_KEYS]:
         node, name = FLAT_KEYS[key]
         nodes[node][name] = keys.pop(key)
-    network = partial(EncodeProcessDecode, **nodes["network"])
-    return LearnedSimulator(stats, network=network, graph=GraphBuilder(**nodes["graph"]), **keys)
+    return LearnedSimulator(
+        stats,
+        network=partial(EncodeProcessDecode, **nodes["network"]),
+        graph=GraphBuilder(**nodes["graph"]),
+        inputs=ModelInputs(**nodes["inputs"]),
+        contacts=ContactHandling(**nodes["contacts"]),
+        **keys,
+    )
 
 
 def trajectory(

@@ -26,7 +26,7 @@ from physgnn.benchmark.training_tables import gpu_section as gpu_tables
 from physgnn.data.dataset import compute_stats
 from physgnn.groundtruth.engine import simulate
 from physgnn.models.profiling import StepTimer
-from physgnn.nn.epd import EncodeProcessDecode
+from physgnn.nn.epd import EncodeProcessDecode, Widths
 from physgnn.report import pareto
 
 CONF = CONF_DIR
@@ -188,7 +188,7 @@ def _paired_graph(n: int, pairs: int, f: int) -> tuple[torch.Tensor, torch.Tenso
 def test_flops_per_step_equals_counted_matmuls(third_law, surfaces, concat):
     torch.manual_seed(0)
     net = EncodeProcessDecode(
-        node_in=20, hidden=16, M=2, third_law=third_law, use_surfaces=surfaces, concat_trick=concat
+        Widths(20), hidden=16, M=2, third_law=third_law, use_surfaces=surfaces, concat_trick=concat
     )
     n, pairs, f = 7, 5, 6
     pp, ps = _paired_graph(n, pairs, f)
@@ -202,7 +202,7 @@ def test_training_flops_count_forward_and_backward():
     layer): counted by torch, backward skips the encoders' first-layer input gradients, so
     the count is an upper bound, within 1 % at the baseline's width."""
     torch.manual_seed(0)
-    net = EncodeProcessDecode(node_in=20, hidden=128, M=5)
+    net = EncodeProcessDecode(Widths(20), hidden=128, M=5)
     n, pairs, f = 40, 30, 45
     pp, ps = _paired_graph(n, pairs, f)
     with FlopCounterMode(display=False) as counter:
@@ -219,7 +219,10 @@ def test_step_timer_records_the_size_of_every_graph_it_watched():
     cfg = _cfg("quick=true")
     scene = bench_scenes.bench_scene(cfg.scene, 12, np.random.default_rng(0), 8.0, 4.0, 5)
     traj = simulate(scene, {"substeps": 2})
-    one_pass = {"network": {"hidden": 16, "M": 2}, "contact_passes": 0}  # one build per step
+    one_pass = {
+        "network": {"hidden": 16, "M": 2},
+        "contacts": {"contact_passes": 0},
+    }  # one build per step
     sim = make_simulator(cfg.model, one_pass, compute_stats([traj]))
     states = frame_states(traj, sim.H)[:2]
     timer = StepTimer()

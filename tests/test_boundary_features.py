@@ -142,7 +142,7 @@ def test_gns_style_model_runs_forward_and_backward():
 
 
 def test_bad_boundary_radius():
-    with pytest.raises(ValueError, match="boundary_radius must be > 0"):
+    with pytest.raises(ValueError, match="model.inputs.boundary_radius must be a number > 0"):
         make(boundary_radius=0.0)
 
 
@@ -151,7 +151,8 @@ def test_config_keys_are_accepted(model):
     with initialize_config_dir(config_dir=CONF, version_base="1.3"):
         cfg = compose("train", overrides=[f"model={model}"])
     check_arguments(cfg)
-    assert cfg.model.boundary_features == (model == "gns") and cfg.model.boundary_radius == R
+    inputs = cfg.model.inputs
+    assert inputs.boundary_features == (model == "gns") and inputs.boundary_radius == R
     sim = instantiate(cfg.model, stats=STATS)
     assert sim.use_boundary == (model == "gns") and sim.boundary_radius == R
 

@@ -12,7 +12,7 @@ from simdata import learned
 from torch.testing import assert_close
 
 from physgnn.models.capture import ShapeBoundCall, compile_in_place
-from physgnn.nn.epd import EncodeProcessDecode
+from physgnn.nn.epd import EncodeProcessDecode, Widths
 from physgnn.nn.padding import bucket, pad_graph
 
 
@@ -40,7 +40,7 @@ def random_graph(n: int, pairs: int, f: int, seed: int = 0):
 @pytest.mark.parametrize("n, pairs, f", [(5, 4, 5), (37, 60, 40), (100, 0, 100)])
 def test_a_padded_graph_gives_the_network_the_same_outputs(n, pairs, f):
     torch.manual_seed(1)
-    net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=16, M=2).eval()
+    net = EncodeProcessDecode(Widths(5, 4, 10), hidden=16, M=2).eval()
     graph = random_graph(n, pairs, f)
     padded, real = pad_graph(*graph)
     assert real == n and padded[0].shape[0] == bucket(n + 1)
@@ -69,7 +69,7 @@ def test_the_padded_simulator_predicts_as_the_plain_one():
 @pytest.mark.slow
 def test_the_compiled_padded_network_equals_eager_and_keeps_its_shapes():
     torch.manual_seed(1)
-    net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=16, M=2).eval()
+    net = EncodeProcessDecode(Widths(5, 4, 10), hidden=16, M=2).eval()
     compiled = torch.compile(net, dynamic=False)
     with torch.no_grad():
         for n, pairs in ((30, 40), (31, 42)):  # the same buckets: one compiled graph
@@ -80,7 +80,7 @@ def test_the_compiled_padded_network_equals_eager_and_keeps_its_shapes():
 
 def test_a_compiled_network_keeps_its_weights_and_warns_past_its_shapes():
     torch.manual_seed(2)
-    net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=8, M=1).eval()
+    net = EncodeProcessDecode(Widths(5, 4, 10), hidden=8, M=1).eval()
     keys = set(net.state_dict())
     compile_in_place(net, max_shapes=2, backend="eager")  # no code generation: the logic only
     assert set(net.state_dict()) == keys and isinstance(net.forward, ShapeBoundCall)
@@ -99,7 +99,7 @@ def test_a_compiled_network_keeps_its_weights_and_warns_past_its_shapes():
 
 
 def test_dynamic_shapes_count_as_one_shape_whatever_the_graph_sizes():
-    net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=8, M=1).eval()
+    net = EncodeProcessDecode(Widths(5, 4, 10), hidden=8, M=1).eval()
     compile_in_place(net, dynamic=True, max_shapes=2, backend="eager")
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("error")  # 20 sizes, one graph: never past the bound
@@ -109,7 +109,7 @@ def test_dynamic_shapes_count_as_one_shape_whatever_the_graph_sizes():
 
 
 def test_compile_options_are_checked_in_one_line():
-    net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=8, M=1)
+    net = EncodeProcessDecode(Widths(5, 4, 10), hidden=8, M=1)
     with pytest.raises(ValueError, match="unknown compile mode 'fast'"):
         ShapeBoundCall(net, mode="fast")
     with pytest.raises(ValueError, match="max_shapes must be >= 1"):

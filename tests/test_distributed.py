@@ -242,7 +242,7 @@ def test_two_ddp_processes_match_one_on_the_same_global_batch(three_sphere_datas
         "datamodule.val_pairs=8",
         "lit.noise.std=0",
         "lit.noise.contact_depth=0",
-        "model.gravity_prior=false",
+        "model.contacts.gravity_prior=false",
         "lit.pushforward.steps=0",
         f"data.dir={three_sphere_dataset}",
     ]

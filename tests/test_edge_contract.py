@@ -24,7 +24,7 @@ from physgnn.graph.edges import (
     pp_inputs,
     ps_inputs,
 )
-from physgnn.nn.epd import EncodeProcessDecode
+from physgnn.nn.epd import Widths
 
 BOOLS = (False, True)
 OPTIONS = [
@@ -57,7 +57,7 @@ def test_the_widths_by_hand():
     assert pp_inputs(3, True, True, True, True).width == 4 + 5 + 9 + 1 + 2  # the default's
     assert ps_inputs(True, True).width == 10 + 3 + 2
     # the network's own defaults are the graph's blocks (nn imports nothing of physgnn)
-    defaults = inspect.signature(EncodeProcessDecode).parameters
+    defaults = inspect.signature(Widths).parameters
     assert (defaults["pp_in"].default, defaults["ps_in"].default) == (PP.width, PS.width)
 
 

@@ -116,15 +116,15 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
         "gns": {
             "model.network.third_law": False,
             "model.network.use_surfaces": False,
-            "model.boundary_features": True,
+            "model.inputs.boundary_features": True,
             **REPORT_INPUTS,
         },
         # each invariance of the default model undone alone
         "vi_connectivity": {"model.graph.connectivity": "vi"},
-        "absolute_pairs": {"model.relative_pairs": False},
-        "absolute_mass": {"model.mass_ratio": False},
+        "absolute_pairs": {"model.inputs.relative_pairs": False},
+        "absolute_mass": {"model.inputs.mass_ratio": False},
         "sum_aggregation": {"model.network.aggregation": "sum"},
-        "no_rest_decision": {"model.rest_decision": False},
+        "no_rest_decision": {"model.contacts.rest_decision": False},
         "uniform_noise": {"lit.noise.rest_scale": 1.0},
         "no_dense_data": {},  # the data only (below)
     }

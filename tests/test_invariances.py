@@ -21,7 +21,7 @@ from physgnn.groundtruth.families import dense_contact
 from physgnn.groundtruth.layouts import OVERLAP_TOL, aggregate_positions, row_positions
 from physgnn.models.learned import LearnedSimulator
 from physgnn.nn.aggregation import IndexSum, inverse_degree
-from physgnn.nn.epd import EncodeProcessDecode
+from physgnn.nn.epd import EncodeProcessDecode, Widths
 from physgnn.physics.energy import G
 from physgnn.physics.geometry import rectangle_offset
 from physgnn.physics.scene import STATIC, Effects, ground_plane, make_plane
@@ -203,7 +203,7 @@ def test_inverse_degree_counts_the_incoming_edges():
 @pytest.mark.parametrize("k", [6, 12])
 def test_a_star_of_k_identical_neighbours_sums_k_times_and_averages_to_one(k):
     torch.manual_seed(0)
-    net = EncodeProcessDecode(node_in=5, pp_in=4, ps_in=10, hidden=16, M=2, aggregation="mean")
+    net = EncodeProcessDecode(Widths(5, 4, 10), hidden=16, M=2, aggregation="mean")
     net.eval()
     with torch.no_grad():
         aggs, outs = {}, {}
@@ -221,9 +221,7 @@ def test_a_star_of_k_identical_neighbours_sums_k_times_and_averages_to_one(k):
         assert_close(mean_k[0], mean_1[0])  # the mean does not
         assert_close(outs[k][0], outs[1][0])  # nor the centre's prediction
         assert_close(outs[k][1:], outs[1][1:].expand(k, -1))  # every leaf as the one
-        summed = EncodeProcessDecode(
-            node_in=5, pp_in=4, ps_in=10, hidden=16, M=2, aggregation="sum"
-        )
+        summed = EncodeProcessDecode(Widths(5, 4, 10), hidden=16, M=2, aggregation="sum")
         summed.load_state_dict(net.state_dict())
         assert not torch.allclose(summed(*star(k))[0], summed(*star(1))[0])  # control
 

@@ -1,7 +1,8 @@
-"""The config's layout: runs whose model holds the network's and the graph builder's keys flat,
-or whose ``lit`` holds the recipe's keys flat (an earlier physgnn's, the shipped weights), load
-as today's nested nodes and groups; their overrides resume, a flat key typed today is one line
-naming its new spelling, and the study reads their registry keys in today's spelling."""
+"""The config's layout: runs whose model holds the network's, the graph builder's or the
+simulator's groups' keys flat, or whose ``lit`` holds the recipe's keys flat (an earlier
+physgnn's, the shipped weights), load as today's nested nodes and groups; their overrides
+resume, a flat key typed today is one line naming its new spelling, and the study reads their
+registry keys in today's spelling."""
 
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from physgnn.training.layout import (
     EARLIER_MODEL,
     FLAT_KEYS,
     NODES,
+    PREVIOUS_MODEL,
     flat_layout,
     key_of_today,
     lit_of_today,
@@ -62,16 +64,18 @@ FLAT_LIT = {
 }
 
 
-def flat_model(model) -> dict:
-    """A model config of today's layout in the flat layout of an earlier physgnn."""
-    flat = {k: v for k, v in model.items() if k not in NODES}
-    return flat | {key: model[node][name] for key, (node, name) in FLAT_KEYS.items()}
+def flat_model(model, nodes=tuple(NODES)) -> dict:
+    """A model config of today's layout with the keys of ``nodes`` flat (all: the layout of an
+    earlier physgnn; ``("inputs", "contacts")``: the layout before the simulator's groups)."""
+    flat = {k: v for k, v in model.items() if k not in nodes}
+    keys = {key: where for key, where in FLAT_KEYS.items() if where[0] in nodes}
+    return flat | {key: model[node][name] for key, (node, name) in keys.items()}
 
 
-def flatten(config: Path) -> None:
-    """Rewrite a run's ``.hydra/config.yaml`` with its model in the flat layout."""
+def flatten(config: Path, nodes=tuple(NODES)) -> None:
+    """Rewrite a run's ``.hydra/config.yaml`` with the keys of ``nodes`` of its model flat."""
     cfg = OmegaConf.load(config)
-    cfg.model = flat_model(cfg.model)
+    cfg.model = flat_model(cfg.model, nodes)
     OmegaConf.save(cfg, config)
 
 
@@ -81,6 +85,28 @@ def flat_run(tiny_run, tmp_path) -> Path:
     run = Path(shutil.copytree(tiny_run, tmp_path / "run"))
     flatten(run / ".hydra" / "config.yaml")
     return run
+
+
+def test_a_run_of_the_layout_before_the_groups_loads_as_today_and_predicts_alike(
+    tiny_run, tmp_path
+):
+    run = Path(shutil.copytree(tiny_run, tmp_path / "groups"))
+    config = run / ".hydra" / "config.yaml"
+    flatten(config, ("inputs", "contacts"))
+    saved = OmegaConf.load(config).model
+    assert "network" in saved and "contacts" not in saved and "contact_passes" in saved
+    (run / ".hydra" / "config.yaml").write_text(
+        config.read_text().replace("contact_passes: 2", "contact_passes: 1")
+    )
+    then, then_cfg, _ = load_run(run)
+    now, now_cfg, _ = load_run(tiny_run)
+    assert then_cfg.model.contacts.contact_passes == then.contact_passes == 1
+    then_cfg.model.contacts.contact_passes = 2
+    assert then_cfg.model == now_cfg.model
+    state = batch([trajectory(3, seed=5)], t=2, H=now.H)
+    now.contact_passes = 1
+    with torch.no_grad():
+        assert torch.equal(then(state)[0], now(state)[0])
 
 
 def test_a_run_of_the_flat_layout_loads_as_today_and_predicts_alike(tiny_run, flat_run):
@@ -100,10 +126,23 @@ def test_a_flat_run_whose_weights_do_not_fit_names_todays_key(flat_run):
         load_run(flat_run)
 
 
+def test_a_run_whose_weights_do_not_fit_names_the_groups_key(flat_run):
+    config = flat_run / ".hydra" / "config.yaml"
+    config.write_text(
+        config.read_text().replace("\n  mass_ratio: true\n", "\n  mass_ratio: false\n")
+    )
+    match = r"\(model\.inputs\.mass_ratio is True in the weights, False in the"
+    with pytest.raises(RunError, match=match):
+        load_run(flat_run)
+
+
 def test_the_shipped_weights_hold_a_flat_config_and_load_in_todays_layout():
     assert "network" not in OmegaConf.load(PRETRAINED_DIR / ".hydra" / "config.yaml").model
     simulator, cfg, _ = load_run("pretrained")
     assert cfg.model.network.M == simulator.M == 5 and cfg.model.graph.backend == "auto"
+    assert cfg.model.inputs.mass_ratio and cfg.model.contacts.rest_speed == 0.01
+    # trained before the contact changes: one pass, no pair impulses, the latch
+    assert (simulator.contact_passes, simulator.pair_impulses, simulator.latch) == (0, False, True)
     assert simulator.graph_builder.connectivity == cfg.model.graph.connectivity == "approach"
 
 
@@ -122,10 +161,10 @@ def test_a_flat_model_lacking_the_later_keys_gets_its_own_models_values():
     assert today.network == NODES["network"] | {"M": 3, "aggregation": "sum"}
     graph = {"connectivity": "vi", "backend": "torch", "fixed_capacity": False}
     assert today.graph == NODES["graph"] | graph
-    nested = ("aggregation", "fixed_capacity")  # keys of the nodes
-    assert {k: today[k] for k in EARLIER_MODEL if k not in nested} == {
-        k: v for k, v in EARLIER_MODEL.items() if k not in nested
-    }
+    nested = {key: today[node].get(name) for key, (node, name) in FLAT_KEYS.items()}
+    assert {key: nested[key] for key in EARLIER_MODEL} == EARLIER_MODEL
+    assert {key: nested[key] for key in PREVIOUS_MODEL} == PREVIOUS_MODEL
+    assert today.contacts._target_ == "physgnn.models.options.ContactHandling"
     assert model_of_today(today) == today  # today's layout comes back as it is
 
 
@@ -134,6 +173,8 @@ def test_keys_translate_both_ways_and_the_default_keeps_its_fingerprint():
     assert key_of_today("model.neighbor_backend") == "model.graph.backend"
     assert key_of_today("model.H=0") == "model.H=0" == key_of_today("model.H=0")
     assert key_of_today("model.network.M=1") == "model.network.M=1"
+    assert key_of_today("model.contact_passes=0") == "model.contacts.contact_passes=0"
+    assert key_of_today("model.mass_ratio") == "model.inputs.mass_ratio"
     flat = {"model.network.M": 5, "model.network._target_": "x", "model.graph.backend": "auto"}
     assert flat_layout(flat) == {"model.M": 5, "model.neighbor_backend": "auto"}
     # the default's fingerprint names its model, not the layout that spells it
@@ -189,6 +230,15 @@ def test_a_flat_recipe_key_typed_today_is_one_line_naming_the_new_one():
     with pytest.raises(ConfigError, match=r"lit.scheduler.decay_per_epoch=0.1 lit.schedul"):
         check_resume_argv(["lit.scheduler.final_lr_factor=0.1"])
     check_resume_argv(["lit.noise.std=0.01", "lit.compile.enabled=true"])  # today's: taken
+    with pytest.raises(
+        ConfigError,
+        match=r"^model.contact_passes is now model.contacts.contact_passes: write "
+        r"model.contacts.contact_passes=0$",
+    ):
+        check_resume_argv(["model.contact_passes=0"])
+    with pytest.raises(ConfigError, match=r"^model.boundary_features is now model.inputs.bound"):
+        check_resume_argv(["+model.boundary_features=true"])
+    check_resume_argv(["model.contacts.contact_passes=0", "model.H=1"])  # today's: taken
 
 
 def test_an_interrupted_run_of_flat_overrides_resumes_with_todays_spelling(tmp_path):
@@ -230,7 +280,7 @@ def test_registry_records_of_the_flat_layout_read_with_todays_keys(tmp_path):
         append_record(path, {"key": key, "seed": 0, "budget": {"steps": 1}, "status": "finished"})
     assert [r["key"] for r in read_registry(path)] == [
         "model.network.M=1",
-        "model.boundary_features=True model.network.aggregation=sum",
+        "model.inputs.boundary_features=True model.network.aggregation=sum",
         "baseline",
         "lit.pushforward.growth=450 lit.pushforward.steps=4",
     ]

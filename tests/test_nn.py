@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 import torch
 from torch.testing import assert_close
 from torch.utils.flop_counter import FlopCounterMode
 
-from physgnn.nn import MLP, EncodeProcessDecode, InteractionBlock, SurfaceBlock
+from physgnn.nn import MLP, EncodeProcessDecode, InteractionBlock, SurfaceBlock, Widths
 
 H = 8  # latent width of the small test models
 NODE_IN = 5
@@ -35,9 +37,14 @@ def graph(seed: int = 0, n: int = 5, pairs=PAIRS) -> dict:
     )
 
 
+WIDTHS = {field.name for field in dataclasses.fields(Widths)}
+
+
 def model(seed: int = 0, **kwargs) -> EncodeProcessDecode:
+    """A network of ``hidden`` H, M = 3 and ``kwargs`` (the :class:`Widths` among them)."""
     torch.manual_seed(seed)
-    return EncodeProcessDecode(**{"node_in": NODE_IN, "hidden": H, "M": 3, **kwargs})
+    widths = {"node_in": NODE_IN} | {k: kwargs.pop(k) for k in WIDTHS & set(kwargs)}
+    return EncodeProcessDecode(Widths(**widths), **{"hidden": H, "M": 3, **kwargs})
 
 
 def test_mlp_is_linear_relu_linear_and_resets():

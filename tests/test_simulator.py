@@ -15,6 +15,7 @@ from torch.testing import assert_close
 from physgnn import CONF_DIR
 from physgnn.graph.builder import GraphBuilder
 from physgnn.models.learned import LearnedSimulator, StatsError
+from physgnn.models.options import ContactHandling, ModelInputs
 from physgnn.models.profiling import StepTimer
 from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.physics.scene import Effects
@@ -41,8 +42,13 @@ def defaults_of(cls) -> dict:
 
 # The nodes of the model config, the constructor each is built with and that constructor's
 # arguments the config leaves to the code (the widths the simulator sets; an evaluation detail).
-LEFT_TO_CODE = {"pp_in", "ps_in", "out_dim", "concat_trick", "pair_out"}
-NODES = {"network": (EncodeProcessDecode, LEFT_TO_CODE), "graph": (GraphBuilder, set())}
+LEFT_TO_CODE = {"widths", "concat_trick"}
+NODES = {
+    "network": (EncodeProcessDecode, LEFT_TO_CODE),
+    "graph": (GraphBuilder, set()),
+    "inputs": (ModelInputs, set()),
+    "contacts": (ContactHandling, set()),
+}
 
 
 def test_constructor_defaults_are_the_default_model_and_report_model_is_the_reports():
@@ -50,9 +56,10 @@ def test_constructor_defaults_are_the_default_model_and_report_model_is_the_repo
     assert get_class(baseline.pop("_target_")) is LearnedSimulator
     for node, (cls, left) in NODES.items():
         keys = baseline.pop(node)
-        assert get_class(keys.pop("_target_")) is cls and keys.pop("_partial_", node == "graph")
+        assert get_class(keys.pop("_target_")) is cls and keys.pop("_partial_", node != "network")
         assert keys == {k: v for k, v in defaults_of(cls).items() if k not in left}, node
-    assert defaults_of(LearnedSimulator) == baseline | {"network": None, "graph": None}
+    groups = {"inputs": ModelInputs(), "contacts": ContactHandling()}
+    assert defaults_of(LearnedSimulator) == baseline | {"network": None, "graph": None} | groups
     own = OmegaConf.load(MODEL_CONF / "report.yaml")
     own.pop("defaults")
     default = OmegaConf.load(MODEL_CONF / "baseline.yaml")

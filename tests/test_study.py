@@ -78,18 +78,18 @@ def test_the_default_study_adds_the_contact_switches_to_the_reports_sweeps(tmp_p
     assert sweeps == [*SWEEPS, "ablation_contacts"]
     extra = [c.key for c in study_configs(sweeps)][18:]
     assert extra == [
-        "model.contact_passes=0",
-        "model.pair_impulses=False",
-        "model.recent_contact=True",
+        "model.contacts.contact_passes=0",
+        "model.contacts.pair_impulses=False",
+        "model.contacts.recent_contact=True",
         "lit.loss.truth_contacts=False",
-        "model.plane_materials=False",
-        "model.contact_features=False",
-        "model.material_features=False",
-        "model.gravity_prior=False",
+        "model.inputs.plane_materials=False",
+        "model.inputs.contact_features=False",
+        "model.inputs.material_features=False",
+        "model.contacts.gravity_prior=False",
         "lit.loss.lambda_contact=0",
         "lit.noise.contact_depth=0",
         "model.network.layer_norm=True",
-        "model.contact_memory=True",
+        "model.contacts.contact_memory=True",
         "lit.pushforward.steps=0",
         "lit.pushforward.growth=450 lit.pushforward.steps=4",
     ]
@@ -120,12 +120,13 @@ def test_the_five_sweeps_are_18_configurations_the_baseline_shared():
     assert by_key["model.graph.connectivity=vi"].points == {"ablation_connectivity": "vi"}
     gns = [k for k in keys if "use_surfaces=False" in k]
     assert gns == [
-        "model.boundary_features=True model.contact_features=False model.contact_passes=0 "
-        "model.graph.connectivity=vi model.gravity_prior=False model.mass_ratio=False "
-        "model.material_features=False model.network.aggregation=sum "
-        "model.network.third_law=False model.network.use_surfaces=False "
-        "model.pair_impulses=False model.plane_materials=False model.relative_pairs=False "
-        "model.rest_decision=False"
+        "model.contacts.contact_passes=0 model.contacts.gravity_prior=False "
+        "model.contacts.pair_impulses=False model.contacts.rest_decision=False "
+        "model.graph.connectivity=vi model.inputs.boundary_features=True "
+        "model.inputs.contact_features=False model.inputs.mass_ratio=False "
+        "model.inputs.material_features=False model.inputs.plane_materials=False "
+        "model.inputs.relative_pairs=False model.network.aggregation=sum "
+        "model.network.third_law=False model.network.use_surfaces=False"
     ]  # the GNS-style model is the report's (tests/simdata.py, REPORT_MODEL)
     jobs = study_jobs(configs, [0, 1, 2])
     assert len(jobs) == 54

@@ -60,7 +60,8 @@ from physgnn.models.normalisation import (  # noqa: F401 (StatsError: re-exporte
     register_stats,
     stats_from_state_dict,
 )
-from physgnn.nn.epd import EncodeProcessDecode
+from physgnn.models.options import ContactHandling, ModelInputs
+from physgnn.nn.epd import EncodeProcessDecode, Widths
 from physgnn.nn.padding import pad_graph
 from physgnn.physics.scene import EFFECT_NAMES
 
@@ -68,6 +69,7 @@ ROTATION = EFFECT_NAMES.index("rotation")
 # Outputs: normalised Δv and Δω (then the rest logit with rest_decision); per pair with
 # pair_impulses: an impulse and a couple (3 + 3). The edge inputs: physgnn.graph.edges.
 OUTPUTS, PAIR_OUTPUTS = 6, 6
+DEFAULT_INPUTS, DEFAULT_CONTACTS = ModelInputs(), ContactHandling()
 
 
 class LearnedSimulator(nn.Module):
@@ -75,12 +77,15 @@ class LearnedSimulator(nn.Module):
 
     Constructor arguments are the ``model`` config keys (``conf/model/*.yaml``); ``stats`` is
     the dataset's ``stats.json`` dict (runtime object). ``network`` makes the network from the
-    widths the simulator's inputs set (``node_in``, ``pp_in``, ``ps_in``, ``out_dim``; ``None``:
+    :class:`~physgnn.nn.epd.Widths` the simulator's inputs set (``None``:
     :class:`~physgnn.nn.epd.EncodeProcessDecode` with its defaults; the config's ``network``
     node is a partial of it); ``graph`` is the :class:`~physgnn.graph.builder.GraphBuilder`
     (``None``: one with its defaults). ``length_scale`` divides every length of the edge
     features (``None``: the mean sphere diameter of the training set); velocities in edge
-    features are divided by the velocity std. Node input per sphere:
+    features are divided by the velocity std. ``inputs``
+    (:class:`~physgnn.models.options.ModelInputs`) says what the network sees, ``contacts``
+    (:class:`~physgnn.models.options.ContactHandling`) how a step treats contacts. Node input
+    per sphere:
     ``[(v − μ_v)/σ_v for the H+1 latest v, (ω − μ_ω)/σ_ω likewise, radius, mass (standardised)]``
     = ``6·(H+1) + 2`` numbers, plus 4 with ``material_features``, plus 6 with
     ``boundary_features`` (:meth:`boundary_features`, ``boundary_radius`` R in metres);
@@ -99,48 +104,40 @@ class LearnedSimulator(nn.Module):
         network: Callable[..., EncodeProcessDecode] | None = None,
         graph: GraphBuilder | None = None,
         length_scale: float | None = None,
-        boundary_features: bool = False,
-        boundary_radius: float = 2.0,
-        contact_features: bool = True,
-        material_features: bool = True,
-        gravity_prior: bool = True,
+        inputs: ModelInputs = DEFAULT_INPUTS,
+        contacts: ContactHandling = DEFAULT_CONTACTS,
         pad_to_buckets: bool = False,
-        relative_pairs: bool = True,
-        mass_ratio: bool = True,
-        rest_decision: bool = True,
-        rest_speed: float = 0.01,
-        contact_passes: int = 2,
-        pair_impulses: bool = True,
-        recent_contact: bool = False,
-        plane_materials: bool = True,
-        contact_memory: bool = False,
     ):
         super().__init__()
-        _check_sizes(H, boundary_radius, rest_speed, contact_passes)
+        if H < 0:
+            raise ValueError(f"need H >= 0 (got H={H})")
         self.H, self.pad_to_buckets = int(H), bool(pad_to_buckets)
-        self.use_boundary, self.boundary_radius = bool(boundary_features), float(boundary_radius)
-        self.contact_features = bool(contact_features)
-        self.material_features = bool(material_features)
-        self.gravity_prior = bool(gravity_prior)
-        self.relative_pairs, self.mass_ratio = bool(relative_pairs), bool(mass_ratio)
-        self.rest_decision, self.rest_speed = bool(rest_decision), float(rest_speed)
-        self.contact_passes, self.pair_impulses = int(contact_passes), bool(pair_impulses)
-        self.latch, self.contact_memory = bool(recent_contact), bool(contact_memory)
-        self.plane_materials = bool(plane_materials) and self.material_features
+        self.inputs, self.contacts = inputs, contacts
+        self.use_boundary, self.boundary_radius = inputs.boundary_features, inputs.boundary_radius
+        self.contact_features = inputs.contact_features
+        self.material_features = inputs.material_features
+        self.relative_pairs, self.mass_ratio = inputs.relative_pairs, inputs.mass_ratio
+        self.plane_materials = inputs.plane_materials and self.material_features
+        self.gravity_prior = contacts.gravity_prior
+        self.rest_decision, self.rest_speed = contacts.rest_decision, float(contacts.rest_speed)
+        self.contact_passes = int(contacts.contact_passes)
+        self.pair_impulses = contacts.pair_impulses
+        self.latch, self.contact_memory = contacts.recent_contact, contacts.contact_memory
         self._register_stats(stats, length_scale)
         self.graph_builder = GraphBuilder() if graph is None else graph
         self.network = self._network(EncodeProcessDecode if network is None else network)
 
     def _network(self, network: Callable[..., EncodeProcessDecode]) -> EncodeProcessDecode:
-        """``network`` called with the input and output widths of the simulator's inputs."""
-        pairs = {"pair_out": PAIR_OUTPUTS} if self.pair_impulses else {}
-        built = network(
+        """``network`` called with the :class:`~physgnn.nn.epd.Widths` of the simulator's
+        inputs."""
+        widths = Widths(
             node_in=self.node_in,
             pp_in=self.pp_layout.width,
             ps_in=self.ps_layout.width,
             out_dim=OUTPUTS + int(self.rest_decision),
-            **pairs,
+            pair_out=PAIR_OUTPUTS if self.pair_impulses else 0,
         )
+        built = network(widths=widths)
         if len(built.blocks) < 1:
             raise ValueError(f"need M >= 1 message-passing blocks (got M={len(built.blocks)})")
         return built
@@ -373,14 +370,3 @@ class LearnedSimulator(nn.Module):
         where = self.reach(state, graph, provisional)
         pred = self.network_prediction(state, graph, where.planes)
         return self.to_physical(state, pred, where.spheres, where.supported)
-
-
-def _check_sizes(H: int, boundary_radius: float, rest_speed: float, passes: int) -> None:
-    if H < 0:
-        raise ValueError(f"need H >= 0 (got H={H})")
-    if not boundary_radius > 0:
-        raise ValueError(f"boundary_radius must be > 0 (got {boundary_radius})")
-    if not rest_speed > 0:
-        raise ValueError(f"rest_speed must be > 0 (got {rest_speed})")
-    if passes < 0:
-        raise ValueError(f"contact_passes must be >= 0 (got {passes})")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
@@ -14,6 +15,20 @@ from physgnn.nn.pair_decoder import PairDecoder
 from physgnn.nn.surface import SurfaceBlock
 
 AGGREGATIONS = ("sum", "mean")
+
+
+@dataclass(frozen=True)
+class Widths:
+    """The network's input and output widths, which the simulator's inputs set (not config):
+    ``node_in`` numbers per sphere, ``pp_in`` per pp edge, ``ps_in`` per ps edge (the defaults:
+    the ``PP`` and ``PS`` widths of ``physgnn.graph.edges``), ``out_dim`` per sphere out and
+    ``pair_out`` antisymmetric numbers per pp pair (0: no pair decoder)."""
+
+    node_in: int
+    pp_in: int = 4
+    ps_in: int = 10
+    out_dim: int = 6
+    pair_out: int = 0
 
 
 class ProcessorBlock(nn.Module):
@@ -87,7 +102,8 @@ class ProcessorBlock(nn.Module):
 
 class EncodeProcessDecode(nn.Module):
     """Node, pp and ps encoders to width ``hidden``; ``M`` :class:`ProcessorBlock`; a decoder
-    to ``out_dim`` numbers per sphere (report: v and ω, 6).
+    to ``out_dim`` numbers per sphere (report: v and ω, 6); the widths are one
+    :class:`Widths` (``widths``).
 
     ``forward(x [N, node_in], pp_index [2, E], pp_attr [E, pp_in], ps_index [2, F],
     ps_attr [F, ps_in], material [N] | None) -> [N, out_dim]``; the simulator sets ``pp_in``
@@ -109,7 +125,7 @@ class EncodeProcessDecode(nn.Module):
       :class:`ProcessorBlock`).
     - ``aggregation``: ``"mean"`` (bounded in the number of contacts, :class:`ProcessorBlock`)
       or ``"sum"`` (the report's).
-    - ``pair_out`` > 0: a :class:`~physgnn.nn.pair_decoder.PairDecoder` to ``pair_out``
+    - ``widths.pair_out`` > 0: a :class:`~physgnn.nn.pair_decoder.PairDecoder` to ``pair_out``
       antisymmetric numbers per pp pair (:meth:`forward_pairs`; the default model's pair
       impulses).
 
@@ -118,12 +134,9 @@ class EncodeProcessDecode(nn.Module):
 
     def __init__(
         self,
-        node_in: int,
-        pp_in: int = 4,
-        ps_in: int = 10,
+        widths: Widths,
         hidden: int = 128,
         M: int = 5,
-        out_dim: int = 6,
         third_law: bool = True,
         use_surfaces: bool = True,
         num_materials: int = 0,
@@ -131,9 +144,10 @@ class EncodeProcessDecode(nn.Module):
         concat_trick: str = "auto",
         layer_norm: bool = False,
         aggregation: str = "mean",
-        pair_out: int = 0,
     ):
         super().__init__()
+        node_in, pp_in, ps_in = widths.node_in, widths.pp_in, widths.ps_in
+        out_dim, pair_out = widths.out_dim, widths.pair_out
         if min(node_in, pp_in, ps_in, hidden, out_dim) < 1 or M < 0:
             raise ValueError("dimensions must be positive and M >= 0")
         if aggregation not in AGGREGATIONS:

@@ -2,10 +2,13 @@
 configs of earlier runs (``.hydra/config.yaml``, the shipped ``physgnn/pretrained``) are read
 into today's.
 
-Today's layout (``conf/model/baseline.yaml``) nests the network and the graph builder in nodes
-of their own, ``model.network`` and ``model.graph``, each built by Hydra from its ``_target_``.
-Runs of an earlier physgnn hold them as flat keys of ``model`` (``model.M``,
-``model.connectivity``, ``model.neighbor_backend``): :func:`model_of_today` moves them.
+Today's layout (``conf/model/baseline.yaml``) nests the network, the graph builder and the
+simulator's two groups of options in nodes of their own, ``model.network``, ``model.graph``,
+``model.inputs`` and ``model.contacts`` (:mod:`physgnn.models.options`), each built by Hydra
+from its ``_target_``. Runs of an earlier physgnn hold them as flat keys of ``model``
+(``model.M``, ``model.connectivity``, ``model.neighbor_backend``, ``model.contact_passes``):
+:func:`model_of_today` moves them, and a flat key of the simulator's groups typed on today's
+command line is refused naming its new spelling (:func:`check_renamed`).
 
 Likewise the training recipe: today's ``lit`` holds four groups (``lit.noise``,
 ``lit.pushforward``, ``lit.loss``, ``lit.compile``: :mod:`physgnn.training.recipe`) and its
@@ -46,7 +49,12 @@ LEARNED = "physgnn.models.learned.LearnedSimulator"
 NODES = {
     "network": {"_target_": "physgnn.nn.epd.EncodeProcessDecode", "_partial_": True},
     "graph": {"_target_": "physgnn.graph.builder.GraphBuilder"},
+    "inputs": {"_target_": "physgnn.models.options.ModelInputs"},
+    "contacts": {"_target_": "physgnn.models.options.ContactHandling"},
 }
+# The simulator's groups (physgnn/models/options.py): their flat keys are refused on a command
+# line (check_renamed), as the recipe's are.
+MODEL_GROUPS = ("inputs", "contacts")
 # Each flat model key of an earlier run: its node and its name there.
 FLAT_KEYS = {
     "hidden": ("network", "hidden"),
@@ -63,6 +71,20 @@ FLAT_KEYS = {
     "neighbor_backend": ("graph", "backend"),
     "clip_margin": ("graph", "clip_margin"),
     "fixed_capacity": ("graph", "fixed_capacity"),
+    "boundary_features": ("inputs", "boundary_features"),
+    "boundary_radius": ("inputs", "boundary_radius"),
+    "contact_features": ("inputs", "contact_features"),
+    "material_features": ("inputs", "material_features"),
+    "relative_pairs": ("inputs", "relative_pairs"),
+    "mass_ratio": ("inputs", "mass_ratio"),
+    "plane_materials": ("inputs", "plane_materials"),
+    "gravity_prior": ("contacts", "gravity_prior"),
+    "contact_passes": ("contacts", "contact_passes"),
+    "pair_impulses": ("contacts", "pair_impulses"),
+    "rest_decision": ("contacts", "rest_decision"),
+    "rest_speed": ("contacts", "rest_speed"),
+    "recent_contact": ("contacts", "recent_contact"),
+    "contact_memory": ("contacts", "contact_memory"),
 }
 
 
@@ -100,25 +122,23 @@ RUN_LENGTH_DECAY = "physgnn.training.schedule.RunLengthDecay"
 
 
 def model_of_today(model: DictConfig) -> DictConfig:
-    """``model`` (a run's ``model`` node) in today's layout: a moved target renamed; a flat
-        model (no ``network`` node: an earlier physgnn's) with the keys it lacks at its own model's
-        values (:data:`EARLIER_MODEL`) and its network and graph keys moved into their nodes
-        (:data:`FLAT_KEYS`); a learned simulator without the keys of the contact changes with its
-    own model's values (:data:`PREVIOUS_MODEL`). A model of today's layout comes back as it is."""
+    """``model`` (a run's ``model`` node) in today's layout: a moved target renamed; a model
+    without a ``network`` node (an earlier physgnn's) with the keys it lacks at its own model's
+    values (:data:`EARLIER_MODEL`); a learned simulator without the keys of the contact changes
+    with its own model's values (:data:`PREVIOUS_MODEL`); then every flat key moved into its
+    node (:data:`FLAT_KEYS`). A model of today's layout comes back as it is."""
     flat = OmegaConf.to_container(model, resolve=False)
     if flat.get("_target_") in MOVED_TARGETS:
         flat["_target_"] = MOVED_TARGETS[flat["_target_"]]
     if "network" not in flat:
         flat = EARLIER_MODEL | flat
-        nested = {k: v for k, v in flat.items() if k not in FLAT_KEYS}
-        nested |= {node: dict(keys) for node, keys in NODES.items()}
-        for key, (node, name) in FLAT_KEYS.items():
-            if key in flat:
-                nested[node][name] = flat[key]
-        flat = nested
-    if flat.get("_target_") == LEARNED:
+    if flat.get("_target_") == LEARNED and "contacts" not in flat:
         flat = PREVIOUS_MODEL | flat
-    return OmegaConf.create(flat)
+    nested = {k: v for k, v in flat.items() if k not in FLAT_KEYS}
+    for key, (node, name) in FLAT_KEYS.items():
+        if key in flat:
+            nested.setdefault(node, dict(NODES[node]))[name] = flat[key]
+    return OmegaConf.create(nested)
 
 
 def key_of_today(key: str) -> str:
@@ -192,16 +212,20 @@ def lit_of_today(lit: DictConfig) -> DictConfig:
 
 
 def renamed_key(name: str) -> str | None:
-    """Today's spelling of a flat recipe key (``lit.noise_std`` → ``lit.noise.std``), None for
-    any other key."""
+    """Today's spelling of a flat recipe key (``lit.noise_std`` → ``lit.noise.std``) or of a
+    flat key of the simulator's groups (``model.contact_passes`` →
+    ``model.contacts.contact_passes``), None for any other key."""
     if name.startswith("lit.") and name[4:] in LIT_KEYS:
         return "lit." + ".".join(LIT_KEYS[name[4:]])
+    if name.startswith("model.") and FLAT_KEYS.get(name[6:], ("",))[0] in MODEL_GROUPS:
+        return "model." + ".".join(FLAT_KEYS[name[6:]])
     return None
 
 
 def check_renamed(argv: list[str]) -> None:
-    """A flat recipe key of an earlier physgnn on a command line (``lit.noise_std=0.01``, a
-    ``final_lr_factor``) is refused in one line naming today's key."""
+    """A flat recipe or simulator key of an earlier physgnn on a command line
+    (``lit.noise_std=0.01``, ``model.contact_passes=0``, a ``final_lr_factor``) is refused in
+    one line naming today's key."""
     for arg in argv:
         name, sep, value = arg.lstrip("+~").partition("=")
         new = renamed_key(name)

@@ -14,8 +14,6 @@ RANGES = {
     "model.network.hidden": (1, True, None, "units per layer"),
     "model.network.num_materials": (0, True, None, "materials; 0: none"),
     "model.network.material_dim": (0, True, None, "material embedding size; 0: none"),
-    "model.boundary_radius": (0, False, None, "m"),
-    "model.rest_speed": (0, False, None, "m/s"),
     "datamodule.batch_size": (1, True, None, "pairs per step"),
     "datamodule.pairs_per_epoch": (1, True, None, "training pairs per epoch"),
     "datamodule.val_pairs": (1, True, None, "validation pairs"),
@@ -26,8 +24,9 @@ RANGES = {
 def check_range(key: str, value, hint=None) -> None:
     """``value`` of ``key`` lies in its :data:`RANGES` (``model.network.M=0``:
     ``model.network.M must be a whole number >= 1 (message-passing steps), got 0``); NaN never
-    does. The recipe's groups (``lit.noise`` ...) check their own ranges
-    (:mod:`physgnn.training.recipe`)."""
+    does. The recipe's groups (``lit.noise`` ...) and the model's (``model.inputs``,
+    ``model.contacts``) check their own ranges (:mod:`physgnn.training.recipe`,
+    :mod:`physgnn.models.options`)."""
     if key not in RANGES or not isinstance(value, int | float) or isinstance(value, bool):
         return
     least, closed, most, what = RANGES[key]

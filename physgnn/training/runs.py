@@ -219,12 +219,12 @@ SHAPE_KEYS = {
     "H": range(0, 9),
     "network.num_materials": range(0, 9),
     "network.material_dim": range(0, 33),
-    "boundary_features": (False, True),
-    "contact_features": (False, True),
-    "material_features": (False, True),
-    "relative_pairs": (False, True),
-    "mass_ratio": (False, True),
-    "rest_decision": (False, True),
+    "inputs.boundary_features": (False, True),
+    "inputs.contact_features": (False, True),
+    "inputs.material_features": (False, True),
+    "inputs.relative_pairs": (False, True),
+    "inputs.mass_ratio": (False, True),
+    "contacts.rest_decision": (False, True),
     "network.use_surfaces": (False, True),
 }
 

@@ -1,0 +1,82 @@
+"""The options of :class:`~physgnn.models.learned.LearnedSimulator` in two groups, each a
+frozen dataclass: the one source of its defaults, units and ranges. Each is mirrored by one
+node of ``conf/model/baseline.yaml`` (``model.inputs``, ``model.contacts``: its keys are the
+fields, Hydra builds it from its ``_target_``); a value out of range is refused when the group
+is made, in one line naming the key (:class:`~physgnn.errors.ConfigError`, a ``ValueError``).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass, fields
+from typing import ClassVar
+
+from physgnn.errors import ConfigError, check_flag, check_whole
+
+
+def _check_flags(group) -> None:
+    """Every ``bool`` field of ``group`` is true or false."""
+    for field in fields(group):
+        if field.type in ("bool", bool):
+            check_flag(f"{group.NODE}.{field.name}", getattr(group, field.name))
+
+
+def _check_positive(group, key: str, unit: str) -> None:
+    """The field ``key`` of ``group`` is a finite number > 0."""
+    value = getattr(group, key)
+    number = isinstance(value, numbers.Real) and not isinstance(value, bool)
+    if not number or not math.isfinite(value) or value <= 0:
+        raise ConfigError(f"{group.NODE}.{key} must be a number > 0 ({unit}), got {value!r}")
+
+
+@dataclass(frozen=True)
+class ModelInputs:
+    """What the network sees beyond the velocity histories, radius and mass.
+
+    ``boundary_features``: each sphere's distance to the nearest plane along ±x, ±y, ±z,
+    clipped at ``boundary_radius`` (m) and divided by it (the GNS-style baseline's);
+    ``contact_features``: pp signed gap and normal relative speed, ps clearance, normal and
+    tangential speed; ``material_features``: each sphere's restitution and friction values;
+    ``relative_pairs``: pp edges carry relative quantities only; ``mass_ratio``: masses only as
+    the pair ratio m_i / (m_i + m_j); ``plane_materials``: ps edges carry the sphere–plane
+    contact's restitution and friction (needs ``material_features``)."""
+
+    NODE: ClassVar[str] = "model.inputs"
+    boundary_features: bool = False
+    boundary_radius: float = 2.0
+    contact_features: bool = True
+    material_features: bool = True
+    relative_pairs: bool = True
+    mass_ratio: bool = True
+    plane_materials: bool = True
+
+    def __post_init__(self) -> None:
+        _check_flags(self)
+        _check_positive(self, "boundary_radius", "m")
+
+
+@dataclass(frozen=True)
+class ContactHandling:
+    """How a step treats contacts (:mod:`physgnn.models.learned`'s module doc).
+
+    ``gravity_prior``: spheres out of reach of any contact fly ballistically;
+    ``contact_passes`` K: at most K rebuilds of the graph on a pass's provisional velocities
+    (0: one pass); ``pair_impulses``: sphere–sphere interactions decoded as antisymmetric pair
+    impulses; ``rest_decision``: a 7th output, the logit of "at rest next frame" (|v| and
+    |ω|·r below ``rest_speed``, m/s); ``recent_contact``: the previous default's latch;
+    ``contact_memory``: the rules also link by the last frame's motion reversed."""
+
+    NODE: ClassVar[str] = "model.contacts"
+    gravity_prior: bool = True
+    contact_passes: int = 2
+    pair_impulses: bool = True
+    rest_decision: bool = True
+    rest_speed: float = 0.01
+    recent_contact: bool = False
+    contact_memory: bool = False
+
+    def __post_init__(self) -> None:
+        _check_flags(self)
+        check_whole(f"{self.NODE}.contact_passes", self.contact_passes, 0, "rebuilds; 0: one pass")
+        _check_positive(self, "rest_speed", "m/s")
