@@ -71,7 +71,8 @@ def test_a_rebuild_on_provisional_velocities_links_every_pair_that_touches_under
 def test_a_rebuild_from_the_last_builds_candidates_is_the_whole_builds_graph():
     """extend reuses the candidates and earlier masks where the allowance holds, and builds
     anew where a faster velocity widens it: the graph is the whole build's, edge for edge."""
-    for seed, builder in zip(range(6), [GraphBuilder(), GraphBuilder(fixed_capacity=True)] * 3):
+    builders = [GraphBuilder(), GraphBuilder(fixed_capacity=True)] * 3
+    for seed, builder in zip(range(6), builders, strict=True):
         state = random_supported_state(seed)
         ballistic = ballistic_velocity(state)
         slower = 0.5 * ballistic  # every allowance holds: the cheap path
