@@ -14,7 +14,8 @@
 
 A scene from arrays: ``pg.scene_from_arrays(pos [N, 3], radius, vel=[N, 3], frames=T)``; a
 trajectory from another engine: ``pg.trajectory_from_arrays(pos [T, N, 3], radius, dt)``.
-Both take the optional fields of :meth:`~physgnn.physics.trajectory.Trajectory.from_arrays`.
+Both take the optional fields of :meth:`~physgnn.physics.trajectory.Trajectory.from_arrays`
+(pairs: ``planes=(rows, kinds)``, ``materials=(table, index)``).
 A scene outside what the model was trained on makes :func:`roll_out` warn with an
 :class:`OutOfDistributionWarning` (``warnings.simplefilter("error", pg.OutOfDistributionWarning)``
 turns it into an error). Every trajectory is a :class:`~physgnn.physics.trajectory.Trajectory`.
@@ -94,15 +95,24 @@ def load_scene(path: str | Path) -> Scene:
 
 
 def scene_from_arrays(
-    pos, radius, *, frames: int = 100, dt: float = 0.1, name: str = "arrays", **fields
+    pos,
+    radius,
+    *,
+    vel=None,
+    angvel=None,
+    frames: int = 100,
+    dt: float = 0.1,
+    name: str = "arrays",
+    **fields,
 ) -> Scene:
     """A scene from its start: pos ``[N, 3]``, radius ``[N]`` (or one number), ``frames`` to
-    simulate at interval ``dt``; ``fields``: vel, angvel ``[N, 3]``, quat ``[N, 4]``, and
-    mass, material, materials, planes, plane_kind, effects as in
-    :meth:`Trajectory.from_arrays` (velocities default to zero)."""
+    simulate at interval ``dt``; ``vel``, ``angvel`` ``[N, 3]`` (default zero); ``fields``:
+    quat ``[N, 4]``, and mass, materials, planes, effects as in
+    :meth:`Trajectory.from_arrays`."""
     frames = check_whole("frames", frames, 2, "the first frame is the start", ArgumentError)
-    start = {k: v if k not in ("vel", "angvel", "quat") else [v] for k, v in fields.items()}
-    first = Trajectory.from_arrays([pos], radius, dt, name=name, **start)
+    start = {k: [v] if k == "quat" else v for k, v in fields.items()}
+    velocities = tuple(None if v is None else [v] for v in (vel, angvel))
+    first = Trajectory.from_arrays([pos], radius, dt, velocities=velocities, name=name, **start)
     scene = dataclasses.replace(scene_of(first), n_frames=frames).validate()
     scenefile.check_placement(f"scene '{name}'", scene.pos, scene.radius, scene.planes)
     return scene

@@ -8,9 +8,10 @@ starts from its first ``H + 1`` ground-truth frames (the state at frame ``H``); 
 shifted by the velocities the move implies, as the training features are computed).
 
 A scene stops when a frame turns non-finite or runs away (a speed above the bound, a
-coordinate beyond ``max_pos``); ``diverged_at`` is the index of that first bad frame and the
-scene's arrays keep only the frames before it. The other scenes of the batch continue. Each
-result is a :class:`~physgnn.physics.trajectory.Trajectory`, the container the truth uses.
+coordinate beyond ``max_pos``: :class:`RolloutBounds`); ``diverged_at`` is the index of that
+first bad frame and the scene's arrays keep only the frames before it. The other scenes of
+the batch continue. Each result is a :class:`~physgnn.physics.trajectory.Trajectory`, the
+container the truth uses.
 The frames are recorded on the rollout's device and reach the host once, at the end.
 """
 
@@ -53,33 +54,40 @@ class RolloutError(PhysgnnError, ValueError):
     """A rollout cannot start (one line naming the problem)."""
 
 
+@dataclasses.dataclass(frozen=True)
+class RolloutBounds:
+    """When a scene runs away: a sphere faster than ``max_speed`` m/s or, if ``speed_factor``
+    is set, than ``speed_factor × max(largest true speed, min_speed)``; or a coordinate beyond
+    ``max_pos`` m."""
+
+    max_speed: float = 1e4
+    speed_factor: float | None = None
+    min_speed: float = 1.0
+    max_pos: float = 1e6
+
+
 def rollout(
     simulator,
     trajectories: list[Trajectory],
     history: int | None = None,
     n_frames: int | None = None,
     *,
-    max_speed: float = 1e4,
-    speed_factor: float | None = None,
-    min_speed: float = 1.0,
-    max_pos: float = 1e6,
+    bounds: RolloutBounds | None = None,
     batch_size: int | None = None,
     device: str | torch.device | None = None,
     dtype: torch.dtype = torch.float32,
-    sleeping: bool = False,
-    sleep: dict | None = None,
+    sleep: bool | dict = False,
     timer: StepTimer | None = None,
 ) -> list[Trajectory]:
     """Roll every trajectory out from its first ``history + 1`` frames, without gradients.
 
     ``history`` defaults to the simulator's ``H``. ``n_frames``: frames per rollout, seed
-    frames included (default: each trajectory's length; may exceed it). A scene runs away
-    when a sphere is faster than ``max_speed`` m/s or, if ``speed_factor`` is set, than
-    ``speed_factor × max(largest true speed, min_speed)``, or a coordinate exceeds
-    ``max_pos`` m. ``batch_size`` scenes share one graph (None: all). ``sleeping``: resting
-    spheres are frozen (:class:`~physgnn.models.sleeping.SleepingSimulator`, built with the
-    ``sleep`` kwargs ``threshold``, ``k``, ``touch``; one per batch). ``timer`` (opt-in)
-    splits the steps' seconds into graph, network and integration.
+    frames included (default: each trajectory's length; may exceed it). ``bounds``: when a
+    scene runs away (:class:`RolloutBounds`; None: its defaults). ``batch_size`` scenes share
+    one graph (None: all). ``sleep``: resting spheres are frozen
+    (:class:`~physgnn.models.sleeping.SleepingSimulator`, one per batch): True with its
+    default settings, a dict of its ``threshold``, ``k``, ``touch``; False: off. ``timer``
+    (opt-in) splits the steps' seconds into graph, network and integration.
     """
     hooks = hooks_of(simulator)
     h = _history(hooks.history, history)
@@ -89,8 +97,7 @@ def rollout(
     _warn_unseen_effects(hooks.effects_trained, trajectories)
     settings = dict(
         h=h,
-        bounds=dict(max_speed=max_speed, speed_factor=speed_factor, min_speed=min_speed),
-        max_pos=max_pos,
+        bounds=bounds if bounds is not None else RolloutBounds(),
         device=torch.device(device if device is not None else hooks.device),
         dtype=dtype,
         timer=timer,
@@ -99,10 +106,23 @@ def rollout(
     results = []
     with torch.inference_mode():
         for i in range(0, len(trajectories), size):
-            sim = SleepingSimulator(simulator, **(sleep or {})) if sleeping else simulator
+            sim = _sleeping(simulator, sleep)
             chunk = slice(i, i + size)
             results += _rollout_batch(sim, trajectories[chunk], lengths[chunk], **settings)
     return results
+
+
+def _sleeping(simulator, sleep: bool | dict):
+    """``simulator`` itself (``sleep`` False) or wrapped in a fresh SleepingSimulator."""
+    if sleep is False:
+        return simulator
+    if sleep is True:
+        return SleepingSimulator(simulator)
+    if isinstance(sleep, dict):
+        return SleepingSimulator(simulator, **sleep)
+    raise RolloutError(
+        f"sleep must be True, False or a dict of SleepingSimulator settings (got {sleep!r})"
+    )
 
 
 def _history(own: int | None, history: int | None) -> int:
@@ -137,12 +157,12 @@ def _warn_unseen_effects(trained, trajectories: list[Trajectory]) -> None:
         warnings.warn(message, UserWarning, stacklevel=3)
 
 
-def _speed_bound(frames: TrajectoryFrames, bounds: dict) -> float:
-    if bounds["speed_factor"] is None:
-        return bounds["max_speed"]
+def _speed_bound(frames: TrajectoryFrames, bounds: RolloutBounds) -> float:
+    if bounds.speed_factor is None:
+        return bounds.max_speed
     finite = torch.nan_to_num(frames.vel, nan=0.0, posinf=0.0, neginf=0.0)
     true_max = float(finite.norm(dim=-1).max()) if finite.numel() else 0.0
-    return min(bounds["max_speed"], bounds["speed_factor"] * max(true_max, bounds["min_speed"]))
+    return min(bounds.max_speed, bounds.speed_factor * max(true_max, bounds.min_speed))
 
 
 class _Batch:
@@ -266,7 +286,7 @@ class _Record:
         return {k: a[:end, lo:hi].copy() for k, a in self.arrays.items()}
 
 
-def _rollout_batch(simulator, trajs, lengths, *, h, bounds, max_pos, device, dtype, timer):
+def _rollout_batch(simulator, trajs, lengths, *, h, bounds, device, dtype, timer):
     frames = [TrajectoryFrames(t) for t in trajs]
     record = _Record(frames, max(lengths), h, device)
     speed_bound = torch.tensor([_speed_bound(f, bounds) for f in frames], dtype=torch.float64)
@@ -280,7 +300,7 @@ def _rollout_batch(simulator, trajs, lengths, *, h, bounds, max_pos, device, dty
         state.keep([k for k, i in enumerate(state.active) if lengths[i] > h + 1])
     nodes = record.nodes(state.active)
     while state.batch is not None and t + 1 < max(lengths):
-        bad = _one_step(simulator, state, max_pos, hooks.hold, timer)
+        bad = _one_step(simulator, state, bounds.max_pos, hooks.hold, timer)
         t, steps = t + 1, steps + 1
         record.write(t, nodes, state)
         keep = []

@@ -19,6 +19,7 @@ CONF = Path(__file__).resolve().parents[1] / "conf"
 # config groups whose options set keys, one table per option
 GROUPS = [
     "lit",
+    "datamodule",
     "data",
     "model",
     "trainer",

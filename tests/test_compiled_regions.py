@@ -80,8 +80,8 @@ def test_compiled_regions_give_the_eager_losses_and_gradients(tiny_train):
 def test_a_compiled_training_step_dispatches_at_most_the_budget(tiny_train):
     """The default recipe through Lightning (noise, contact noise, push-forward up to 2, the
     loss, backward, clipping, Adam): eager it dispatches far more than the budget. Slow (its
-    compile takes minutes on 2 busy cores): the fast suite checks the same budget on the quick
-    bench's compiled training step (tests/test_bench.py), the same model and recipe."""
+    compile takes minutes on 2 busy cores); so is the same budget on the quick bench's compiled
+    training step (tests/test_bench.py), the same model and recipe."""
     trajectories, stats = tiny_train
     cfg = compose_config("bench").gpu_readiness
     model = OmegaConf.merge(OmegaConf.load(Path(CONF_DIR) / "model/baseline.yaml"), cfg.model)

@@ -1,8 +1,8 @@
 """One source of truth: every literal value of the training recipe's nodes
 (``conf/lit/default.yaml``: ``lit.scheduler``; the groups ``lit.noise`` ... with exactly their
-dataclass's fields) and of conf/train.yaml's ``datamodule`` equals the default of the
-constructor argument of that name (interpolations such as ``${seed}`` and nested nodes such as
-the optimiser are the config's alone)."""
+dataclass's fields) and of the training data's recipe (``conf/datamodule/default.yaml``) equals
+the default of the constructor argument of that name (interpolations such as ``${seed}`` and
+nested nodes such as the optimiser are the config's alone)."""
 
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ from physgnn.training.schedule import RunLengthDecay
 
 TRAIN = Path(CONF_DIR) / "train.yaml"
 RECIPE = Path(CONF_DIR) / "lit" / "default.yaml"
+DATA_RECIPE = Path(CONF_DIR) / "datamodule" / "default.yaml"
 GROUPS = {"noise": InputNoise, "pushforward": PushForward, "loss": LossTerms, "compile": Compile}
 
 
@@ -39,7 +40,7 @@ def literal_values(node) -> dict:
 
 @pytest.mark.parametrize(
     ("path", "node", "cls"),
-    [(RECIPE, "scheduler", RunLengthDecay), (TRAIN, "datamodule", StatePairDataModule)]
+    [(RECIPE, "scheduler", RunLengthDecay), (DATA_RECIPE, "", StatePairDataModule)]
     + [(RECIPE, name, cls) for name, cls in GROUPS.items()],
 )
 def test_constructor_defaults_equal_the_yaml(path, node, cls):

@@ -47,12 +47,34 @@ def test_from_arrays_keeps_what_it_is_given():
         ref.pos,
         ref.radius,
         ref.dt,
+        quat=ref.quat,
+        velocities=(ref.vel, ref.angvel),
+        mass=ref.mass,
+        materials=(ref.materials, ref.material),
+        planes=(ref.planes, ref.plane_kind),
         effects=Effects(rotation=False),
-        **{k: getattr(ref, k) for k in fields},
+        name=("mine", {"source": "a DEM code"}),
     )
     for key in ("pos", "radius", *fields):
         np.testing.assert_array_equal(getattr(traj, key), getattr(ref, key), err_msg=key)
     assert not traj.effects.rotation
+    assert traj.name == "mine" and traj.attrs == {"source": "a DEM code"}
+
+
+def test_from_arrays_pairs_take_one_value_as_their_first():
+    ref = mixed(frames=4)
+    table = [[0.5, 0.5, 0.01, 0.01], [0.9, 0.2, 0.01, 0.01]]
+    traj = Trajectory.from_arrays(
+        ref.pos, ref.radius, ref.dt, velocities=ref.vel, materials=table, name="one"
+    )
+    np.testing.assert_array_equal(traj.vel, ref.vel)
+    finite = Trajectory.from_arrays(ref.pos, ref.radius, ref.dt)
+    np.testing.assert_array_equal(traj.angvel, finite.angvel)  # the second: its default
+    assert traj.materials.tolist() == np.float32(table).tolist()
+    assert traj.material.tolist() == [0] * ref.n_spheres
+    assert traj.name == "one" and traj.attrs == {}
+    with pytest.raises(SceneError, match=r"planes must be a pair \(rows \[S, 11\], kinds"):
+        Trajectory.from_arrays(ref.pos, ref.radius, ref.dt, planes=ref.planes)
 
 
 def test_from_arrays_finite_differences_match_the_kinematics():

@@ -12,7 +12,7 @@ from physgnn.data.state import TrajectoryFrames
 from physgnn.models.profiling import StepTimer
 from physgnn.physics.scene import Effects, ground_plane
 from physgnn.physics.trajectory import Trajectory
-from physgnn.rollout import RolloutError, rollout
+from physgnn.rollout import RolloutBounds, RolloutError, rollout
 
 DT = 0.1
 
@@ -117,7 +117,7 @@ def test_exploding_simulator_stops_at_the_step_computed_by_hand():
     out = M.trajectory_metrics(res_boom, boom)
     assert out["diverged_at"] == 5 and out["n_frames"] == 5 and np.isfinite(out["mse"])
     # The bound relative to the truth: 10 × max(1 m/s, 1) = 10 m/s, exceeded by 100 m/s.
-    (res,) = rollout(Exploding(), [boom], speed_factor=10.0)
+    (res,) = rollout(Exploding(), [boom], bounds=RolloutBounds(speed_factor=10.0))
     assert res.diverged_at == 2
 
 
@@ -189,6 +189,8 @@ def test_bad_input_is_one_clear_error():
         rollout(Constant([0.0, 0, 0], [0.0, 0, 0], H=0), [nan])
     with pytest.raises(RolloutError, match="history=H"):
         rollout(lambda s: (s.pos, s.pos), [short])
+    with pytest.raises(RolloutError, match="sleep must be True, False or a dict"):
+        rollout(Constant([0.0, 0, 0], [0.0, 0, 0], H=0), [short], sleep="yes")
 
 
 def test_sleeping_freezes_resting_spheres_and_keeps_the_result():
@@ -203,10 +205,15 @@ def test_sleeping_freezes_resting_spheres_and_keeps_the_result():
 
     plain, sleepy = Keep([0.0] * 3, [0.0] * 3, H=0), Keep([0.0] * 3, [0.0] * 3, H=0)
     (ref,) = rollout(plain, [traj])
-    (res,) = rollout(sleepy, [traj], sleeping=True, sleep=dict(threshold=0.01, k=2))
+    (res,) = rollout(sleepy, [traj], sleep=dict(threshold=0.01, k=2))
     np.testing.assert_array_equal(res.pos, ref.pos)
     assert [v.shape[0] for v in plain.seen] == [2] * 9
     assert [v.shape[0] for v in sleepy.seen] == [2] + [1] * 8  # still at calls 1 and 2
+    # sleep=True: the SleepingSimulator's own settings (k = 3: sphere 0 sleeps after 3 calls).
+    default = Keep([0.0] * 3, [0.0] * 3, H=0)
+    (on,) = rollout(default, [traj], sleep=True)
+    np.testing.assert_array_equal(on.pos, ref.pos)
+    assert [v.shape[0] for v in default.seen] == [2, 2] + [1] * 7
 
 
 def test_unseen_effect_warns_once_and_seen_effects_are_silent():
@@ -295,3 +302,17 @@ def test_batched_fps_counts_the_frames_every_scene_produced(monkeypatch):
     monkeypatch.setattr(rollouts, "rollout", lambda sim, trajs, **kw: made)
     preds = rollouts.predict_split(RunInfo("run", "x", simulator=object()), [long, short])
     assert [p.fps for p in preds] == [7.0, 7.0]
+
+
+def test_rollout_settings_turn_the_eval_keys_into_the_sleep_argument():
+    from omegaconf import OmegaConf
+
+    from physgnn.evaluation.rollouts import rollout_settings, sleep_settings
+
+    def cfg(sleeping, sleep):
+        return OmegaConf.create({"rollout": {"sleeping": sleeping, "sleep": sleep}})
+
+    assert rollout_settings(cfg(False, {"k": 3})) == {"sleep": False}
+    assert rollout_settings(cfg(True, {"k": 3})) == {"sleep": {"k": 3}}
+    assert rollout_settings(cfg(True, None)) == {"sleep": {}}  # the SleepingSimulator defaults
+    assert sleep_settings(cfg(False, {"k": 3})) == {"k": 3}

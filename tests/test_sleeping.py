@@ -288,7 +288,7 @@ def test_rollout_with_sleeping_holds_sleepers_exactly_and_wakes_them_when_hit():
     traj = _line_trajectory()
     (plain,) = rollout(Billiard(), [traj], history=0)
     inner = Billiard()
-    (slept,) = rollout(inner, [traj], history=0, sleeping=True, sleep={"k": 3})
+    (slept,) = rollout(inner, [traj], history=0, sleep={"k": 3})
     assert np.array_equal(slept.pos, plain.pos) and np.array_equal(slept.quat, plain.quat)
     assert 1 in inner.calls and inner.calls[-1] == 1  # 0 slept, then 1 after its hit
     assert float(slept.pos[-1, 0, 0]) > 3.0  # the sleeper was hit and rolled away
@@ -305,12 +305,12 @@ def test_rollout_where_nobody_sleeps_is_bit_identical_to_no_sleeping():
     trajs = [trajectory(4, frames=12, seed=s) for s in range(2)]
     ref = rollout(sim, trajs)
     for sleep in ({"threshold": 0.0}, {"threshold": 1e9, "k": 100}):
-        out = rollout(sim, trajs, sleeping=True, sleep=sleep)
+        out = rollout(sim, trajs, sleep=sleep)
         for a, b in zip(ref, out, strict=True):
             assert np.array_equal(a.pos, b.pos) and np.array_equal(a.quat, b.quat)
             assert np.array_equal(a.vel, b.vel) and a.n_frames == b.n_frames == 12
     # With a huge threshold and k = 1 everything sleeps at once and then stays exactly put.
-    (frozen,) = rollout(sim, trajs[:1], sleeping=True, sleep={"threshold": 1e9, "k": 1})
+    (frozen,) = rollout(sim, trajs[:1], sleep={"threshold": 1e9, "k": 1})
     assert np.array_equal(frozen.pos[2:], np.broadcast_to(frozen.pos[2], frozen.pos[2:].shape))
     assert np.array_equal(frozen.quat[2:], np.broadcast_to(frozen.quat[2], frozen.quat[2:].shape))
     assert np.array_equal(frozen.vel[2:], np.zeros_like(frozen.vel[2:]))
@@ -348,7 +348,7 @@ def test_sleep_state_survives_a_scene_leaving_the_batch():
     long, short = _line_trajectory(30), _line_trajectory(8)
     inner = Billiard()
     ref = rollout(Billiard(), [long, short], history=0)
-    out = rollout(inner, [long, short], history=0, sleeping=True, sleep={"k": 3})
+    out = rollout(inner, [long, short], history=0, sleep={"k": 3})
     for a, b in zip(ref, out, strict=True):
         assert np.array_equal(a.pos, b.pos) and a.n_frames == b.n_frames
     # Calls see 4 spheres, then 2 (both resting spheres asleep, k = 3) until the short scene
@@ -408,7 +408,7 @@ def test_learned_rollout_with_a_whole_scene_asleep_in_the_batch():
     resting = _traj(4, seed=3)  # 3 frames at rest
     resting.pos[..., 2] = 0.5  # on the ground
     moving = trajectory(3, frames=10, seed=1)
-    rest, move = rollout(sim, [resting, moving], n_frames=10, sleeping=True, sleep={"k": 2})
+    rest, move = rollout(sim, [resting, moving], n_frames=10, sleep={"k": 2})
     (alone,) = rollout(sim, [moving], n_frames=10)
     # The resting scene sleeps from the first step (2 still seed frames) and never moves.
     assert np.array_equal(rest.pos, np.broadcast_to(resting.pos[0], rest.pos.shape))

@@ -28,7 +28,7 @@ from physgnn.evaluation.runs import dataset_of, load_splits
 from physgnn.metrics import max_penetration
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.trajectory import Trajectory
-from physgnn.rollout import rollout
+from physgnn.rollout import RolloutBounds, rollout
 from physgnn.training.runs import load_run
 
 SPLITS = ("test", "ood")
@@ -50,7 +50,7 @@ FIGURES = (
 def measure_trajectory(simulator, traj: Trajectory, speed_factor: float) -> dict:
     """One record: the rollout's figures (None after a divergence), the truth's energy gain,
     ``diverged_at`` (frames after the seed frames, None when it reached the horizon), FPS."""
-    pred = rollout(simulator, [traj], speed_factor=speed_factor)[0]
+    pred = rollout(simulator, [traj], bounds=RolloutBounds(speed_factor=speed_factor))[0]
     truth = metrics.trajectory_metrics(traj.with_finite_velocities(), traj)
     record = {
         "trajectory": traj.name,

@@ -156,10 +156,13 @@ def gpu_readiness(cfg: DictConfig, trajectories: list, stats: dict, start) -> di
     "where"}`` (bench.json's ``gpu_readiness``; ``where`` of each goes to bench_extra.json): the
     module doc's counts with counted graphs, with graphs of fixed capacity
     (``model.graph.fixed_capacity=true``, what a captured step uses), and compiled (kernels
-    only); ``start``: a bench scene in motion, the rollout's first frames."""
+    only; left out with ``gpu_readiness.compiled=false``); ``start``: a bench scene in motion,
+    the rollout's first frames."""
     c, out = cfg.gpu_readiness, {}
     for suffix, kind in _KINDS.items():
         fixed, compiled = kind.get("fixed", False), kind.get("compiled", False)
+        if compiled and not c.compiled:
+            continue
         model = OmegaConf.merge(cfg.model, c.model, {"graph": {"fixed_capacity": fixed}})
         train = training_step_counts(model, c.lit, trajectories, stats, c, compiled)
         frame = rollout_frame_counts(model, stats, start, int(c.rollout_frames), compiled)

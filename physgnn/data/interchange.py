@@ -219,7 +219,7 @@ def _from_arrays(path: Path, pos, radius, dt, material, table, name: str) -> Tra
         table = np.tile(Material().as_array(), (int(np.max(material, initial=0)) + 1, 1))
     try:
         return Trajectory.from_arrays(
-            pos, radius, dt, material=material, name=name, materials=np.asarray(table, np.float32)
+            pos, radius, dt, materials=(np.asarray(table, np.float32), material), name=name
         )
     except ValueError as e:
         raise DatasetError(f"{path}: {e}") from None

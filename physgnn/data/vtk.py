@@ -118,19 +118,16 @@ def read_vtk(folder: str | Path, name: str = "vtk") -> Trajectory:
         ) from None
     frames = [_read(folder / f["name"]) for f in files]
     dt = times[1] - times[0] if len(files) > 1 else 0.1
-    planes, kinds = read_planes(folder / PLANES)
     first = frames[0].point_data
     return Trajectory.from_arrays(
         np.stack([f.points for f in frames]),
         first["radius"],
         dt,
         quat=_stacked(frames, "orientation"),
-        vel=_stacked(frames, "velocity"),
-        angvel=_stacked(frames, "angular_velocity"),
+        velocities=(_stacked(frames, "velocity"), _stacked(frames, "angular_velocity")),
         mass=first["mass"],
-        material=first["material"],
-        planes=planes,
-        plane_kind=kinds,
+        materials=(None, first["material"]),  # the default table, each sphere's row
+        planes=read_planes(folder / PLANES),
         name=name,
         effects=Effects(),
     )

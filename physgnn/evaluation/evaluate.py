@@ -34,6 +34,7 @@ from physgnn.evaluation.rollouts import (
     rest_tol,
     roll_all,
     rollout_settings,
+    sleep_settings,
     sleeping_rows,
 )
 from physgnn.evaluation.runs import (
@@ -129,8 +130,8 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
     out.rows += engine_rows(cfg, runs, data, batched)
     if out.saved:
         write_rollouts(report_dir / "rollouts", out.saved)
-    if film is not None and cfg.sleeping_compare and not settings["sleeping"]:
-        out.rows += sleeping_rows(film, data[film.dataset]["ood"], cfg.tol, settings["sleep"])
+    if film is not None and cfg.sleeping_compare and settings["sleep"] is False:
+        out.rows += sleeping_rows(film, data[film.dataset]["ood"], cfg.tol, sleep_settings(cfg))
     table.write_csv(report_dir / "metrics.csv", out.rows)
     if stab is not None:
         stability.write_csv(report_dir / "stability.csv", stab + hard_rows(runs, cfg))

@@ -21,12 +21,18 @@ from physgnn.report.table import COLUMNS, SLEEP_SCENE, SLEEP_SUFFIX
 from physgnn.rollout import rollout
 
 
-def rollout_settings(cfg: DictConfig) -> dict:
-    """``rollout`` keyword arguments from ``cfg.rollout``: ``sleeping`` (bool) and ``sleep``
-    (the :class:`physgnn.models.sleeping.SleepingSimulator` settings)."""
+def sleep_settings(cfg: DictConfig) -> dict:
+    """The :class:`physgnn.models.sleeping.SleepingSimulator` settings of ``cfg.rollout.sleep``
+    (``{}``: its defaults)."""
     r = cfg.get("rollout") or {}
-    sleep = OmegaConf.to_container(r["sleep"]) if r.get("sleep") is not None else {}
-    return {"sleeping": bool(r.get("sleeping", False)), "sleep": sleep}
+    return OmegaConf.to_container(r["sleep"]) if r.get("sleep") is not None else {}
+
+
+def rollout_settings(cfg: DictConfig) -> dict:
+    """``rollout`` keyword arguments from ``cfg.rollout``: ``sleep``, the sleep settings when
+    ``sleeping`` is on, else False."""
+    r = cfg.get("rollout") or {}
+    return {"sleep": sleep_settings(cfg) if r.get("sleeping", False) else False}
 
 
 def predict(job: RunInfo, traj: Trajectory, settings: dict | None = None) -> Trajectory:
@@ -186,7 +192,7 @@ def sleeping_rows(
         name=film.name + SLEEP_SUFFIX,
         overrides=(film.overrides + " rollout.sleeping=true").strip(),
     )
-    settings = {"sleeping": True, "sleep": sleep}
+    settings = {"sleep": sleep if sleep is not None else True}
     return [
         metrics_row(info, "ood", traj, predict(film, traj, settings), tol)
         for traj in ood

@@ -60,7 +60,7 @@ def compare(simulator, traj: Trajectory, sleep: dict) -> list[dict]:
     """Rows (``COLUMNS``) of ``traj`` rolled out with sleeping off, then on."""
     rows = []
     for on in (False, True):
-        (res,) = rollout(simulator, [traj], sleeping=on, sleep=sleep)
+        (res,) = rollout(simulator, [traj], sleep=sleep if on else False)
         m = metrics.trajectory_metrics(res, traj, horizon=20)
         drift = metrics.drift_before_hit(res.pos, traj.pos, traj.radius, res.start)
         rows.append(

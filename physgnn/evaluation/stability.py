@@ -65,7 +65,7 @@ def rollout_rows(
     **rollout_kwargs,
 ) -> list[dict]:
     """Roll ``simulator`` out on every trajectory (from its first H+1 frames; keyword
-    arguments of :func:`physgnn.rollout.rollout`, e.g. ``sleeping``) and measure."""
+    arguments of :func:`physgnn.rollout.rollout`, e.g. ``sleep``) and measure."""
     rows = []
     for truth, pred in zip(
         trajectories, rollout(simulator, trajectories, **rollout_kwargs), strict=True

@@ -102,26 +102,25 @@ class Trajectory:
         dt: float,
         *,
         quat=None,
-        vel=None,
-        angvel=None,
+        velocities=None,
         mass=None,
-        material=None,
         materials=None,
         planes=None,
-        plane_kind=None,
         effects: Effects | None = None,
-        name: str = "imported",
-        attrs: dict | None = None,
+        name: str | tuple[str, dict] = "imported",
     ) -> Trajectory:
         """A trajectory from plain arrays (another engine's spheres, a DEM code's output).
 
         pos ``[T, N, 3]`` and radius ``[N]`` (or one number) are needed; the rest defaults to:
-        quat ``[T, N, 4]`` (w, x, y, z) the identity; vel, angvel ``[T, N, 3]`` by finite
-        differences of pos and quat (frame 0 takes frame 1's, or zero for one frame); mass
-        ``[N]`` from :data:`DEFAULT_DENSITY`; material ``[N]`` 0 with materials ``[K, 4]`` one
-        default :class:`~physgnn.physics.scene.Material`; planes ``[S, 11]`` and plane_kind
-        ``[S]`` the ground alone. A wrong shape, a dt or radius not > 0, or a value not finite
-        (NaN, inf) raises a one-line ``SceneError``.
+        quat ``[T, N, 4]`` (w, x, y, z) the identity; velocities ``(vel, angvel)``, each
+        ``[T, N, 3]``, by finite differences of pos and quat (frame 0 takes frame 1's, or zero
+        for one frame); mass ``[N]`` from :data:`DEFAULT_DENSITY`; materials ``(table [K, 4],
+        index [N])`` one default :class:`~physgnn.physics.scene.Material` that every sphere
+        takes; planes ``(rows [S, 11], kinds [S])`` the ground alone; name ``(name, attrs)``
+        ``"imported"`` without attributes. Where a pair is asked for, a tuple of two gives
+        both, and one value (not a tuple) the first, the second taking its default (planes
+        need both). A wrong shape, a dt or radius not > 0, or a value not finite (NaN, inf)
+        raises a one-line ``SceneError``.
         """
         pos = _finite("pos", _array("pos", pos, np.float32, (None, None, 3)))
         t, n = pos.shape[:2]
@@ -129,8 +128,9 @@ class Trajectory:
         radius = np.asarray(_positive("radius", radius, "metres"), np.float32)
         radius = _array("radius", radius if radius.ndim else np.full(n, radius), np.float32, (n,))
         quat = _frames("quat", quat, (t, n, 4), _identity(t, n))
+        vel, angvel = _pair(velocities)
         vel_fd, angvel_fd = _finite_velocities(pos, quat, dt)
-        static = _static_fields(radius, mass, material, materials, planes, plane_kind)
+        name, attrs = _pair(name)
         return cls(
             name=name,
             pos=pos,
@@ -140,7 +140,7 @@ class Trajectory:
             vel=_frames("vel", vel, (t, n, 3), vel_fd),
             attrs=dict(attrs or {}),
             angvel=_frames("angvel", angvel, (t, n, 3), angvel_fd),
-            **static,
+            **_static_fields(radius, mass, materials, planes),
         )
 
 
@@ -172,19 +172,35 @@ def continued(truth: Trajectory, run: Trajectory, start: int, fps: float) -> Tra
     return pred.with_finite_velocities()
 
 
-def _static_fields(radius: np.ndarray, mass, material, materials, planes, plane_kind) -> dict:
+def _static_fields(radius: np.ndarray, mass, materials, planes) -> dict:
     """The arrays of :meth:`Trajectory.from_arrays` that do not change over frames, checked,
     with their defaults (``radius`` ``[N]``, already checked)."""
     n = len(radius)
     volume = 4 / 3 * np.pi * radius.astype(np.float64) ** 3
+    table, index = _pair(materials)
+    if planes is not None and not _is_pair(planes):
+        raise SceneError(
+            "Trajectory.from_arrays: planes must be a pair (rows [S, 11], kinds [S]), "
+            "e.g. planes=(planes, plane_kind)"
+        )
+    rows, kinds = planes if planes is not None else (None, None)
     return {
         "radius": radius,
         "mass": _frames("mass", mass, (n,), DEFAULT_DENSITY * volume),
-        "material": _frames("material", material, (n,), np.zeros(n), np.int64),
-        "materials": _frames("materials", materials, (None, 4), Material().as_array()[None]),
-        "planes": _frames("planes", planes, (None, 11), ground_plane()[None]),
-        "plane_kind": _frames("plane_kind", plane_kind, (None,), [GROUND], np.int64),
+        "material": _frames("material", index, (n,), np.zeros(n), np.int64),
+        "materials": _frames("materials", table, (None, 4), Material().as_array()[None]),
+        "planes": _frames("planes", rows, (None, 11), ground_plane()[None]),
+        "plane_kind": _frames("plane_kind", kinds, (None,), [GROUND], np.int64),
     }
+
+
+def _is_pair(value) -> bool:
+    return isinstance(value, tuple) and len(value) == 2
+
+
+def _pair(value) -> tuple:
+    """``value`` as ``(first, second)``: a tuple of two as it is, else ``(value, None)``."""
+    return value if _is_pair(value) else (value, None)
 
 
 def _array(key: str, value, dtype, shape: tuple) -> np.ndarray:
