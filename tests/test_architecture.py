@@ -99,6 +99,9 @@ FORBIDDEN = {
 # joined in one class) needs ~370 lines; 300 pushed code into `# fmt: skip` lines.
 MAX_MODULE_LINES = 400
 MAX_FUNCTION_LINES = 50
+# arguments of a function or constructor (self and cls not counted): past this, a group of them
+# belongs together in a small typed node (models/options.py, training/recipe.py, RolloutBounds)
+MAX_ARGUMENTS = 10
 
 
 def module_name(path: Path) -> str:
@@ -233,7 +236,7 @@ def test_only_training_and_the_bench_import_lightning():
     assert users <= {"training", "benchmark"}
 
 
-def test_modules_and_functions_are_of_a_readable_size():
+def test_modules_and_functions_are_of_a_readable_size_and_take_few_arguments():
     long = []
     for module, path in MODULES.items():
         lines = len(path.read_text().splitlines())
@@ -244,7 +247,18 @@ def test_modules_and_functions_are_of_a_readable_size():
                 size = node.end_lineno - node.lineno + 1
                 if size > MAX_FUNCTION_LINES:
                     long.append(f"{module}.{node.name}: {size} lines")
+                if arguments(node) > MAX_ARGUMENTS:
+                    long.append(f"{module}.{node.name}: {arguments(node)} arguments")
     assert not long, "\n".join(long)
+
+
+def arguments(node: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
+    """How many arguments a caller may pass (``self`` and ``cls`` not counted; ``*args`` and
+    ``**kwargs`` count one each)."""
+    args = node.args
+    names = [a.arg for a in args.posonlyargs + args.args + args.kwonlyargs]
+    names += [a.arg for a in (args.vararg, args.kwarg) if a is not None]
+    return len([n for n in names if n not in ("self", "cls")])
 
 
 def reads_from_the_working_dir(node: ast.AST) -> bool:
