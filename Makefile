@@ -30,8 +30,8 @@ install: ## Make .venv and install physgnn with its dev tools, the Hydra launche
 	$(PIP) install -q -e ".[dev,launchers,docs]"
 	$(PY) -c "import torch, torch_geometric, lightning, pybullet, h5py, submitit, hydra_plugins.hydra_joblib_launcher; print('physgnn environment ready: torch', torch.__version__)"
 
-test: ## Run the fast test suite (and list its 15 slowest tests)
-	$(PY) -m pytest --durations=15 $(ARGS)
+test: ## Run the fast test suite, one worker per core, a test file per worker (and list its 15 slowest tests)
+	$(PY) -m pytest -n auto --dist loadfile --durations=15 $(ARGS)
 
 test-slow: ## Run only the slow tests
 	$(PY) -m pytest -m slow $(ARGS)
