@@ -25,6 +25,16 @@ def compose_generate(overrides: list[str]):
         return compose("generate", overrides=overrides)
 
 
+@pytest.fixture(autouse=True)
+def fresh_dynamo(request):
+    """A slow test starts with dynamo's caches and recompile counts empty: they are per
+    process, so the compiles of an earlier test (the same code objects, other modules) would
+    count against this one's limit and leave its regions eager."""
+    if request.node.get_closest_marker("slow"):
+        torch._dynamo.reset()
+    yield
+
+
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory) -> Path:
     """The ``tiny`` preset generated once per session; returns its folder (train.h5, val.h5,

@@ -114,3 +114,16 @@ def test_compile_options_are_checked_in_one_line():
         ShapeBoundCall(net, mode="fast")
     with pytest.raises(ValueError, match="max_shapes must be >= 1"):
         ShapeBoundCall(net, max_shapes=0)
+
+
+def test_dynamos_limit_grows_with_every_compiled_module():
+    """Dynamo counts the compiles of one code object over every module of the process: with
+    the limit at one module's bound, the regions of the third simulator compiled would run
+    eager past it."""
+    config = torch._dynamo.config
+    name = "recompile_limit" if hasattr(config, "recompile_limit") else "cache_size_limit"
+    before = ShapeBoundCall.bounds
+    for _ in range(3):
+        compile_in_place(torch.nn.Linear(2, 2), "default", True, 5, backend="eager")
+    assert ShapeBoundCall.bounds == before + 15
+    assert getattr(config, name) >= ShapeBoundCall.bounds

@@ -7,9 +7,10 @@ silently. :func:`compile_in_place` makes a module's ``forward`` (or another of i
 :class:`ShapeBoundCall`, which keeps count instead: the first ``max_shapes`` keys (argument
 shapes, grad mode, training flag) run the compiled code, and a later new key runs eager with
 one warning naming the fix (pad graphs to buckets, ``model.pad_to_buckets=true``, so that few
-shapes occur; or raise the bound). Dynamo's own limit is raised to the bound, so the compiled
-keys are never evicted. Parameters stay the module's: its ``state_dict`` is not changed by
-compiling.
+shapes occur; or raise the bound). Dynamo's own limit, which counts the compiles of a
+code object over every module in the process, is raised to the sum of the bounds, so the
+compiled keys are never evicted, however many simulators a process compiles. Parameters stay
+the module's: its ``state_dict`` is not changed by compiling.
 
 What a region may hold: with dynamic shapes, any code of tensors whose shapes follow the data
 but whose *values* are never read by the host, such as a simulator's whole step after its
@@ -77,6 +78,8 @@ class ShapeBoundCall:
     """``call(*args)``: ``module.<method>(*args)`` through ``torch.compile(method, mode=mode,
     dynamic=dynamic, backend=backend)`` for at most ``max_shapes`` keys (module doc)."""
 
+    bounds = 0  # the sum of every instance's max_shapes in this process
+
     def __init__(
         self,
         module,
@@ -100,7 +103,10 @@ class ShapeBoundCall:
         self.compiled = torch.compile(self.eager, **options)
         self.keys: set = set()
         self.warned = False
-        _raise_recompile_limit(self.max_shapes)
+        # dynamo counts compiles per code object, over every module compiled in the process
+        # (a simulator's ``head`` compiled for each of several runs): each call adds its bound
+        ShapeBoundCall.bounds += self.max_shapes
+        _raise_recompile_limit(ShapeBoundCall.bounds)
 
     def key(self, args) -> tuple:
         """What a compiled graph is specialised on: the argument shapes (only their ranks with
@@ -127,8 +133,8 @@ class ShapeBoundCall:
 
 
 def _raise_recompile_limit(limit: int) -> None:
-    """Dynamo's recompile limit per code object at least ``limit`` (plus grad and train modes,
-    which are part of the keys already)."""
+    """Dynamo's recompile limit per code object at least ``limit`` (grad and train modes are
+    part of the keys already)."""
     config = torch._dynamo.config
     name = "recompile_limit" if hasattr(config, "recompile_limit") else "cache_size_limit"
     setattr(config, name, max(getattr(config, name), limit))
