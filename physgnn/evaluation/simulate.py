@@ -130,9 +130,10 @@ def learned(
     start = time.perf_counter()
     pred = rollout_prediction(simulator, truth)
     steps = max(pred.n_frames - history - 1, 1)
-    if compile_s is not None and compiled_graphs() > graphs:
+    graphs = compiled_graphs() - graphs
+    if compile_s is not None and graphs > 0:
         print(
-            f"note: ms_per_frame includes compiling {compiled_graphs() - graphs} more graph(s) "
+            f"note: ms_per_frame includes compiling {graphs} more graph(s) "
             "for edge counts the first frames did not have (0 or 1 pair); a second call "
             "loads them from paths.compile_cache",
             file=sys.stderr,

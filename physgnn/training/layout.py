@@ -118,6 +118,8 @@ LIT_KEYS = {
 # Recipe keys that runs before the contact changes lack, with the value their recipe had (the
 # loss's graph on the state's own motion: docs/TRAINING.md).
 PREVIOUS_LIT = {"truth_contacts": False}
+# Each grouped recipe key of today, with its flat name (lit.noise.std -> lit.noise_std).
+FLAT_LIT_NAMES = {f"lit.{node}.{name}": f"lit.{key}" for key, (node, name) in LIT_KEYS.items()}
 RUN_LENGTH_DECAY = "physgnn.training.schedule.RunLengthDecay"
 
 
@@ -134,11 +136,20 @@ def model_of_today(model: DictConfig) -> DictConfig:
         flat = EARLIER_MODEL | flat
     if flat.get("_target_") == LEARNED and "contacts" not in flat:
         flat = PREVIOUS_MODEL | flat
-    nested = {k: v for k, v in flat.items() if k not in FLAT_KEYS}
-    for key, (node, name) in FLAT_KEYS.items():
+    return OmegaConf.create(_into_nodes(flat, FLAT_KEYS, NODES))
+
+
+def _into_nodes(flat: dict, keys: dict, nodes: dict, every_node: bool = False) -> dict:
+    """``flat`` with each of its flat ``keys`` (``{key: (node, name)}``) moved into its node,
+    a node made from its Hydra keys (``nodes``) where first needed, or every one of them
+    (``every_node``)."""
+    nested = {k: v for k, v in flat.items() if k not in keys}
+    if every_node:
+        nested |= {node: dict(hydra) for node, hydra in nodes.items()}
+    for key, (node, name) in keys.items():
         if key in flat:
-            nested.setdefault(node, dict(NODES[node]))[name] = flat[key]
-    return OmegaConf.create(nested)
+            nested.setdefault(node, dict(nodes[node]))[name] = flat[key]
+    return nested
 
 
 def key_of_today(key: str) -> str:
@@ -158,7 +169,7 @@ def flat_layout(keys: dict) -> dict:
     ``final_lr_factor`` they make): the inverse of :func:`key_of_today`, so that what names a
     configuration does not change with its spelling."""
     before = {f"model.{node}.{name}": f"model.{key}" for key, (node, name) in FLAT_KEYS.items()}
-    before |= {f"lit.{node}.{name}": f"lit.{key}" for key, (node, name) in LIT_KEYS.items()}
+    before |= FLAT_LIT_NAMES
     hydra = {f"model.{node}.{key}" for node, keys in NODES.items() for key in keys}
     hydra |= {f"lit.{node}.{key}" for node, keys in LIT_NODES.items() for key in keys}
     flat = {before.get(k, k): _flat_reference(v) for k, v in keys.items() if k not in hydra}
@@ -173,8 +184,7 @@ def _flat_reference(value):
     ``${lit.pushforward_steps}``); any other value as it is."""
     if isinstance(value, str) and value.startswith("${lit."):
         name = value[2:-1]
-        flat = {f"lit.{node}.{key}": f"lit.{old}" for old, (node, key) in LIT_KEYS.items()}
-        return "${" + flat.get(name, name) + "}"
+        return "${" + FLAT_LIT_NAMES.get(name, name) + "}"
     return value
 
 
@@ -197,13 +207,7 @@ def lit_of_today(lit: DictConfig) -> DictConfig:
     ``lit`` of today's layout comes back as it is."""
     flat = OmegaConf.to_container(lit, resolve=False)
     if not isinstance(flat.get("noise"), dict):
-        flat = PREVIOUS_LIT | flat
-        nested = {k: v for k, v in flat.items() if k not in LIT_KEYS}
-        nested |= {node: dict(keys) for node, keys in LIT_NODES.items()}
-        for key, (node, name) in LIT_KEYS.items():
-            if key in flat:
-                nested[node][name] = flat[key]
-        flat = nested
+        flat = _into_nodes(PREVIOUS_LIT | flat, LIT_KEYS, LIT_NODES, every_node=True)
     scheduler = flat.get("scheduler")
     if isinstance(scheduler, dict) and "final_lr_factor" in scheduler:
         factor = scheduler.pop("final_lr_factor")
