@@ -33,8 +33,10 @@ from physgnn.training.layout import (
 )
 from physgnn.training.lit import LitSimulator
 from physgnn.training.recipe import Compile, InputNoise, LossTerms, PushForward
-from physgnn.training.runs import PRETRAINED_DIR, RunError, load_run
+from physgnn.training.runs import RunError, load_run
 from physgnn.training.schedule import RunLengthDecay
+
+PREVIOUS_SHIPPED = Path(__file__).parent / "previous_shipped"
 
 # A recipe of the flat layout, written by hand as an earlier physgnn saved it
 FLAT_LIT = {
@@ -136,9 +138,30 @@ def test_a_run_whose_weights_do_not_fit_names_the_groups_key(flat_run):
         load_run(flat_run)
 
 
-def test_the_shipped_weights_hold_a_flat_config_and_load_in_todays_layout():
-    assert "network" not in OmegaConf.load(PRETRAINED_DIR / ".hydra" / "config.yaml").model
-    simulator, cfg, _ = load_run("pretrained")
+def previous_shipped_run(folder: Path) -> Path:
+    """A run folder with the config of the previously shipped weights (flat model and recipe
+    keys) and a checkpoint of its names, dtypes and shapes (placeholder values):
+    ``tests/previous_shipped``."""
+    (folder / ".hydra").mkdir(parents=True)
+    shutil.copy(PREVIOUS_SHIPPED / "config.yaml", folder / ".hydra" / "config.yaml")
+    layout = json.loads((PREVIOUS_SHIPPED / "weights.json").read_text())
+    state = {
+        name: torch.ones(entry["shape"], dtype=getattr(torch, entry["dtype"]))
+        for name, entry in layout.items()
+    }
+    (folder / "checkpoints").mkdir()
+    torch.save(
+        {"state_dict": state, "global_step": 22_500},
+        folder / "checkpoints" / "best-step022500.ckpt",
+    )
+    (folder / "run.json").write_text(json.dumps({"status": "finished", "weights_format": 1}))
+    return folder
+
+
+def test_the_previously_shipped_weights_hold_a_flat_config_and_load_in_todays_layout(tmp_path):
+    run = previous_shipped_run(tmp_path / "shipped")
+    assert "network" not in OmegaConf.load(run / ".hydra" / "config.yaml").model
+    simulator, cfg, _ = load_run(run)
     assert cfg.model.network.M == simulator.M == 5 and cfg.model.graph.backend == "auto"
     assert cfg.model.inputs.mass_ratio and cfg.model.contacts.rest_speed == 0.01
     # trained before the contact changes: one pass, no pair impulses, the latch
@@ -211,9 +234,10 @@ def test_a_run_of_the_flat_recipe_loads_with_todays_groups(tiny_run, tmp_path):
     assert lit_of_today(cfg.lit) == cfg.lit  # today's layout comes back as it is
 
 
-def test_the_shipped_weights_hold_a_flat_recipe_read_in_todays_groups():
-    assert "noise_std" in OmegaConf.load(PRETRAINED_DIR / ".hydra" / "config.yaml").lit
-    _, cfg, _ = load_run("pretrained")
+def test_the_previously_shipped_weights_hold_a_flat_recipe_read_in_todays_groups(tmp_path):
+    run = previous_shipped_run(tmp_path / "shipped")
+    assert "noise_std" in OmegaConf.load(run / ".hydra" / "config.yaml").lit
+    _, cfg, _ = load_run(run)
     assert cfg.lit.noise.std == 0.03 and cfg.lit.pushforward.steps == 2
     assert cfg.lit.scheduler.gamma == 0.99696  # its per-epoch decay, as it was
 
