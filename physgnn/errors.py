@@ -6,7 +6,8 @@ Anything else is a bug and keeps its traceback.
 
 A command stopped from outside (Ctrl-C, ``kill``) is an :class:`Interrupted`: exit code
 128 + the signal number, as a shell reports it. :func:`sigterm_interrupts` makes SIGTERM
-raise ``KeyboardInterrupt`` like Ctrl-C, so ``finally`` blocks clean up after both.
+raise ``KeyboardInterrupt`` like Ctrl-C, so ``finally`` blocks clean up after both;
+:func:`forked_worker` readies the workers of a forked pool.
 """
 
 from __future__ import annotations
@@ -109,6 +110,19 @@ def sigterm_interrupts() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+def forked_worker() -> None:
+    """The initializer of physgnn's forked pools: the worker leaves Ctrl-C to the main process
+    (no traceback per worker), dies on the pool's SIGTERM, and runs torch on one thread. GNU
+    OpenMP is not fork-safe: a child forked from a process whose torch already ran a parallel
+    loop on several threads waits forever at the team's barrier in its own first parallel loop
+    (``make eval``'s pybullet rows hung so); on one thread ATen runs its loops inline."""
+    import torch  # not at import: this module is the base every part imports
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    torch.set_num_threads(1)
 
 
 def interrupt_signal(err: KeyboardInterrupt) -> int:

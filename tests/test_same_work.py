@@ -4,14 +4,16 @@
 from __future__ import annotations
 
 import math
+import multiprocessing as mp
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import torch
 from omegaconf import OmegaConf
 
 from physgnn.data.dataset import read_split
-from physgnn.errors import ConfigError
+from physgnn.errors import ConfigError, forked_worker
 from physgnn.evaluation import same_work as engine_work
 from physgnn.evaluation.runs import RunInfo
 from physgnn.physics.trajectory import FRAME_KEYS
@@ -169,3 +171,27 @@ def test_bad_pybullet_settings_are_one_line(settings, text):
         [1, 5],
         3,
     )
+
+
+def _a_parallel_loop(_) -> tuple[int, float]:
+    """A worker's torch threads and a copy large enough for ATen to split across threads."""
+    return torch.get_num_threads(), float(torch.cat([torch.ones(200_000)] * 2).sum())
+
+
+def test_forked_workers_run_torch_after_the_parent_ran_it_on_two_threads():
+    """GNU OpenMP is not fork-safe: before ``forked_worker``, ``make eval``'s pybullet pool hung
+    for good at its first parallel loop once the parent's torch had run one on 2 threads."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        (torch.randn(4_000_000) * 2).sum()  # the parent's OpenMP team of 2 threads exists now
+        with mp.get_context("fork").Pool(2, initializer=forked_worker) as pool:
+            answers = pool.map_async(_a_parallel_loop, range(2))
+            try:
+                got = answers.get(timeout=60)
+            except mp.TimeoutError:
+                pool.terminate()
+                pytest.fail("a forked worker hung in its first parallel loop")
+    finally:
+        torch.set_num_threads(threads)
+    assert got == [(1, 400_000.0)] * 2

@@ -18,12 +18,11 @@ import dataclasses
 import json
 import multiprocessing as mp
 import os
-import signal
 import time
 
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.errors import ConfigError
+from physgnn.errors import ConfigError, forked_worker
 from physgnn.evaluation.rollouts import metrics_row, progress
 from physgnn.evaluation.runs import SPLITS, RunInfo
 from physgnn.groundtruth.engine import simulate
@@ -58,7 +57,7 @@ def engine_split(trajs: list[Trajectory], H: int, substeps: int, processes: int)
             continued(t, run, H, (run.n_frames - 1) / s)
             for t, (run, s) in zip(trajs, runs, strict=True)
         ]
-    with mp.get_context("fork").Pool(processes, initializer=_worker_signals) as pool:
+    with mp.get_context("fork").Pool(processes, initializer=forked_worker) as pool:
         t0 = time.perf_counter()
         runs = pool.map(timed_run, jobs, chunksize=1)
         wall = time.perf_counter() - t0
@@ -66,12 +65,6 @@ def engine_split(trajs: list[Trajectory], H: int, substeps: int, processes: int)
         pool.join()  # the workers end on their own, not by the pool's SIGTERM
     fps = sum(run.n_frames - 1 for run, _ in runs) / wall
     return [continued(t, run, H, fps) for t, (run, _) in zip(trajs, runs, strict=True)]
-
-
-def _worker_signals() -> None:
-    """Pool workers leave Ctrl-C to the main process and die quietly on SIGTERM."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def engine_jobs(runs: list[RunInfo], several: bool) -> list[RunInfo]:

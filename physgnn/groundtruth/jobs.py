@@ -9,14 +9,13 @@ number of worker processes, nor on the shard that simulates it
 from __future__ import annotations
 
 import multiprocessing as mp
-import signal
 from dataclasses import dataclass
 
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from physgnn.errors import ConfigError
+from physgnn.errors import ConfigError, forked_worker
 from physgnn.groundtruth.engine import as_stored, simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.physics.scene import SceneError
@@ -103,7 +102,7 @@ def run_jobs(jobs: list[Job], workers: int, progress: bool = True) -> list[Traje
                 results[k] = run_job(job)
                 bar.update(task, advance=1, description=f"{job.split}/{job.group}")
         else:
-            with mp.get_context("fork").Pool(workers, initializer=_quiet_worker) as pool:
+            with mp.get_context("fork").Pool(workers, initializer=forked_worker) as pool:
                 it = pool.imap_unordered(_indexed, list(enumerate(jobs)))
                 for k, traj in it:
                     results[k] = traj
@@ -113,13 +112,6 @@ def run_jobs(jobs: list[Job], workers: int, progress: bool = True) -> list[Traje
 
 def _indexed(item: tuple[int, Job]) -> tuple[int, Trajectory]:
     return item[0], run_job(item[1])
-
-
-def _quiet_worker() -> None:
-    """Pool workers leave Ctrl-C to the main process (no traceback per worker) and die on
-    the pool's SIGTERM."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def check_workers(workers) -> int:
