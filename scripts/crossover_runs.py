@@ -4,7 +4,7 @@ scripts/crossover_runs.py RUN RUN ... [--sizes 154 1000]``.
 Each size draws one ``conf/bench.yaml`` random_box pile, the sizes one after another from the
 bench's seed (not the draws of a whole ``make bench``, whose earlier phases draw first), and
 lands it. Every RUN (a run folder or ``pretrained``) then takes its turns against pybullet at
-``crossover.substeps`` on that window (``taking_turns``: the crossover's rounds, one scene at a
+``crossover.substeps`` on that window (``judged_size``: the crossover's rounds, one scene at a
 time, one thread). Printed per size and run: MSE20 and median frames/s of the learned model and
 of each setting, the median learned-over-pybullet ratio, whether the model is on the MSE20
 front and its matched setting.
@@ -13,12 +13,11 @@ front and its matched setting.
 from __future__ import annotations
 
 import argparse
-import os
 
 import numpy as np
 import torch
 
-from physgnn.benchmark.crossover import judged, landed_window, taking_turns
+from physgnn.benchmark.crossover import judged_size, landed_window
 from physgnn.cli.overrides import compose_config
 from physgnn.training.runs import load_run
 
@@ -36,25 +35,23 @@ def main() -> None:
         raise SystemExit(f"error: the runs have different histories H {sorted(histories)}")
     H = histories.pop()
     rng = np.random.default_rng(cfg.seed)
-    c = cfg.crossover
     for n in args.sizes:
         window = landed_window(cfg, n, rng, H, {})
         for run, sim in sims.items():
-            load = os.getloadavg()[0]
-            rows = taking_turns(sim, window, {}, list(c.substeps), int(c.rounds))
-            verdict = judged(rows)
-            print(f"{n} spheres, {run} (load {load:.1f} → {os.getloadavg()[0]:.1f}):")
-            for r in rows:
+            size = judged_size(sim, window, n, cfg.crossover, {})
+            load = f"load {size['loadavg_start']:.1f} → {size['loadavg_end']:.1f}"
+            print(f"{n} spheres, {run} ({load}):")
+            for r in size["rows"]:
                 ratio = "" if r["ratio"] is None else f", learned / it {r['ratio']:.3g}×"
                 speed = f"{r['fps']:.3g} frames/s{ratio}"
                 print(f"  {r['simulator']:12s} MSE20 {r['mse20']:.3g} at {speed}")
-            matched = verdict["matched_substeps"]
+            matched = size["matched_substeps"]
             ratio = (
                 "none as accurate"
                 if matched is None
-                else (f"{matched} substeps, learned / it {verdict['matched_ratio']:.3g}×")
+                else (f"{matched} substeps, learned / it {size['matched_ratio']:.3g}×")
             )
-            print(f"  on the MSE20 front: {verdict['on_front']}; matched: {ratio}", flush=True)
+            print(f"  on the MSE20 front: {size['on_front']}; matched: {ratio}", flush=True)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@ from handmade import scene
 from simdata import learned
 from torch.testing import assert_close
 
-from physgnn.models.capture import ShapeBoundCall, compile_in_place
+from physgnn.models.capture import ShapeBoundCall, compile_in_place, recompile_limit
 from physgnn.nn.epd import EncodeProcessDecode, Widths
 from physgnn.nn.padding import bucket, pad_graph
 
@@ -120,10 +120,8 @@ def test_dynamos_limit_grows_with_every_compiled_module():
     """Dynamo counts the compiles of one code object over every module of the process: with
     the limit at one module's bound, the regions of the third simulator compiled would run
     eager past it."""
-    config = torch._dynamo.config
-    name = "recompile_limit" if hasattr(config, "recompile_limit") else "cache_size_limit"
     before = ShapeBoundCall.bounds
     for _ in range(3):
         compile_in_place(torch.nn.Linear(2, 2), "default", True, 5, backend="eager")
     assert ShapeBoundCall.bounds == before + 15
-    assert getattr(config, name) >= ShapeBoundCall.bounds
+    assert recompile_limit() >= ShapeBoundCall.bounds

@@ -134,6 +134,20 @@ def front_from(sizes: list[dict]) -> int | None:
     return start
 
 
+def judged_size(sim, window, n: int, c: DictConfig, engine: dict) -> dict:
+    """One size of the crossover: ``sim`` and pybullet take turns on ``window`` (``c``: the
+    ``crossover`` config), judged, with the 1-minute load average before and after."""
+    load = os.getloadavg()[0]
+    rows = taking_turns(sim, window, engine, list(c.substeps), int(c.rounds))
+    return {
+        "n_spheres": n,
+        "rows": rows,
+        **judged(rows),
+        "loadavg_start": load,
+        "loadavg_end": os.getloadavg()[0],
+    }
+
+
 def crossover(cfg: DictConfig, rng, stats: dict) -> dict | None:
     """Every size of ``cfg.crossover`` (None with ``crossover: null``): ``{"run", "sizes":
     [{n_spheres, rows, on_front, matched_substeps, matched_ratio, loadavg_start,
@@ -146,18 +160,10 @@ def crossover(cfg: DictConfig, rng, stats: dict) -> dict | None:
     sizes = []
     for n in c.sizes:
         window = landed_window(cfg, int(n), rng, int(sim.H), engine)
-        load = os.getloadavg()[0]
-        rows = taking_turns(sim, window, engine, list(c.substeps), int(c.rounds))
-        size = {
-            "n_spheres": int(n),
-            "rows": rows,
-            **judged(rows),
-            "loadavg_start": load,
-            "loadavg_end": os.getloadavg()[0],
-        }
+        size = judged_size(sim, window, int(n), c, engine)
         sizes.append(size)
         print(
-            f"crossover n={n:6d}: learned MSE20 {rows[0]['mse20']}, on the front: "
+            f"crossover n={n:6d}: learned MSE20 {size['rows'][0]['mse20']}, on the front: "
             f"{size['on_front']}, matched: {size['matched_substeps']}",
             flush=True,
         )

@@ -132,12 +132,21 @@ class ShapeBoundCall:
         return self.eager(*args)
 
 
+def _recompile_limit_name() -> str:
+    """The name of dynamo's recompile limit in this torch (``cache_size_limit`` before 2.6)."""
+    config = torch._dynamo.config
+    return "recompile_limit" if hasattr(config, "recompile_limit") else "cache_size_limit"
+
+
+def recompile_limit() -> int:
+    """Dynamo's recompile limit per code object now."""
+    return getattr(torch._dynamo.config, _recompile_limit_name())
+
+
 def _raise_recompile_limit(limit: int) -> None:
     """Dynamo's recompile limit per code object at least ``limit`` (grad and train modes are
     part of the keys already)."""
-    config = torch._dynamo.config
-    name = "recompile_limit" if hasattr(config, "recompile_limit") else "cache_size_limit"
-    setattr(config, name, max(getattr(config, name), limit))
+    setattr(torch._dynamo.config, _recompile_limit_name(), max(recompile_limit(), limit))
 
 
 def _no_duck_shapes() -> None:
