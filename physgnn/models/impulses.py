@@ -26,6 +26,7 @@ from __future__ import annotations
 import torch
 
 from physgnn.graph.builder import ballistic_velocity
+from physgnn.models.outputs import NODE, PAIR
 
 INERTIA_FACTOR = 0.4  # I = 2/5 m r² of a solid sphere
 
@@ -38,7 +39,8 @@ def sphere_inertia(mass: torch.Tensor, radius: torch.Tensor) -> torch.Tensor:
 def pair_changes(state, pp_index, pair_out, speed_scale, spin_scale, weight=None):
     """``(Δv [N, 3], Δω [N, 3])`` of every sphere from the pair outputs (module doc).
 
-    ``pp_index [2, E]`` in the paired layout; ``pair_out [E/2, 6]``, row e the output for
+    ``pp_index [2, E]`` in the paired layout; ``pair_out [E/2, 6]`` (the blocks of
+    :data:`~physgnn.models.outputs.PAIR`), row e the output for
     target ``pp_index[1, e]``; ``weight [E/2]`` (or None) multiplies each pair (0 for the
     masked candidates of a fixed-capacity graph); ``speed_scale``, ``spin_scale``: σ_v, σ_ω."""
     half = pp_index.shape[1] // 2
@@ -46,10 +48,10 @@ def pair_changes(state, pp_index, pair_out, speed_scale, spin_scale, weight=None
     mass, radius, pos = state.mass, state.radius, state.pos
     f = pair_out if weight is None else pair_out * weight[:, None]
     m_i, m_j = mass[dst], mass[src]
-    impulse = (m_i * m_j / (m_i + m_j))[:, None] * speed_scale * f[:, :3]
+    impulse = (m_i * m_j / (m_i + m_j))[:, None] * speed_scale * PAIR.take(f, "impulse")
     inertia = sphere_inertia(mass, radius)
     i_i, i_j = inertia[dst], inertia[src]
-    couple = (i_i * i_j / (i_i + i_j))[:, None] * spin_scale * f[:, 3:6]
+    couple = (i_i * i_j / (i_i + i_j))[:, None] * spin_scale * PAIR.take(f, "couple")
     centre = pos[dst] - pos[src]
     share = (radius[dst] / (radius[dst] + radius[src]))[:, None]
     lever = torch.linalg.cross(centre, impulse)
@@ -74,8 +76,8 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
     dvel, dang = pair_changes(state, graph.pp_index, pair_out[:half], *scales, weight)
     own = on_plane[:, None].to(node_out.dtype)
     gravity = ballistic_velocity(state) - state.vel[:, 0]
-    dvel = dvel + gravity + own * node_out[:, :3] * sim.delta_vel_std
-    dang = dang + own * node_out[:, 3:6] * sim.delta_angvel_std
+    dvel = dvel + gravity + own * NODE.take(node_out, "delta_vel") * sim.delta_vel_std
+    dang = dang + own * NODE.take(node_out, "delta_angvel") * sim.delta_angvel_std
     parts = [(dvel - sim.delta_vel_mean) / sim.delta_vel_std]
     parts.append((dang - sim.delta_angvel_mean) / sim.delta_angvel_std)
-    return torch.cat(parts + [node_out[:, 6:]], 1)
+    return torch.cat(parts + [node_out[:, NODE.width :]], 1)

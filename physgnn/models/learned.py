@@ -61,14 +61,12 @@ from physgnn.models.normalisation import (  # noqa: F401 (StatsError: re-exporte
     stats_from_state_dict,
 )
 from physgnn.models.options import ContactHandling, ModelInputs
+from physgnn.models.outputs import PAIR, StepOutputs, node_outputs
 from physgnn.nn.epd import EncodeProcessDecode, Widths
 from physgnn.nn.padding import pad_graph
 from physgnn.physics.scene import EFFECT_NAMES
 
 ROTATION = EFFECT_NAMES.index("rotation")
-# Outputs: normalised Δv and Δω (then the rest logit with rest_decision); per pair with
-# pair_impulses: an impulse and a couple (3 + 3). The edge inputs: physgnn.graph.edges.
-OUTPUTS, PAIR_OUTPUTS = 6, 6
 DEFAULT_INPUTS, DEFAULT_CONTACTS = ModelInputs(), ContactHandling()
 
 
@@ -134,8 +132,8 @@ class LearnedSimulator(nn.Module):
             node_in=self.node_in,
             pp_in=self.pp_layout.width,
             ps_in=self.ps_layout.width,
-            out_dim=OUTPUTS + int(self.rest_decision),
-            pair_out=PAIR_OUTPUTS if self.pair_impulses else 0,
+            out_dim=self.outputs.width,
+            pair_out=PAIR.width if self.pair_impulses else 0,
         )
         built = network(widths=widths)
         if len(built.blocks) < 1:
@@ -147,6 +145,11 @@ class LearnedSimulator(nn.Module):
         """True when the network sees graphs padded to buckets: ``pad_to_buckets``, or a
         fixed-capacity graph builder (its masked edges need padding's ghost node)."""
         return self.pad_to_buckets or bool(getattr(self.graph_builder, "fixed_capacity", False))
+
+    @property
+    def outputs(self) -> Layout:
+        """The blocks of the network's node outputs (:mod:`physgnn.models.outputs`)."""
+        return node_outputs(self.rest_decision)
 
     @property
     def M(self) -> int:
@@ -315,19 +318,19 @@ class LearnedSimulator(nn.Module):
         scene without rotation keep ``ω_t``. With ``gravity_prior``, spheres outside
         ``reach [N]`` (:meth:`in_reach` of the prediction's graph) fly ballistically. The rest
         decision stops spheres that are ``supported [N]`` (None: those in ``reach``)."""
-        vel_next = state.vel[:, 0] + pred[:, :3] * self.delta_vel_std + self.delta_vel_mean
-        angvel_next = (
-            state.angvel[:, 0] + pred[:, 3:6] * self.delta_angvel_std + self.delta_angvel_mean
-        )
+        dvel, dang = self.outputs.take(pred, "delta_vel"), self.outputs.take(pred, "delta_angvel")
+        vel_next = state.vel[:, 0] + dvel * self.delta_vel_std + self.delta_vel_mean
+        angvel_next = state.angvel[:, 0] + dang * self.delta_angvel_std + self.delta_angvel_mean
         if self.gravity_prior:
             if reach is None:
                 raise ValueError("gravity_prior needs the spheres in reach of a contact")
             vel_free, angvel_free = contact_inputs.free_flight(state)
             vel_next = torch.where(reach[:, None], vel_next, vel_free)
             angvel_next = torch.where(reach[:, None], angvel_next, angvel_free)
-        if self.rest_decision:  # output 7 is the logit of "at rest next frame"
+        if self.rest_decision:
             still = reach if supported is None else supported
-            vel_next, angvel_next = rest.apply_rest(pred[:, OUTPUTS], vel_next, angvel_next, still)
+            logit = self.outputs.take(pred, "rest")[:, 0]
+            vel_next, angvel_next = rest.apply_rest(logit, vel_next, angvel_next, still)
         angvel_next = torch.where(self.rotating(state)[:, None], angvel_next, state.angvel[:, 0])
         return vel_next, angvel_next
 
@@ -360,13 +363,22 @@ class LearnedSimulator(nn.Module):
         return (-state.vel[:, 0],) if self.contact_memory else ()
 
     def head(self, state, graph, provisional: Sequence = ()) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(vel_next [N, 3], angvel_next [N, 3])`` on ``graph`` (built with
-        ``provisional``): everything of a step after the graph build (reach, features, network,
-        physical units), the region a compiled simulator compiles as one
+        """``(vel_next [N, 3], angvel_next [N, 3])`` of :meth:`step`: everything of a step after
+        the graph build, the region a compiled simulator compiles as one
         (:mod:`physgnn.models.capture`)."""
+        outputs = self.step(state, graph, provisional)
+        return outputs.vel, outputs.angvel
+
+    def step(self, state, graph, provisional: Sequence = ()) -> StepOutputs:
+        """One step on ``graph`` (built from ``state`` with ``provisional`` velocities): reach,
+        features, network, physical units. The one step function: the rollout (:meth:`head`)
+        and the training loss (:meth:`~physgnn.training.lit.LitSimulator.graph_losses`) both
+        call it."""
         if not self.gravity_prior:
             pred = self.network_prediction(state, graph)
-            return self.to_physical(state, pred)
+            vel, angvel = self.to_physical(state, pred)
+            return StepOutputs(pred, vel, angvel, vel, angvel, None)
         where = self.reach(state, graph, provisional)
         pred = self.network_prediction(state, graph, where.planes)
-        return self.to_physical(state, pred, where.spheres, where.supported)
+        vel, angvel = self.to_physical(state, pred, where.spheres, where.supported)
+        return StepOutputs(pred, vel, angvel, vel, angvel, where.spheres)

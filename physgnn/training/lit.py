@@ -46,7 +46,8 @@ import lightning as L
 import torch
 
 from physgnn.models.capture import compile_in_place, compile_simulator
-from physgnn.models.learned import OUTPUTS, LearnedSimulator
+from physgnn.models.learned import LearnedSimulator
+from physgnn.models.outputs import velocity_changes
 from physgnn.physics.integrator import step
 from physgnn.training.contacts import contact_penalty, perturb_contacts
 from physgnn.training.epoch_means import EpochMeans
@@ -149,21 +150,20 @@ class LitSimulator(L.LightningModule):
         return self.graph_losses(state, graph, provisional)
 
     def graph_losses(self, state, graph, provisional=()) -> dict[str, torch.Tensor]:
-        """:meth:`losses` on ``graph``, built from ``state`` with ``provisional`` velocities."""
+        """:meth:`losses` on ``graph``, built from ``state`` with ``provisional`` velocities:
+        the simulator's one :meth:`~physgnn.models.learned.LearnedSimulator.step`, as in a
+        rollout, then the terms on its outputs."""
         sim = self.simulator
-        where = sim.reach(state, graph, provisional) if sim.gravity_prior else None
-        reach = None if where is None else where.spheres
-        pred = sim.network_prediction(state, graph, None if where is None else where.planes)
+        outputs = sim.step(state, graph, provisional)
         target = sim.normalized_target(state)
-        mse = masked_mse(pred[:, :OUTPUTS], target, sim.rotating(state), reach)
-        supported = None if where is None else where.supported
-        vel_next, _ = sim.to_physical(state, pred, reach, supported)
+        mse = masked_mse(velocity_changes(outputs.out), target, sim.rotating(state), outputs.reach)
+        vel_next = outputs.vel
         energy = energy_increase(state, vel_next).mean()
         terms = self.loss_terms
         weighted = terms.lambda_energy * energy
         tol = terms.contact_tol * sim.length_scale
         contact = contact_penalty(state, vel_next, graph, tol, sim.delta_speed_scale)
-        rest = rest_loss(sim, state, pred, reach)
+        rest = rest_loss(sim, state, outputs.out, outputs.reach)
         loss = mse + weighted + terms.lambda_contact * contact + terms.lambda_rest * rest
         share = (weighted / loss.clamp_min(1e-30)).detach()
         return {

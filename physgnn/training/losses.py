@@ -8,7 +8,7 @@ import torch
 import torch.nn.functional as F
 
 from physgnn.data.state import scene_of_sphere
-from physgnn.models.learned import OUTPUTS, LearnedSimulator
+from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.energy import scene_energy, scene_weight
 from physgnn.physics.integrator import euler_step
 
@@ -45,13 +45,14 @@ def masked_mse(
 
 
 def rest_loss(simulator: LearnedSimulator, state, pred: torch.Tensor, reach) -> torch.Tensor:
-    """Binary cross-entropy of the rest logit ``pred[:, 6]`` against
+    """Binary cross-entropy of the rest logit (the ``rest`` block of ``pred``) against
     :meth:`~physgnn.models.learned.LearnedSimulator.rest_target`, over the spheres in ``reach``
     (all when None); 0 without a rest decision."""
     if not simulator.rest_decision:
         return pred.new_zeros(())
     label = simulator.rest_target(state).to(pred.dtype)
-    each = F.binary_cross_entropy_with_logits(pred[:, OUTPUTS], label, reduction="none")
+    logit = simulator.outputs.take(pred, "rest")[:, 0]
+    each = F.binary_cross_entropy_with_logits(logit, label, reduction="none")
     if reach is None:
         return each.mean()
     weight = reach.to(pred.dtype)
