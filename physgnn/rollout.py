@@ -28,7 +28,7 @@ from torch_geometric.data import Batch
 from physgnn.data.state import SceneState, TrajectoryFrames, layout_of
 from physgnn.errors import PhysgnnError
 from physgnn.models.profiling import StepTimer
-from physgnn.models.protocol import hooks_of
+from physgnn.models.protocol import hooks_of, motion_of
 from physgnn.models.sleeping import SleepingSimulator
 from physgnn.physics import integrator
 from physgnn.physics.scene import EFFECT_NAMES
@@ -209,11 +209,13 @@ class _Batch:
         self.active = [self.active[k] for k in keep]
         self._build(states)
 
-    def step(self, vel_next, angvel_next, max_pos: float, hold=None) -> list[bool] | None:
-        """Integrate one frame in place (:func:`physgnn.physics.integrator.step`).
+    def step(self, answer: tuple, max_pos: float, hold=None) -> list[bool] | None:
+        """Integrate one frame in place (:func:`physgnn.physics.integrator.step`) from a
+        simulator's ``answer`` (:func:`~physgnn.models.protocol.motion_of`).
 
         Returns None when every scene is fine, else a per-scene list: diverged?
         """
+        (vel_next, angvel_next), mean = motion_of(answer)
         pos_next, quat_next, vel, angvel = integrator.step(
             self.pos,
             self.quat,
@@ -224,6 +226,7 @@ class _Batch:
             self.dt,
             self.rotate,
             hold,
+            mean,
         )
         for own, new in (
             (self.pos, pos_next),
@@ -287,7 +290,7 @@ class _Record:
 
 
 def _rollout_batch(simulator, trajs, lengths, *, h, bounds, device, dtype, timer):
-    frames = [TrajectoryFrames(t) for t in trajs]
+    frames = [TrajectoryFrames(t, hooks_of(simulator).engine_state) for t in trajs]
     record = _Record(frames, max(lengths), h, device)
     speed_bound = torch.tensor([_speed_bound(f, bounds) for f in frames], dtype=torch.float64)
     state = _Batch([_start_state(f, h) for f in frames], speed_bound, device, dtype)
@@ -336,8 +339,7 @@ def _rollout_batch(simulator, trajs, lengths, *, h, bounds, device, dtype, timer
 def _one_step(simulator, state: _Batch, max_pos: float, hold, timer: StepTimer | None):
     """Predict and integrate one frame of the batch (timed when a timer is given)."""
     if timer is None:
-        vel_next, angvel_next = simulator(state.batch)
-        return state.step(vel_next, angvel_next, max_pos, hold)
+        return state.step(simulator(state.batch), max_pos, hold)
     with timer.watch(simulator):
-        vel_next, angvel_next = timer.predict(simulator, state.batch)
-    return timer.integrate(state.step, vel_next, angvel_next, max_pos, hold)
+        answer = timer.predict(simulator, state.batch)
+    return timer.integrate(state.step, answer, max_pos, hold)

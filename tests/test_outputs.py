@@ -30,7 +30,7 @@ def test_network_widths_follow_the_contract(model):
     graph = sim.graph_builder(state)
     out = sim.network_prediction(state, graph)
     assert out.shape == (12, sim.outputs.width)
-    assert sim.outputs is node_outputs(sim.rest_decision)
+    assert sim.outputs is node_outputs(sim.rest_decision, sim.engine_state)
 
 
 @pytest.mark.parametrize("model", [{}, REPORT_MODEL], ids=["default", "report"])
@@ -43,7 +43,7 @@ def test_rollout_head_and_training_loss_read_the_same_step(model):
     calls = []
     original = sim.step
     sim.step = lambda *a: calls.append(a) or original(*a)
-    vel, angvel = sim.head(state, graph)
+    vel, angvel, _, _ = sim.head(state, graph)
     lit.graph_losses(state, graph)
     assert len(calls) == 2  # one step function serves both
     step = original(state, graph)

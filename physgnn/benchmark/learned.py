@@ -16,6 +16,7 @@ from physgnn.data.state import TrajectoryFrames
 from physgnn.models.capture import compile_simulator
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.models.profiling import StepTimer
+from physgnn.models.protocol import motion_of
 from physgnn.physics import integrator
 
 
@@ -47,7 +48,7 @@ def step_once(sim, state) -> tuple[dict, tuple | None]:
     timer = StepTimer()
     t0 = time.perf_counter()
     with timer.watch(sim):
-        vel, angvel = timer.predict(sim, state)
+        (vel, angvel), mean = motion_of(timer.predict(sim, state))
     rotate, hold = sim.rotating(state), getattr(sim, "hold", None)
     timer.integrate(
         integrator.step,
@@ -60,6 +61,7 @@ def step_once(sim, state) -> tuple[dict, tuple | None]:
         state.scene_dt,
         rotate,
         hold,
+        mean,
     )
     t = timer.timings
     secs = {"graph": t["graph"], "network": t["network"], "integrate": t["integration"]}

@@ -270,7 +270,24 @@ def compute_stats(trajectories: list[Trajectory]) -> dict:
         "mass": {"mean": float(m.mean()), "std": float(max(m.std(), STD_FLOOR))},
         "max_speed": float(speeds.max()),
         "n_pairs": int(sum(tr.n_frames - 1 for tr in trajectories)),
+        "substeps": common_substeps(trajectories),
     }
+
+
+def common_substeps(trajectories: list[Trajectory]) -> int:
+    """The engine's substeps per frame that every trajectory was generated at (their
+    ``substeps`` attribute), 0 where unknown or not the same for all: what a learned
+    simulator's free flight follows (:mod:`physgnn.models.learned`, the engine state)."""
+    found = {int(tr.attrs.get("substeps", 0) or 0) for tr in trajectories}
+    return found.pop() if len(found) == 1 else 0
+
+
+def split_substeps(path) -> int:
+    """:func:`common_substeps` of a split file, from its groups' attributes alone (for a
+    ``stats.json`` written before it held them)."""
+    with h5py.File(path, "r") as f:
+        found = {int(g.attrs.get("substeps", 0)) for g in f.values() if isinstance(g, h5py.Group)}
+    return found.pop() if len(found) == 1 else 0
 
 
 def write_stats(dataset_dir, stats: dict) -> Path:

@@ -26,6 +26,7 @@ from torch_geometric.data import Batch
 from physgnn.data.state import SceneState, TrajectoryFrames
 
 _DYNAMIC = ("pos", "quat", "vel", "angvel")
+_MEAN = ("mean_vel", "mean_angvel")  # the frame's mean motion, with the engine state
 _SPHERE = ("radius", "mass", "material", "material_params")
 _PLANE = ("planes", "plane_kind", "plane_materials")
 
@@ -34,14 +35,16 @@ class PairDataset(Dataset):
     """Every valid ``(trajectory, t)`` pair of a list of trajectories (``pairs [P, 2]``).
 
     ``future`` = K > 0 adds the K + 1 next frames to each item (push-forward targets) and
-    keeps only the frames ``t ≤ T − K − 2`` that have them. ``dataset[k]`` is the batch of
+    keeps only the frames ``t ≤ T − K − 2`` that have them. ``engine_state``: the state's
+    velocities are the engine's end-of-frame ones, and the targets also hold the frame's mean
+    motion (:class:`~physgnn.data.state.TrajectoryFrames`). ``dataset[k]`` is the batch of
     pair k alone; :meth:`batch` (and ``__getitems__``, which the torch DataLoader calls)
     assembles many at once.
     """
 
-    def __init__(self, trajectories: list, H: int, future: int = 0):
-        self.H, self.future = int(H), int(future)
-        frames = [TrajectoryFrames(traj) for traj in trajectories]
+    def __init__(self, trajectories: list, H: int, future: int = 0, engine_state: bool = False):
+        self.H, self.future, self.engine_state = int(H), int(future), bool(engine_state)
+        frames = [TrajectoryFrames(traj, self.engine_state) for traj in trajectories]
         last = 1 + self.future
         pairs = [(i, t) for i, f in enumerate(frames) for t in range(self.H, f.n_frames - last)]
         self.pairs = torch.tensor(pairs, dtype=torch.long).reshape(-1, 2)
@@ -82,7 +85,8 @@ class PairDataset(Dataset):
         self.frame_start, self.sphere_start, self.plane_start = (
             torch.cumsum(c, 0) - c for c in (rows, self.n_spheres, self.n_planes)
         )
-        self.tables = {key: torch.cat([_rows(getattr(f, key)) for f in frames]) for key in _DYNAMIC}
+        dynamic = (*_DYNAMIC, *_MEAN) if self.engine_state else _DYNAMIC
+        self.tables = {key: torch.cat([_rows(getattr(f, key)) for f in frames]) for key in dynamic}
         for key in (*_SPHERE, *_PLANE):
             self.tables[key] = torch.cat([f.static[key] for f in frames])
         self.dt = torch.cat([f.static["dt"] for f in frames])
@@ -125,9 +129,16 @@ class PairDataset(Dataset):
         fields |= {"plane_batch": plane_graph, "dt": self.dt[traj], "effects": self.effects[traj]}
         after = now[:, 0] + n[:, 0]  # frame t + 1
         fields["target_vel"], fields["target_angvel"] = tab["vel"][after], tab["angvel"][after]
+        mean_angvel = tab["mean_angvel"] if self.engine_state else tab["angvel"]
+        if self.engine_state:
+            fields["target_mean_vel"] = tab["mean_vel"][after]
+            fields["target_mean_angvel"] = mean_angvel[after]
         if self.future > 0:
             ahead = base + (frame + 1 + torch.arange(self.future + 1, device=device)) * n
-            fields["future_pos"], fields["future_angvel"] = tab["pos"][ahead], tab["angvel"][ahead]
+            fields["future_pos"], fields["future_angvel"] = tab["pos"][ahead], mean_angvel[ahead]
+            if self.engine_state:
+                fields["future_vel"] = tab["vel"][ahead]
+                fields["future_end_angvel"] = tab["angvel"][ahead]
         batch = Batch(_base_cls=SceneState, **fields, batch=node_graph, ptr=ptr)
         batch.host_sizes = sizes  # graph builds then read no size back
         return batch

@@ -32,6 +32,8 @@ NODE_KEYS = (
     "batch",
     "target_vel",
     "target_angvel",
+    "target_mean_vel",
+    "target_mean_angvel",
 )
 SCENE_KEYS = ("planes", "plane_kind", "plane_materials", "plane_batch", "dt", "effects", "ptr")
 
@@ -47,9 +49,14 @@ class SceneState(Data):
     - ``plane_materials [S, 4]``: each plane's coefficients in the order of ``material_params``
       (restitution ``e_p`` first: a sphere of ``e`` bounces off it with ``e·e_p``)
     - ``dt [B]``, ``effects [B, 5]`` (bool, order of ``scene.EFFECT_NAMES``)
-    - optional targets ``target_vel [N, 3]``, ``target_angvel [N, 3]`` (``v_{t+1}``, ``ω_{t+1}``)
+    - optional targets ``target_vel [N, 3]``, ``target_angvel [N, 3]`` (``v_{t+1}``, ``ω_{t+1}``);
+      with the engine state (:class:`TrajectoryFrames`) also ``target_mean_vel [N, 3]``,
+      ``target_mean_angvel [N, 3]``: the frame's mean motion ``(p_{t+1} − p_t)/dt`` and
+      ``log(q_{t+1} ⊗ q_t⁻¹)/dt``
     - optional ``future_pos [N, K+1, 3]``, ``future_angvel [N, K+1, 3]``: ``p_{t+1..t+K+1}``,
-      ``ω_{t+1..t+K+1}``, the targets of a push-forward of up to K steps
+      the mean ``ω̄_{t+1..t+K+1}``, the targets of a push-forward of up to K steps; with the
+      engine state also ``future_vel``, ``future_end_angvel [N, K+1, 3]``, the engine's
+      end-of-frame velocities
     """
 
     @property
@@ -102,20 +109,39 @@ def _float32(a) -> torch.Tensor:
     return torch.as_tensor(np.asarray(a, dtype=np.float32))
 
 
+def has_engine_velocities(traj: Trajectory) -> bool:
+    """Whether ``traj`` holds an engine's end-of-frame velocities (its ``engine`` attribute, which
+    generation writes): data with positions only (the GNS and LagrangeBench imports,
+    :meth:`Trajectory.from_arrays`) has finite differences there."""
+    return bool(traj.attrs.get("engine"))
+
+
 class TrajectoryFrames:
-    """A trajectory as float32 tensors with its finite-difference velocities precomputed.
+    """A trajectory as float32 tensors with its velocities precomputed.
 
     ``state(t, h)`` is the :class:`SceneState` at frame ``t`` with ``h + 1`` velocities of
     history (needs ``t ≥ h``) and, when ``t + 1`` exists, the targets of frame ``t + 1``; with
     ``future=K`` also the K + 1 next positions and angular velocities (needs ``t + K + 1 < T``).
+
+    The state's velocities (``vel``, ``angvel`` ``[T, N, 3]``): finite differences
+    (``engine_state`` False, the report's state), or the engine's end-of-frame velocities that
+    the dataset stores (``engine_state`` True, where the trajectory has them:
+    :func:`has_engine_velocities`; else finite differences). ``mean_vel``, ``mean_angvel``: the
+    finite differences, each frame's mean motion (the same tensors for a finite-difference
+    state).
     """
 
-    def __init__(self, traj: Trajectory):
+    def __init__(self, traj: Trajectory, engine_state: bool = False):
         self.traj = traj
         self.pos, self.quat = _float32(traj.pos), _float32(traj.quat)
-        self.vel, self.angvel = finite_difference_velocities(
+        self.mean_vel, self.mean_angvel = finite_difference_velocities(
             self.pos, self.quat, _float32(traj.vel[0]), _float32(traj.angvel[0]), traj.dt
         )
+        self.engine_state = bool(engine_state)
+        if self.engine_state and has_engine_velocities(traj):
+            self.vel, self.angvel = _float32(traj.vel), _float32(traj.angvel)
+        else:
+            self.vel, self.angvel = self.mean_vel, self.mean_angvel
         self.static = dict(
             radius=_float32(traj.radius),
             mass=_float32(traj.mass),
@@ -144,9 +170,16 @@ class TrajectoryFrames:
         if t + 1 < self.n_frames:
             s.target_vel = self.vel[t + 1].clone()
             s.target_angvel = self.angvel[t + 1].clone()
+            if self.engine_state:
+                s.target_mean_vel = self.mean_vel[t + 1].clone()
+                s.target_mean_angvel = self.mean_angvel[t + 1].clone()
         if future > 0:
-            s.future_pos = self.pos[t + 1 : t + future + 2].transpose(0, 1).contiguous()
-            s.future_angvel = self.angvel[t + 1 : t + future + 2].transpose(0, 1).contiguous()
+            ahead = slice(t + 1, t + future + 2)
+            s.future_pos = self.pos[ahead].transpose(0, 1).contiguous()
+            s.future_angvel = self.mean_angvel[ahead].transpose(0, 1).contiguous()
+            if self.engine_state:
+                s.future_vel = self.vel[ahead].transpose(0, 1).contiguous()
+                s.future_end_angvel = self.angvel[ahead].transpose(0, 1).contiguous()
         return s
 
 

@@ -62,9 +62,20 @@ class ConstrainedSimulator(nn.Module):
     def rotating(self, state) -> torch.Tensor:
         return self.simulator.rotating(state)
 
-    def forward(self, state) -> tuple[torch.Tensor, torch.Tensor]:
-        vel, angvel, graph = self.simulator.predict(state)
-        return self.correct(state, vel, graph), angvel
+    @property
+    def engine_state(self) -> bool:
+        return bool(getattr(self.simulator, "engine_state", False))
+
+    def forward(self, state) -> tuple[torch.Tensor, ...]:
+        """The learned step's answer after the constraint stage: the move (the frame's mean
+        velocity ū; the velocity itself for a finite-difference state) corrected, and the
+        engine state's end velocity changed by the same correction."""
+        if not self.engine_state:
+            vel, angvel, graph = self.simulator.predict(state)
+            return self.correct(state, vel, graph), angvel
+        (vel, angvel, mean_vel, mean_angvel), graph = self.simulator.predict_motion(state)
+        moved = self.correct(state, mean_vel, graph)
+        return vel + (moved - mean_vel), angvel, moved, mean_angvel
 
     def correct(self, state, vel: torch.Tensor, graph) -> torch.Tensor:
         """``[N, 3]``: ``vel`` after the constraint stage on ``graph``."""

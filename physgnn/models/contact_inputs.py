@@ -122,3 +122,12 @@ def free_flight(state) -> tuple[torch.Tensor, torch.Tensor]:
     """``(v_t + g·dt, ω_t)`` ``[N, 3]`` each: the ballistic next velocities (g only in scenes
     with gravity; :func:`~physgnn.graph.builder.ballistic_velocity`)."""
     return ballistic_velocity(state), state.angvel[:, 0]
+
+
+def gravity_share(stats: dict) -> float:
+    """The share ``s`` of ``g·dt`` in a free-flying sphere's mean velocity over a frame, as the
+    truth's integrator moves it: semi-implicit Euler at k substeps (``stats["substeps"]``, the
+    training data's) gives ``Δp = dt·v_t + g·dt²·(k + 1)/(2k)``; data without substeps (0 or
+    absent) the exact parabola, ``s = 1/2``."""
+    k = int(stats.get("substeps", 0) or 0)
+    return (k + 1) / (2 * k) if k > 0 else 0.5

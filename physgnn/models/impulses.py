@@ -26,7 +26,7 @@ from __future__ import annotations
 import torch
 
 from physgnn.graph.builder import ballistic_velocity
-from physgnn.models.outputs import NODE, PAIR
+from physgnn.models.outputs import PAIR, regression
 
 INERTIA_FACTOR = 0.4  # I = 2/5 m r² of a solid sphere
 
@@ -64,20 +64,31 @@ def pair_changes(state, pp_index, pair_out, speed_scale, spin_scale, weight=None
 
 
 def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch.Tensor:
-    """``[N, 6 (+1)]``: the normalised (Δv, Δω) of the :class:`LearnedSimulator` ``sim`` (its
-    statistics) from the network's ``node_out [N, 6 (+1)]`` and ``pair_out [E'/2, 6]`` (the
-    graph's pairs first; padding after): the pair impulses (:func:`pair_changes`), gravity, and
-    the node decoder's own change for spheres ``on_plane [N]`` only; then the node outputs past
-    the sixth (the rest logit) as they are."""
+    """``[N, sim.outputs.width]``: the normalised velocity changes of the
+    :class:`LearnedSimulator` ``sim`` (its statistics) from the network's ``node_out [N,
+    sim.outputs.width]`` and ``pair_out [E'/2, sim.pair_outputs.width]`` (the graph's pairs
+    first; padding after): the pair impulses (:func:`pair_changes`), gravity, and the node
+    decoder's own change for spheres ``on_plane [N]`` only; then the rest logit as it is. With
+    the engine state the frame's mean motion likewise, from its own pair impulses and the
+    engine's share of gravity (``sim.gravity_share``): over an isolated group,
+    ``Σ m Δp = M·(dt·v̄ + s·g·dt²)`` for any weights."""
     half = graph.pp_index.shape[1] // 2
     weight = graph.pp_weight(pair_out)
     weight = None if weight is None else weight[:half]
     scales = sim.delta_speed_scale, sim.delta_spin_scale
-    dvel, dang = pair_changes(state, graph.pp_index, pair_out[:half], *scales, weight)
     own = on_plane[:, None].to(node_out.dtype)
-    gravity = ballistic_velocity(state) - state.vel[:, 0]
-    dvel = dvel + gravity + own * NODE.take(node_out, "delta_vel") * sim.delta_vel_std
-    dang = dang + own * NODE.take(node_out, "delta_angvel") * sim.delta_angvel_std
-    parts = [(dvel - sim.delta_vel_mean) / sim.delta_vel_std]
-    parts.append((dang - sim.delta_angvel_mean) / sim.delta_angvel_std)
-    return torch.cat(parts + [node_out[:, NODE.width :]], 1)
+    fall = ballistic_velocity(state) - state.vel[:, 0]  # g·dt where gravity is on
+    outputs, pairs = sim.outputs, sim.pair_outputs
+    motions = [("", 1.0)] + ([("mean_", sim.gravity_share)] if sim.engine_state else [])
+    parts = []
+    for prefix, share in motions:
+        columns = slice(pairs.slice(prefix + "impulse").start, pairs.slice(prefix + "couple").stop)
+        dvel, dang = pair_changes(state, graph.pp_index, pair_out[:half, columns], *scales, weight)
+        own_vel = outputs.take(node_out, f"delta_{prefix}vel") * sim.delta_vel_std
+        own_ang = outputs.take(node_out, f"delta_{prefix}angvel") * sim.delta_angvel_std
+        dvel = dvel + share * fall + own * own_vel
+        dang = dang + own * own_ang
+        parts.append((dvel - sim.delta_vel_mean) / sim.delta_vel_std)
+        parts.append((dang - sim.delta_angvel_mean) / sim.delta_angvel_std)
+    rest = node_out[:, regression(outputs).width :]
+    return torch.cat(parts + [rest], 1)

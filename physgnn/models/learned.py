@@ -55,13 +55,15 @@ from physgnn.data.state import scene_of_sphere
 from physgnn.graph.builder import GraphBuilder
 from physgnn.graph.edges import PS, Layout, pp_inputs, ps_inputs
 from physgnn.models import boundary, contact_inputs, impulses, reach, rest
+from physgnn.models.motion import physical_motion
 from physgnn.models.normalisation import (  # noqa: F401 (StatsError: re-exported)
     StatsError,
     register_stats,
     stats_from_state_dict,
 )
 from physgnn.models.options import ContactHandling, ModelInputs
-from physgnn.models.outputs import PAIR, StepOutputs, node_outputs
+from physgnn.models.outputs import StepOutputs, node_outputs, pair_outputs
+from physgnn.models.protocol import motion_of
 from physgnn.nn.epd import EncodeProcessDecode, Widths
 from physgnn.nn.padding import pad_graph
 from physgnn.physics.scene import EFFECT_NAMES
@@ -121,7 +123,11 @@ class LearnedSimulator(nn.Module):
         self.contact_passes = int(contacts.contact_passes)
         self.pair_impulses = contacts.pair_impulses
         self.latch, self.contact_memory = contacts.recent_contact, contacts.contact_memory
+        self.engine_state = inputs.engine_state
         self._register_stats(stats, length_scale)
+        if self.engine_state:
+            share = contact_inputs.gravity_share(stats)
+            self.register_buffer("gravity_share", torch.tensor(share))
         self.graph_builder = GraphBuilder() if graph is None else graph
         self.network = self._network(EncodeProcessDecode if network is None else network)
 
@@ -133,7 +139,7 @@ class LearnedSimulator(nn.Module):
             pp_in=self.pp_layout.width,
             ps_in=self.ps_layout.width,
             out_dim=self.outputs.width,
-            pair_out=PAIR.width if self.pair_impulses else 0,
+            pair_out=self.pair_outputs.width if self.pair_impulses else 0,
         )
         built = network(widths=widths)
         if len(built.blocks) < 1:
@@ -149,7 +155,12 @@ class LearnedSimulator(nn.Module):
     @property
     def outputs(self) -> Layout:
         """The blocks of the network's node outputs (:mod:`physgnn.models.outputs`)."""
-        return node_outputs(self.rest_decision)
+        return node_outputs(self.rest_decision, self.engine_state)
+
+    @property
+    def pair_outputs(self) -> Layout:
+        """The blocks of the network's pair outputs (with ``pair_impulses``)."""
+        return pair_outputs(self.engine_state)
 
     @property
     def M(self) -> int:
@@ -302,10 +313,17 @@ class LearnedSimulator(nn.Module):
             raise ValueError(
                 "state has no target_vel / target_angvel (last frame of a trajectory?)"
             )
-        dvel = (state.target_vel - state.vel[:, 0] - self.delta_vel_mean) / self.delta_vel_std
-        dang = state.target_angvel - state.angvel[:, 0]
-        dang = (dang - self.delta_angvel_mean) / self.delta_angvel_std
-        return torch.cat([dvel, dang], 1)
+        targets = [state.target_vel, state.target_angvel]
+        if self.engine_state:
+            targets += [state.target_mean_vel, state.target_mean_angvel]
+        return torch.cat([self._normalised_change(state, t, k) for k, t in enumerate(targets)], 1)
+
+    def _normalised_change(self, state, target: torch.Tensor, k: int) -> torch.Tensor:
+        """``(target − x_t − μ)/σ``: a linear (k even) or angular (k odd) velocity target as the
+        normalised change from the state's latest velocity."""
+        if k % 2 == 0:
+            return (target - state.vel[:, 0] - self.delta_vel_mean) / self.delta_vel_std
+        return (target - state.angvel[:, 0] - self.delta_angvel_mean) / self.delta_angvel_std
 
     def rest_target(self, state) -> torch.Tensor:
         """``[N]`` bool: the rest decision's label (:func:`~physgnn.models.rest.rest_target`)."""
@@ -314,47 +332,45 @@ class LearnedSimulator(nn.Module):
     def to_physical(
         self, state, pred: torch.Tensor, reach: torch.Tensor | None = None, supported=None
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Normalised output ``[N, 6]`` → ``(v_{t+1} [N, 3], ω_{t+1} [N, 3])``; spheres of a
-        scene without rotation keep ``ω_t``. With ``gravity_prior``, spheres outside
-        ``reach [N]`` (:meth:`in_reach` of the prediction's graph) fly ballistically. The rest
-        decision stops spheres that are ``supported [N]`` (None: those in ``reach``)."""
-        dvel, dang = self.outputs.take(pred, "delta_vel"), self.outputs.take(pred, "delta_angvel")
-        vel_next = state.vel[:, 0] + dvel * self.delta_vel_std + self.delta_vel_mean
-        angvel_next = state.angvel[:, 0] + dang * self.delta_angvel_std + self.delta_angvel_mean
-        if self.gravity_prior:
-            if reach is None:
-                raise ValueError("gravity_prior needs the spheres in reach of a contact")
-            vel_free, angvel_free = contact_inputs.free_flight(state)
-            vel_next = torch.where(reach[:, None], vel_next, vel_free)
-            angvel_next = torch.where(reach[:, None], angvel_next, angvel_free)
-        if self.rest_decision:
-            still = reach if supported is None else supported
-            logit = self.outputs.take(pred, "rest")[:, 0]
-            vel_next, angvel_next = rest.apply_rest(logit, vel_next, angvel_next, still)
-        angvel_next = torch.where(self.rotating(state)[:, None], angvel_next, state.angvel[:, 0])
-        return vel_next, angvel_next
+        """Normalised output ``[N, outputs.width]`` → ``(v_{t+1} [N, 3], ω_{t+1} [N, 3])``, the
+        first two of :meth:`motion`."""
+        vel, angvel, _, _ = self.motion(state, pred, reach, supported)
+        return vel, angvel
 
-    def forward(self, state) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(vel_next [N, 3], angvel_next [N, 3])`` in physical units (m/s, rad/s, world frame)."""
-        vel_next, angvel_next, _ = self.predict(state)
-        return vel_next, angvel_next
+    def motion(self, state, pred: torch.Tensor, reach=None, supported=None) -> tuple:
+        """Normalised output → ``(v_{t+1}, ω_{t+1}, ū, ω̄)`` ``[N, 3]`` each
+        (:func:`~physgnn.models.motion.physical_motion`)."""
+        return physical_motion(self, state, pred, reach, supported)
+
+    def forward(self, state) -> tuple[torch.Tensor, ...]:
+        """``(vel_next [N, 3], angvel_next [N, 3])`` in physical units (m/s, rad/s, world
+        frame); with the engine state also the frame's mean motion ``(ū [N, 3], ω̄ [N, 3])``,
+        what moves the spheres (:func:`~physgnn.models.protocol.motion_of`)."""
+        motion, _ = self.predict_motion(state)
+        return motion if self.engine_state else motion[:2]
 
     def predict(self, state):
-        """``(vel_next [N, 3], angvel_next [N, 3], graph)``: :meth:`forward` and the graph it
-        was computed on (for a constraint stage, :mod:`physgnn.models.constrained`): passes
-        while a rebuild on the provisional velocities adds edges, at most ``contact_passes``
+        """``(vel_next [N, 3], angvel_next [N, 3], graph)`` of :meth:`predict_motion`."""
+        motion, graph = self.predict_motion(state)
+        return motion[0], motion[1], graph
+
+    def predict_motion(self, state):
+        """``((v_{t+1}, ω_{t+1}, ū, ω̄), graph)``: :meth:`head` of the last pass and the graph
+        it was computed on (for a constraint stage, :mod:`physgnn.models.constrained`): passes
+        while a rebuild on the provisional motion adds edges, at most ``contact_passes``
         rebuilds (module doc)."""
         provisional = list(self.recalled(state))
         graph, basis = self.graph_builder.build(state, provisional)
-        vel, angvel = self.head(state, graph, tuple(provisional))
+        motion = self.head(state, graph, tuple(provisional))
         for _ in range(self.contact_passes):
-            provisional.append(vel)
+            (vel, _), mean = motion_of(motion)
+            provisional.append(vel if mean is None else mean[0])
             wider, basis = self.graph_builder.extend(state, basis, provisional)
             if not wider.grew(graph):
                 break
             graph = wider
-            vel, angvel = self.head(state, graph, tuple(provisional))
-        return vel, angvel, graph
+            motion = self.head(state, graph, tuple(provisional))
+        return motion, graph
 
     def recalled(self, state) -> tuple[torch.Tensor, ...]:
         """With ``contact_memory``, ``(−v_t,)``: the last frame's motion reversed, as a velocity
@@ -362,12 +378,12 @@ class LearnedSimulator(nn.Module):
         more frame (module doc); else ``()``."""
         return (-state.vel[:, 0],) if self.contact_memory else ()
 
-    def head(self, state, graph, provisional: Sequence = ()) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(vel_next [N, 3], angvel_next [N, 3])`` of :meth:`step`: everything of a step after
-        the graph build, the region a compiled simulator compiles as one
+    def head(self, state, graph, provisional: Sequence = ()) -> tuple[torch.Tensor, ...]:
+        """``(v_{t+1}, ω_{t+1}, ū, ω̄)`` ``[N, 3]`` each of :meth:`step`: everything of a step
+        after the graph build, the region a compiled simulator compiles as one
         (:mod:`physgnn.models.capture`)."""
         outputs = self.step(state, graph, provisional)
-        return outputs.vel, outputs.angvel
+        return outputs.vel, outputs.angvel, outputs.mean_vel, outputs.mean_angvel
 
     def step(self, state, graph, provisional: Sequence = ()) -> StepOutputs:
         """One step on ``graph`` (built from ``state`` with ``provisional`` velocities): reach,
@@ -376,9 +392,8 @@ class LearnedSimulator(nn.Module):
         call it."""
         if not self.gravity_prior:
             pred = self.network_prediction(state, graph)
-            vel, angvel = self.to_physical(state, pred)
-            return StepOutputs(pred, vel, angvel, vel, angvel, None)
+            return StepOutputs(pred, *self.motion(state, pred), None)
         where = self.reach(state, graph, provisional)
         pred = self.network_prediction(state, graph, where.planes)
-        vel, angvel = self.to_physical(state, pred, where.spheres, where.supported)
-        return StepOutputs(pred, vel, angvel, vel, angvel, where.spheres)
+        motion = self.motion(state, pred, where.spheres, where.supported)
+        return StepOutputs(pred, *motion, where.spheres)

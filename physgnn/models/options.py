@@ -40,7 +40,10 @@ class ModelInputs:
     tangential speed; ``material_features``: each sphere's restitution and friction values;
     ``relative_pairs``: pp edges carry relative quantities only; ``mass_ratio``: masses only as
     the pair ratio m_i / (m_i + m_j); ``plane_materials``: ps edges carry the sphere–plane
-    contact's restitution and friction (needs ``material_features``)."""
+    contact's restitution and friction (needs ``material_features``); ``engine_state``: the
+    state's velocities are the engine's at each frame's end (the dataset's ``vel``,
+    ``angvel``), and the model predicts the frame's mean motion apart from the end velocities
+    (false: finite-difference velocities, the report's state; :mod:`physgnn.models.learned`)."""
 
     NODE: ClassVar[str] = "model.inputs"
     boundary_features: bool = False
@@ -50,6 +53,7 @@ class ModelInputs:
     relative_pairs: bool = True
     mass_ratio: bool = True
     plane_materials: bool = True
+    engine_state: bool = False
 
     def __post_init__(self) -> None:
         _check_flags(self)

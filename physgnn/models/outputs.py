@@ -75,13 +75,11 @@ def velocity_changes(out: torch.Tensor, layout: Layout = NODE) -> torch.Tensor:
     return out[:, : regression(layout).width]
 
 
-def angular_columns(layout: Layout) -> torch.Tensor:
-    """``[regression(layout).width]`` bool: the columns of angular changes (left out of the
-    loss for spheres of a scene without rotation)."""
-    flags = [
-        name.endswith("angvel") for name, width in regression(layout).blocks for _ in range(width)
-    ]
-    return torch.tensor(flags)
+def angular_columns(layout: Layout) -> list[slice]:
+    """The column ranges of angular changes in ``regression(layout)`` (left out of the loss
+    for spheres of a scene without rotation); host slices, nothing copied to a device."""
+    regressed = regression(layout)
+    return [regressed.slice(name) for name in regressed.names if name.endswith("angvel")]
 
 
 @dataclass(frozen=True)

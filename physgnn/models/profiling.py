@@ -94,7 +94,9 @@ class StepTimer:
 
     def integrate(self, step, *args, **kwargs):
         """``step(*args, **kwargs)`` (one integration), its seconds added to integration."""
-        device = args[0].device if args and torch.is_tensor(args[0]) else torch.device("cpu")
+        first = args[0] if args else None
+        first = first[0] if isinstance(first, tuple) else first  # a simulator's answer
+        device = first.device if torch.is_tensor(first) else torch.device("cpu")
         t0 = self.clock(device)
         out = step(*args, **kwargs)
         self.timings["integration"] += self.clock(device) - t0

@@ -3,9 +3,14 @@ rely on, in one place.
 
 Required: ``H`` (the model sees the ``H + 1`` latest velocities) and the call
 ``simulator(state) -> (vel_next [N, 3], angvel_next [N, 3])`` on a batched
-:class:`~physgnn.data.state.SceneState`, in physical units. Optional hooks, read once by
-:func:`hooks_of` (an absent hook means its default):
+:class:`~physgnn.data.state.SceneState`, in physical units: with a finite-difference state the
+velocities of the next frame, which also move the spheres. A simulator of the engine state
+answers four tensors, ``(v_{t+1}, ω_{t+1}, ū, ω̄)``: the next state's end-of-frame velocities,
+then the frame's mean motion that moves the spheres (:func:`motion_of` reads either). Optional
+hooks, read once by :func:`hooks_of` (an absent hook means its default):
 
+- ``engine_state`` (bool, of the innermost simulator): the states it takes carry the engine's
+  end-of-frame velocities (:class:`~physgnn.data.state.TrajectoryFrames`);
 - ``effects_trained [5]`` bool: effects seen in training (a rollout warns about the others);
 - ``parameters()``: the rollout runs on the device of the first parameter (else the CPU);
 - ``hold(pos, quat, pos_next, quat_next)``: keeps spheres in place after integration;
@@ -40,6 +45,7 @@ class Hooks:
     device: torch.device
     hold: Callable | None
     select: Callable | None
+    engine_state: bool = False
 
 
 def hooks_of(simulator) -> Hooks:
@@ -53,7 +59,18 @@ def hooks_of(simulator) -> Hooks:
         device=first.device if first is not None else torch.device("cpu"),
         hold=getattr(simulator, "hold", None),
         select=getattr(simulator, "select", None),
+        engine_state=bool(getattr(innermost(simulator), "engine_state", False)),
     )
+
+
+def motion_of(out: tuple) -> tuple[tuple[torch.Tensor, torch.Tensor], tuple | None]:
+    """A simulator's answer as ``((v_{t+1}, ω_{t+1}), mean)``: ``mean`` the frame's mean motion
+    ``(ū, ω̄)`` of a four-tensor answer (the engine state), None for two (the velocities move
+    the spheres; :func:`physgnn.physics.integrator.step` takes either)."""
+    if len(out) == 4:
+        return (out[0], out[1]), (out[2], out[3])
+    vel, angvel = out
+    return (vel, angvel), None
 
 
 def innermost(simulator):

@@ -4,7 +4,7 @@ Resting spheres are 72 % of the training set's sphere-frames, and 1 radius of cr
 2 000 frames is 0.0025 m/s: below what a regression of Δv, scaled by bounces (σ ≈ 0.16–1.07
 m/s), resolves. So the network has a seventh output, the logit of "at rest next frame", trained
 by binary cross-entropy against :func:`rest_target`; a sphere in reach of a contact that it
-calls at rest gets ``v = ω = 0`` exactly (:func:`apply_rest`). The hand-written sleeping of
+calls at rest gets ``v = ω = 0`` exactly (:func:`at_rest`). The hand-written sleeping of
 :mod:`physgnn.models.sleeping` stays a separate, opt-in effect.
 """
 
@@ -21,10 +21,8 @@ def rest_target(state, rest_speed: float) -> torch.Tensor:
     return still & (spin < rest_speed)
 
 
-def apply_rest(logit: torch.Tensor, vel: torch.Tensor, angvel: torch.Tensor, reach=None):
-    """``(vel, angvel)`` ``[N, 3]`` each with ``v = ω = 0`` where ``logit [N] > 0`` and the
-    sphere is in ``reach [N]`` of a contact (None: every sphere)."""
+def at_rest(logit: torch.Tensor, reach=None) -> torch.Tensor:
+    """``[N]`` bool: spheres that the rest decision stops, ``logit [N] > 0`` and in ``reach
+    [N]`` of a contact (None: every sphere)."""
     rest = logit > 0
-    rest = rest if reach is None else rest & reach
-    zero = torch.zeros_like(vel)
-    return torch.where(rest[:, None], zero, vel), torch.where(rest[:, None], zero, angvel)
+    return rest if reach is None else rest & reach

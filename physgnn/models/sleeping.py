@@ -84,15 +84,17 @@ class SleepingSimulator:
         if not bool(self.asleep.any()):
             return self.simulator(state)
         awake = ~self.asleep
-        vel = state.pos.new_zeros(n, 3)
-        angvel = state.pos.new_zeros(n, 3)
+        # sleeping spheres answer zeros: 2 tensors, or 4 for a simulator of the engine state
+        self._engine = bool(getattr(self.simulator, "engine_state", False))
+        answer = [state.pos.new_zeros(n, 3) for _ in range(4 if self._engine else 2)]
         if bool(awake.any()):
             sub = subset_state(state, awake)
             fresh = woken[awake]  # just woken: their history is the rest they were frozen in
             sub.vel = torch.where(fresh[:, None, None], torch.zeros_like(sub.vel), sub.vel)
             sub.angvel = torch.where(fresh[:, None, None], torch.zeros_like(sub.angvel), sub.angvel)
-            vel[awake], angvel[awake] = self.simulator(sub)
-        return vel, angvel
+            for whole, part in zip(answer, self.simulator(sub), strict=True):
+                whole[awake] = part
+        return tuple(answer)
 
     def hold(
         self, pos: torch.Tensor, quat: torch.Tensor, pos_next: torch.Tensor, quat_next: torch.Tensor

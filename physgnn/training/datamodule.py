@@ -26,6 +26,7 @@ from physgnn.data.dataset import (
     generate_hint,
     read_split,
     read_stats,
+    split_substeps,
 )
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 
@@ -82,7 +83,9 @@ class StatePairDataModule(L.LightningDataModule):
 
     ``preset`` only names the dataset in error messages. ``H`` must equal the model's history;
     ``pushforward_steps`` the Lightning module's (the training pairs carry that many more
-    future frames; validation pairs are one-step).
+    future frames; validation pairs are one-step). ``engine_state``, an attribute set from the
+    model before :meth:`setup` (:func:`~physgnn.training.build.build`): the pairs' velocities
+    are the engine's (``model.inputs.engine_state``).
     """
 
     def __init__(
@@ -113,6 +116,7 @@ class StatePairDataModule(L.LightningDataModule):
         if pushforward_steps < 0:
             raise ValueError(f"pushforward_steps must be >= 0 (got {pushforward_steps})")
         self.pushforward_steps = int(pushforward_steps)
+        self.engine_state = False  # the model's state: build() sets it from the model
         self.train_set: PairDataset | None = None
         self.val_set: PairDataset | None = None
 
@@ -123,9 +127,13 @@ class StatePairDataModule(L.LightningDataModule):
         check_preset(self.data_dir, self.preset)
 
     def stats(self) -> dict:
-        """The training split's normalisation statistics (``stats.json``)."""
+        """The training split's normalisation statistics (``stats.json``), with the engine's
+        substeps per frame read from ``train.h5`` where ``stats.json`` predates them."""
         self._path("stats.json")
-        return read_stats(self.data_dir)
+        stats = read_stats(self.data_dir)
+        if "substeps" not in stats:
+            stats["substeps"] = split_substeps(self._path("train.h5"))
+        return stats
 
     def setup(self, stage: str | None = None) -> None:
         if self.train_set is None:
@@ -134,7 +142,7 @@ class StatePairDataModule(L.LightningDataModule):
             self.val_set = self._load("val.h5")
 
     def _load(self, name: str, future: int = 0) -> PairDataset:
-        pairs = PairDataset(read_split(self._path(name)), self.H, future)
+        pairs = PairDataset(read_split(self._path(name)), self.H, future, self.engine_state)
         if len(pairs) == 0:
             raise DatasetError(
                 f"{self.data_dir / name} has no trajectory longer than H + {future + 2} frames"

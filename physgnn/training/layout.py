@@ -44,6 +44,8 @@ PREVIOUS_MODEL = {
     "plane_materials": False,
     "contact_memory": False,
 }
+# Input keys that runs before the engine state lack, with the value their model had.
+BEFORE_ENGINE_STATE = {"engine_state": False}
 LEARNED = "physgnn.models.learned.LearnedSimulator"
 # The nodes of today's layout, with the Hydra keys that build them.
 NODES = {
@@ -136,7 +138,11 @@ def model_of_today(model: DictConfig) -> DictConfig:
         flat = EARLIER_MODEL | flat
     if flat.get("_target_") == LEARNED and "contacts" not in flat:
         flat = PREVIOUS_MODEL | flat
-    return OmegaConf.create(_into_nodes(flat, FLAT_KEYS, NODES))
+    nested = _into_nodes(flat, FLAT_KEYS, NODES)
+    if nested.get("_target_") == LEARNED:  # runs before the engine state had the FD state
+        inputs = nested.setdefault("inputs", dict(NODES["inputs"]))
+        inputs.update({k: v for k, v in BEFORE_ENGINE_STATE.items() if k not in inputs})
+    return OmegaConf.create(nested)
 
 
 def _into_nodes(flat: dict, keys: dict, nodes: dict, every_node: bool = False) -> dict:

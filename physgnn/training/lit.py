@@ -47,7 +47,8 @@ import torch
 
 from physgnn.models.capture import compile_in_place, compile_simulator
 from physgnn.models.learned import LearnedSimulator
-from physgnn.models.outputs import velocity_changes
+from physgnn.models.outputs import angular_columns, velocity_changes
+from physgnn.models.protocol import motion_of
 from physgnn.physics.integrator import step
 from physgnn.training.contacts import contact_penalty, perturb_contacts
 from physgnn.training.epoch_means import EpochMeans
@@ -62,23 +63,23 @@ from physgnn.training.schedule import lr_scheduler
 def push_forward(state, simulator: LearnedSimulator, steps: int):
     """The state after ``steps`` frames of the simulator's own rollout from ``state``, with
     the targets of the frame after: ``(p_{t+k+1} − p̂_{t+k})/dt`` and ``ω_{t+k+1}``
-    (``state.future_pos`` / ``future_angvel [N, K+1, 3]``, K ≥ steps)."""
+    (``state.future_pos`` / ``future_angvel [N, K+1, 3]``, K ≥ steps); with the engine state
+    those are the mean-motion targets, and the end velocities' are the engine's
+    (``future_vel`` / ``future_end_angvel``)."""
     out = state.clone()
     dt = state.scene_dt
     for _ in range(steps):  # the rollout's own integration step
-        vel_next, angvel_next = simulator(out)
-        out.pos, out.quat, out.vel, out.angvel = step(
-            out.pos,
-            out.quat,
-            out.vel,
-            out.angvel,
-            vel_next,
-            angvel_next,
-            dt,
-            simulator.rotating(out),
-        )
-    out.target_vel = (state.future_pos[:, steps] - out.pos) / dt[:, None]
-    out.target_angvel = state.future_angvel[:, steps]
+        (vel_next, angvel_next), mean = motion_of(simulator(out))
+        rotating = simulator.rotating(out)
+        moved = (out.pos, out.quat, out.vel, out.angvel, vel_next, angvel_next, dt, rotating)
+        out.pos, out.quat, out.vel, out.angvel = step(*moved, mean=mean)
+    motion = (state.future_pos[:, steps] - out.pos) / dt[:, None]
+    if getattr(state, "future_vel", None) is None:
+        out.target_vel, out.target_angvel = motion, state.future_angvel[:, steps]
+        return out
+    out.target_mean_vel, out.target_mean_angvel = motion, state.future_angvel[:, steps]
+    out.target_vel = state.future_vel[:, steps]
+    out.target_angvel = state.future_end_angvel[:, steps]
     return out
 
 
@@ -156,13 +157,14 @@ class LitSimulator(L.LightningModule):
         sim = self.simulator
         outputs = sim.step(state, graph, provisional)
         target = sim.normalized_target(state)
-        mse = masked_mse(velocity_changes(outputs.out), target, sim.rotating(state), outputs.reach)
-        vel_next = outputs.vel
-        energy = energy_increase(state, vel_next).mean()
+        pred = velocity_changes(outputs.out, sim.outputs)
+        angular = angular_columns(sim.outputs)
+        mse = masked_mse(pred, target, sim.rotating(state), outputs.reach, angular)
+        energy = energy_increase(state, outputs.vel, outputs.mean_vel).mean()
         terms = self.loss_terms
         weighted = terms.lambda_energy * energy
         tol = terms.contact_tol * sim.length_scale
-        contact = contact_penalty(state, vel_next, graph, tol, sim.delta_speed_scale)
+        contact = contact_penalty(state, outputs.mean_vel, graph, tol, sim.delta_speed_scale)
         rest = rest_loss(sim, state, outputs.out, outputs.reach)
         loss = mse + weighted + terms.lambda_contact * contact + terms.lambda_rest * rest
         share = (weighted / loss.clamp_min(1e-30)).detach()

@@ -13,16 +13,16 @@ from physgnn.physics.energy import scene_energy, scene_weight
 from physgnn.physics.integrator import euler_step
 
 
-def energy_increase(state, vel_next: torch.Tensor) -> torch.Tensor:
+def energy_increase(state, vel_next: torch.Tensor, mean_vel=None) -> torch.Tensor:
     """``[B]``: ``max(E_{t+1} − E_t, 0) / Σ m g`` of every scene (metres of height).
 
-    ``vel_next [N, 3]`` is the predicted ``v̂_{t+1}``; ``E_{t+1}`` uses the Euler-integrated
-    position ``p_t + dt·v̂_{t+1}`` and ``v̂_{t+1}``; ``E_t`` uses ``p_t`` and ``v_t``."""
+    ``vel_next [N, 3]`` is the predicted ``v̂_{t+1}``; ``E_{t+1}`` uses the position
+    ``p_t + dt·ū`` the step moves to (``mean_vel`` ū; None: ``v̂_{t+1}``, Euler) and
+    ``v̂_{t+1}``; ``E_t`` uses ``p_t`` and ``v_t``."""
     n_scenes = state.num_graphs if hasattr(state, "num_graphs") else 1
     batch = scene_of_sphere(state)
-    pos_next, _ = euler_step(
-        state.pos, state.quat, vel_next, vel_next, state.scene_dt, rotate=False
-    )
+    moved = vel_next if mean_vel is None else mean_vel
+    pos_next, _ = euler_step(state.pos, state.quat, moved, moved, state.scene_dt, rotate=False)
     args = (state.mass, state.radius, batch, n_scenes)
     e_now = scene_energy(state.pos, state.vel[:, 0], *args)
     e_next = scene_energy(pos_next, vel_next, *args)
@@ -34,11 +34,14 @@ def masked_mse(
     target: torch.Tensor,
     rotating: torch.Tensor,
     counted: torch.Tensor | None = None,
+    angular: list[slice] | None = None,
 ) -> torch.Tensor:
-    """Mean squared error of ``[N, 6]`` outputs, angular part only where ``rotating [N]``, and
-    only spheres of ``counted [N]`` (bool, default all; 0 when none is)."""
+    """Mean squared error of ``[N, C]`` outputs, the ``angular`` column ranges (None: the last
+    three of six) only where ``rotating [N]``, and only spheres of ``counted [N]`` (bool,
+    default all; 0 when none is)."""
     weight = torch.ones_like(pred)
-    weight[:, 3:] = rotating[:, None].to(pred.dtype)
+    for columns in [slice(3, None)] if angular is None else angular:
+        weight[:, columns] = rotating[:, None].to(pred.dtype)
     if counted is not None:
         weight = weight * counted[:, None].to(pred.dtype)
     return ((pred - target) ** 2 * weight).sum() / weight.sum().clamp_min(1.0)

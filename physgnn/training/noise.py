@@ -55,7 +55,9 @@ def add_noise(state, simulator: LearnedSimulator, std: float, generator=None, re
     noisy.vel = state.vel + dv
     dp = dt * dv.sum(1)  # p̃_t − p_t: the velocity noise integrated along the history
     noisy.pos = state.pos + dp
-    if getattr(state, "target_vel", None) is not None:
+    if getattr(state, "target_mean_vel", None) is not None:  # the engine state
+        noisy.target_mean_vel = state.target_mean_vel - dp / dt
+    elif getattr(state, "target_vel", None) is not None:
         noisy.target_vel = state.target_vel - dp / dt
     quat = Q.normalize(state.quat + std * randn_like(state.quat))
     noisy.quat = torch.where(rot, quat, state.quat)

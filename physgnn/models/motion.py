@@ -1,0 +1,60 @@
+"""A learned step's normalised outputs in physical units: the next state's velocities and the
+frame's mean motion.
+
+**The engine state** (``model.inputs.engine_state``): the state's velocities are the engine's at
+each frame's end (the dataset's ``vel``, ``angvel``), not finite differences of positions. A
+finite-difference velocity of a frame that holds an impact is the frame's *mean*, so flight after
+a contact would depend on when, inside the frame, the impact happened; the engine's end velocity
+makes the state Markov across a contact. The model then predicts the end velocities
+``(v_{t+1}, ω_{t+1})`` (the next state) and the frame's mean motion ``ū = Δp/dt``,
+``ω̄ = log(q_{t+1} ⊗ q_t⁻¹)/dt`` (what moves the sphere,
+:func:`physgnn.physics.integrator.move`) apart, both through the pair-impulse rule
+(:mod:`physgnn.models.impulses`). A sphere out of reach of any contact moves in closed form as
+the truth's integrator does: semi-implicit Euler at k substeps gives ``v_{t+1} = v_t + g·dt``
+and ``ū = v_t + s·g·dt`` with ``s = (k + 1)/(2k)``
+(:func:`~physgnn.models.contact_inputs.gravity_share`, k from the training data's metadata;
+data without it: the exact parabola, ``s = 1/2``). Data with positions only (the GNS and
+LagrangeBench imports) keeps finite differences
+(:func:`~physgnn.data.state.has_engine_velocities`).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from physgnn.models import contact_inputs, rest
+
+
+def physical_motion(sim, state, pred: torch.Tensor, reach=None, supported=None) -> tuple:
+    """Normalised output → ``(v_{t+1}, ω_{t+1}, ū, ω̄)``, each ``[N, 3]``: the next
+    state's velocities and the frame's mean motion (the same tensors for a
+    finite-difference state). Spheres of a scene without rotation keep ``ω_t``. With
+    ``gravity_prior``, spheres outside ``reach [N]`` (``sim.in_reach`` of the prediction's
+    graph) fly ballistically: ``v + g·dt`` and, with the engine state, the mean
+    ``v + s·g·dt``, ``s`` the engine's own share
+    (:func:`~physgnn.models.contact_inputs.gravity_share`). The rest decision stops spheres
+    that are ``supported [N]`` (None: those in ``reach``)."""
+    out, vel_t, angvel_t = sim.outputs, state.vel[:, 0], state.angvel[:, 0]
+    vel = vel_t + out.take(pred, "delta_vel") * sim.delta_vel_std + sim.delta_vel_mean
+    spin = out.take(pred, "delta_angvel") * sim.delta_angvel_std
+    moves = [vel, angvel_t + spin + sim.delta_angvel_mean]
+    if sim.engine_state:
+        mean = out.take(pred, "delta_mean_vel") * sim.delta_vel_std
+        spin = out.take(pred, "delta_mean_angvel") * sim.delta_angvel_std
+        moves += [vel_t + mean + sim.delta_vel_mean, angvel_t + spin + sim.delta_angvel_mean]
+    if sim.gravity_prior:
+        if reach is None:
+            raise ValueError("gravity_prior needs the spheres in reach of a contact")
+        vel_free, angvel_free = contact_inputs.free_flight(state)
+        free = [vel_free, angvel_free]
+        if sim.engine_state:
+            free += [vel_t + sim.gravity_share * (vel_free - vel_t), angvel_free]
+        moves = [torch.where(reach[:, None], m, f) for m, f in zip(moves, free, strict=True)]
+    if sim.rest_decision:
+        rest_now = rest.at_rest(
+            out.take(pred, "rest")[:, 0], reach if supported is None else supported
+        )
+        moves = [torch.where(rest_now[:, None], torch.zeros_like(m), m) for m in moves]
+    rotating = sim.rotating(state)[:, None]
+    moves[1::2] = [torch.where(rotating, m, angvel_t) for m in moves[1::2]]
+    return tuple(moves) if sim.engine_state else (*moves, *moves)
