@@ -179,20 +179,35 @@ def animate(
 
 def export(trajs: Trajectory | list[Trajectory], folder: str | Path, format: str = "vtk") -> Path:
     """Write ``trajs`` into ``folder`` as ``format``: ``vtk`` (one trajectory: ParaView files,
-    returns the series file), ``gns`` or ``lagrangebench`` (a ``test`` split and
-    metadata.json), ``hdf5`` (physgnn's dataset schema, ``trajectories.h5``). The folder is
-    written whole, replacing an earlier export there; a folder holding other files is refused
-    (:mod:`physgnn.data.exports`). What each format cannot hold: docs/DATA.md."""
-    trajs = [trajs] if isinstance(trajs, Trajectory) else list(trajs)
+    returns the series file), ``gns`` or ``lagrangebench`` (a ``test`` split and metadata.json;
+    ``{"train": [...], "valid": [...], "test": [...]}`` writes those splits, the files the
+    peers' trainers open), ``hdf5`` (physgnn's dataset schema, ``trajectories.h5``). The folder
+    is written whole, replacing an earlier export there; a folder holding other files is
+    refused (:mod:`physgnn.data.exports`). What each format cannot hold: docs/DATA.md."""
+    _of_type("folder", folder, (str, Path), "a folder's path (str or Path), e.g. 'out'")
     if format not in FORMATS:
         raise SceneError(f"export format '{format}' is unknown; choose one of {list(FORMATS)}")
+    splits = (dict(trajs) or {"test": []}) if isinstance(trajs, dict) else {"test": trajs}
+    if isinstance(trajs, dict) and format not in ("gns", "lagrangebench"):
+        raise ArgumentError(f"trajs: splits (a dict) are for gns and lagrangebench, not {format}")
+    for split, items in splits.items():
+        name = f"trajs[{split!r}]" if isinstance(trajs, dict) else "trajs"
+        listed = hasattr(items, "__iter__") and not isinstance(items, str)
+        if not (isinstance(items, Trajectory) or listed):
+            raise ArgumentError(
+                f"{name} must be a Trajectory or a list of them (e.g. [truth, pred]), "
+                f"got {type(items).__name__}"
+            )
+        splits[split] = [items] if isinstance(items, Trajectory) else list(items)
+    trajs = splits.get("test", [])
     if format == "vtk" and len(trajs) > 1:
         raise SceneError(f"export to vtk takes one trajectory, got {len(trajs)}: one folder each")
-    exports.check_exportable(trajs, f"export to {format}")
+    for items in splits.values():
+        exports.check_exportable(items, f"export to {format}")
     if format == "vtk":
         return vtk.write_vtk(trajs[0], folder)
     if format == "gns":
-        return interchange.write_gns(folder, {"test": trajs})
+        return interchange.write_gns(folder, splits)
     if format == "lagrangebench":
-        return interchange.write_lagrangebench(folder, {"test": trajs})
+        return interchange.write_lagrangebench(folder, splits)
     return exports.write_hdf5(folder, trajs)

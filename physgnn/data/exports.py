@@ -6,12 +6,16 @@ previous export as it was, and a shorter export leaves no stale frame of a longe
 folder gets :data:`~physgnn.files.OUTPUT_MARKER` listing its format and files; a folder is
 replaced only when it is absent, empty, or holds nothing but such an export's files. Any
 other folder (a file of the user's in it, or another command's output) is refused in one
-line naming the file and the fix.
+line naming the file and the fix. The folder ends with the user's umask (not the 700 of a
+staging folder); a full disk is one line naming the folder; the previous export that an
+export killed between its two renames left aside (``.<name>.old-<pid>-*/<name>``) is put back
+by the next export there, before anything else.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import errno
 import glob
 import json
 import os
@@ -87,20 +91,84 @@ def _check_finite(traj: Trajectory, what: str) -> None:
 def staged_folder(folder: str | Path, fmt: str) -> Iterator[Path]:
     """Yield an empty staging folder to write an export of format ``fmt`` into; at the end it
     replaces ``folder`` whole (module doc). Refuses a folder it may not replace
-    (:class:`FileExistsError`, one line) before anything is written."""
-    folder = Path(folder)
+    (:class:`FileExistsError`, one line) before anything is written; a full disk is an
+    :class:`ExportDiskFull` naming ``folder``, the staging folder removed."""
+    folder = check_folder(folder)
+    _restore_set_aside(folder)
     check_replaceable(folder)
     folder.parent.mkdir(parents=True, exist_ok=True)
     _remove_leftovers(folder)
-    staging = _beside(folder, "partial")
+    staging = None
     try:
+        staging = _beside(folder, "partial")
+        os.chmod(staging, 0o777 & ~umask())
         yield staging
         files = sorted(p.name for p in staging.iterdir())
         marker = {"physgnn_version": __version__, "export": fmt, "files": files}
         write_json(staging / OUTPUT_MARKER, marker)
         _move_in(staging, folder)
+    except OSError as err:
+        if not disk_full(err):
+            raise
+        raise ExportDiskFull(folder, fmt) from None
     finally:
-        shutil.rmtree(staging, ignore_errors=True)
+        if staging is not None:
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+class ExportDiskFull(ExportError, OSError):
+    """An export that ran out of disk space (also an ``OSError`` with ``errno`` ENOSPC)."""
+
+    def __init__(self, folder: Path, fmt: str):
+        try:
+            free = f"{shutil.disk_usage(folder.parent).free / 2**20:.1f} MiB free there"
+        except OSError:
+            free = "the disk is full"
+        super().__init__(
+            f"export to {fmt}: No space left on device writing {folder} ({free}); "
+            f"nothing was changed there: free space, or export into a folder on another disk"
+        )
+        self.errno = errno.ENOSPC
+
+
+# What h5py says when a write hit a full disk (its OSError carries no errno then).
+DISK_FULL_WORDS = ("No space left on device", "Disk quota exceeded", "errno = 28")
+
+
+def disk_full(err: OSError) -> bool:
+    """``err`` is a full disk or quota (an errno, or h5py's words for one)."""
+    if err.errno in (errno.ENOSPC, errno.EDQUOT):
+        return True
+    return err.errno is None and any(word in str(err) for word in DISK_FULL_WORDS)
+
+
+def umask() -> int:
+    """This process's umask (read without changing it where Linux tells it)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def check_folder(folder) -> Path:
+    """``folder`` as a :class:`Path` once it names a folder of its own (not ``''``, ``'.'``,
+    ``'..'`` or ``'/'``: an export replaces its folder whole), else :class:`ExportError`."""
+    if not isinstance(folder, str | os.PathLike):
+        raise ExportError(
+            f"export folder must be a folder's path (str or Path), got {type(folder).__name__}"
+        )
+    path = Path(folder)
+    if path.name in ("", ".."):
+        raise ExportError(
+            f"export folder {str(folder)!r} names no folder of its own (an export replaces its "
+            f"folder whole): give a new folder's name, e.g. 'out'"
+        )
+    return path
 
 
 def check_replaceable(folder: Path) -> None:
@@ -138,7 +206,11 @@ def _move_in(staging: Path, folder: Path) -> None:
     aside = _beside(folder, "old")
     try:
         os.replace(folder, aside / folder.name)
-        os.replace(staging, folder)
+        try:
+            os.replace(staging, folder)
+        except BaseException:  # the earlier export back in place, never removed with aside
+            os.replace(aside / folder.name, folder)
+            raise
     finally:
         shutil.rmtree(aside, ignore_errors=True)
 
@@ -149,13 +221,43 @@ def _beside(folder: Path, kind: str) -> Path:
     return Path(tempfile.mkdtemp(prefix=prefix, dir=folder.parent))
 
 
+def _leftovers(folder: Path, kind: str) -> list[Path]:
+    """The ``kind`` (``partial``, ``old``) folders beside ``folder`` of exports whose process
+    died (killed mid-way), newest first."""
+    found = []
+    for path in folder.parent.glob(f".{glob.escape(folder.name)}.{kind}-*-*"):
+        pid = path.name[len(f".{folder.name}.{kind}-") :].split("-")[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not process_alive(int(pid)):
+            found.append(path)
+    return sorted(found, key=_modified, reverse=True)
+
+
+def _modified(path: Path) -> float:
+    """When ``path`` last changed (0 once it is gone: another export removed it)."""
+    try:
+        return path.stat().st_mtime
+    except OSError:
+        return 0.0
+
+
+def _restore_set_aside(folder: Path) -> None:
+    """An export killed between its two renames left ``folder`` missing and the previous
+    export in ``.<name>.old-<pid>-*/<name>``: that export goes back to ``folder``."""
+    if folder.exists() or folder.is_symlink():
+        return
+    for aside in _leftovers(folder, "old"):
+        if (aside / folder.name).is_dir():
+            os.replace(aside / folder.name, folder)
+            shutil.rmtree(aside, ignore_errors=True)
+            return
+
+
 def _remove_leftovers(folder: Path) -> None:
-    """The staging and set-aside folders of exports whose process died (killed mid-way)."""
+    """The staging and set-aside folders of exports whose process died; a set-aside export
+    is only removed once ``folder`` holds an export (:func:`_restore_set_aside`)."""
     for kind in ("partial", "old"):
-        for path in folder.parent.glob(f".{glob.escape(folder.name)}.{kind}-*-*"):
-            pid = path.name[len(f".{folder.name}.{kind}-") :].split("-")[0]
-            if pid.isdigit() and int(pid) != os.getpid() and not process_alive(int(pid)):
-                shutil.rmtree(path, ignore_errors=True)
+        for path in _leftovers(folder, kind):
+            shutil.rmtree(path, ignore_errors=True)
 
 
 def write_hdf5(folder: str | Path, trajs: list[Trajectory]) -> Path:
@@ -164,9 +266,28 @@ def write_hdf5(folder: str | Path, trajs: list[Trajectory]) -> Path:
     named = [
         dataclasses.replace(t, attrs={"group": t.name.replace("/", "_")} | t.attrs) for t in trajs
     ]
+    _check_groups(named)
     with staged_folder(folder, "hdf5") as staging:
         write_split(staging / HDF5_FILE, named, {"split": "export", "preset": "api"})
     return Path(folder) / HDF5_FILE
+
+
+def _check_groups(trajs: list[Trajectory]) -> None:
+    """Each trajectory's HDF5 group name is one HDF5 takes and reads back, and no two match."""
+    seen = {}
+    for i, traj in enumerate(trajs):
+        group = str(traj.attrs["group"])
+        if group in ("", ".", ".."):
+            raise ExportError(
+                f"export to hdf5: trajectory {i} is named {traj.name!r}, which HDF5 takes as no "
+                f"group's name: name it (dataclasses.replace(traj, name='drop'))"
+            )
+        if group in seen:
+            raise ExportError(
+                f"export to hdf5: trajectories {seen[group]} and {i} both become the group "
+                f"{group!r} ('/' is written '_'): rename one (dataclasses.replace(traj, name=...))"
+            )
+        seen[group] = i
 
 
 def load_trajectories(path: str | Path) -> list[Trajectory]:

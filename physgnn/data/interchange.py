@@ -5,28 +5,36 @@ file per split and a ``metadata.json``. Each folder is written whole
 (:func:`physgnn.data.exports.staged_folder`). The types follow each reader's conventions:
 
 - GNS (``learning_to_simulate`` / the PyTorch GNS, geoelements/gns ``gns/data_loader.py``):
-  ``<split>.npz`` with one entry ``simulation_trajectory_<i>`` per trajectory, the triple
+  ``<split>.npz`` (``train``, ``valid``, ``test``: the names its ``gns/train.py`` opens) with
+  one entry ``simulation_trajectory_<i>`` per trajectory, the triple
   ``(positions [T, N, 3] float32, particle_type [N] int64, material_property [N] float32)``
   (a pickled object array: read it with ``allow_pickle=True``). GNS embeds 9 particle types
   and type 3 is its kinematic (fixed) particle, which a sphere never is: material ``k`` is
   type ``GNS_TYPES[k]`` (DeepMind's datasets use 5, 6, 7 for water, sand, goop), so at most 8
   materials. ``material_property`` is each sphere's restitution.
 - LagrangeBench (``lagrangebench/data/data.py``): ``<split>.h5`` (splits ``train``,
-  ``valid``, ``test``) with one group per trajectory (``00000``, …) holding ``position
-  [T, N, 3]`` and ``particle_type [N]``, 0 for every sphere: LagrangeBench's moving particle
-  (its types 1 and 2 are fixed and moving walls, ``lagrangebench/utils.py``). The material id
-  is the extra array ``material [N]`` beside them. LagrangeBench reads one length per split
-  (its first trajectory's): a split of trajectories of different lengths is refused.
+  ``valid``, ``test``; its runner opens all three) with one group per trajectory (``00000``,
+  …) holding ``position [T, N, 3]`` and ``particle_type [N]``, 0 for every sphere:
+  LagrangeBench's moving particle (its types 1 and 2 are fixed and moving walls,
+  ``lagrangebench/utils.py``). The material id is the extra array ``material [N]`` beside
+  them. LagrangeBench reads one length per split (its first trajectory's): a split of
+  trajectories of different lengths is refused.
 
-``metadata.json``: ``dim`` 3, ``dt``, ``bounds`` (per axis, of every position),
-``sequence_length`` (and ``sequence_length_<split>``: the shortest trajectory of the split),
-``default_connectivity_radius`` (three times the largest radius), ``dx`` (the side of a cube
-of a sphere's mean volume: LagrangeBench's ``e_kin`` weighs each particle by ``dx**dim``),
-``num_particles_max``, ``periodic_boundary_conditions`` (all false), ``write_every`` 1, the
-statistics of velocity and acceleration in the formats' own units: position change per frame,
-and its change per frame (``vel_mean``, ``vel_std``, ``acc_mean``, ``acc_std``, per axis), and
-physgnn's ``materials`` (``{split: [table [K, 4] per trajectory]}``, columns
-``material_columns``) that the readers below restore.
+Both take physgnn's split ``val`` as ``valid`` (an export written before as ``val.npz`` still
+reads as ``val`` and ``valid``).
+
+``metadata.json`` (strict JSON: trajectories of fewer than 3 frames, which give no
+acceleration statistics, are refused): ``dim`` 3, ``dt``, ``bounds`` (per axis, of every
+position), ``sequence_length`` (and ``sequence_length_<split>``: the shortest trajectory of
+the split), ``default_connectivity_radius`` (three times the largest radius), ``dx`` (the side
+of a cube of a sphere's mean volume: LagrangeBench's ``e_kin`` weighs each particle by
+``dx**dim``), ``num_particles_max``, ``periodic_boundary_conditions`` (all false),
+``write_every`` 1, the statistics of velocity and acceleration in the formats' own units:
+position change per frame, and its change per frame (``vel_mean``, ``vel_std``, ``acc_mean``,
+``acc_std``, per axis), and physgnn's ``materials`` (``{split: [table [K, 4] per
+trajectory]}``, columns ``material_columns``) that the readers below restore. GNS's adds the
+input widths its ``gns/train.py`` builds its network with (:func:`gns_widths`): ``nnode_in``,
+``nedge_in``.
 
 Reading back needs what the formats drop: the radius (``radius``). See docs/DATA.md.
 """
@@ -46,9 +54,43 @@ from physgnn.physics.trajectory import Trajectory
 
 # The GNS particle type of material 0, 1, ...: GNS's 9 types less its kinematic type 3.
 GNS_TYPES = (5, 6, 7, 8, 0, 1, 2, 4)
+# geoelements/gns gns/train.py: INPUT_SEQUENCE_LENGTH positions in, particle_type_embedding_size
+GNS_INPUT_SEQUENCE_LENGTH = 6
+GNS_TYPE_EMBEDDING = 16
 LAGRANGEBENCH_MOVING = 0
-LAGRANGEBENCH_SPLITS = {"train": "train", "val": "valid", "test": "test"}
+# physgnn's split names as GNS's train.py and LagrangeBench's runner open them (others kept)
+PEER_SPLITS = {"train": "train", "val": "valid", "test": "test"}
 MATERIAL_COLUMNS = list(Material.__dataclass_fields__)
+# the fewest frames that give metadata.json its acceleration statistics
+MIN_FRAMES = 3
+DIM = 3
+
+
+def gns_widths(dim: int = DIM) -> dict:
+    """GNS's input widths of a physgnn export, as its ``gns/learned_simulator.py`` builds the
+    node and edge features: the last ``INPUT_SEQUENCE_LENGTH - 1`` velocities, the distances
+    to the lower and upper bounds, the particle type's embedding and the one
+    ``material_property`` each sphere has; edges: the displacement and its length."""
+    velocities = (GNS_INPUT_SEQUENCE_LENGTH - 1) * dim
+    return {"nnode_in": velocities + 2 * dim + GNS_TYPE_EMBEDDING + 1, "nedge_in": dim + 1}
+
+
+def check_lengths(fmt: str, splits: dict[str, list[Trajectory]]) -> None:
+    """At least one trajectory of :data:`MIN_FRAMES` frames (else metadata.json's statistics
+    would be NaN); else :class:`ExportError`."""
+    longest = max((t.n_frames for trajs in splits.values() for t in trajs), default=0)
+    if longest < MIN_FRAMES:
+        raise ExportError(
+            f"export to {fmt}: the trajectories hold {longest} frame(s) at most; metadata.json's "
+            f"velocity and acceleration statistics need {MIN_FRAMES}: export at least "
+            f"{MIN_FRAMES} frames (GNS and LagrangeBench train on windows of "
+            f"{GNS_INPUT_SEQUENCE_LENGTH + 1})"
+        )
+
+
+def _write_metadata(path: Path, meta: dict) -> None:
+    """``metadata.json`` as strict JSON (a NaN is a bug, never a bare ``NaN`` in the file)."""
+    path.write_text(json.dumps(meta, indent=2, allow_nan=False))
 
 
 def metadata(splits: dict[str, list[Trajectory]]) -> dict:
@@ -83,7 +125,10 @@ def metadata(splits: dict[str, list[Trajectory]]) -> dict:
 
 
 def write_gns(folder: str | Path, splits: dict[str, list[Trajectory]]) -> Path:
-    """``<folder>/<split>.npz`` per split and ``metadata.json``; returns the folder."""
+    """``<folder>/<split>.npz`` per split (``train``, ``valid`` from ``val``, ``test``; any
+    other split keeps its name) and ``metadata.json``; returns the folder."""
+    splits = {PEER_SPLITS.get(k, k): v for k, v in splits.items()}
+    check_lengths("gns", splits)
     for trajs in splits.values():
         for traj in trajs:
             if traj.material.max(initial=0) >= len(GNS_TYPES):
@@ -97,7 +142,7 @@ def write_gns(folder: str | Path, splits: dict[str, list[Trajectory]]) -> Path:
             entries = {f"simulation_trajectory_{i}": _gns_entry(t) for i, t in enumerate(trajs)}
             with open(staging / f"{split}.npz", "wb") as f:
                 np.savez_compressed(f, **entries)
-        (staging / "metadata.json").write_text(json.dumps(metadata(splits), indent=2))
+        _write_metadata(staging / "metadata.json", metadata(splits) | gns_widths())
     return Path(folder)
 
 
@@ -116,7 +161,7 @@ def read_gns(folder: str | Path, split: str, radius: float | np.ndarray) -> list
     as :meth:`~physgnn.physics.trajectory.Trajectory.from_arrays` makes them."""
     folder = Path(folder)
     meta = _metadata(folder)
-    path = folder / f"{split}.npz"
+    path, split = _split_file(folder, split, "npz")
     try:
         with np.load(path, allow_pickle=True) as data:
             names = sorted(data.files, key=lambda k: int(k.rsplit("_", 1)[1]))
@@ -124,7 +169,7 @@ def read_gns(folder: str | Path, split: str, radius: float | np.ndarray) -> list
         material = [_gns_material(e[1]) for e in entries]
     except Exception as e:  # a truncated zip, another npz, a pickle of something else
         raise _unreadable(path, "gns", e) from None
-    tables = meta.get("materials", {}).get(split, [None] * len(entries))
+    tables = _tables(meta, split, len(entries))
     return [
         _from_arrays(path, e[0], radius, meta["dt"], m, table, name)
         for name, e, m, table in zip(names, entries, material, tables, strict=True)
@@ -144,7 +189,8 @@ def _gns_material(types) -> np.ndarray:
 def write_lagrangebench(folder: str | Path, splits: dict[str, list[Trajectory]]) -> Path:
     """``<folder>/{train,valid,test}.h5`` (from the splits ``train``, ``val``, ``test``; any
     other split keeps its name) and ``metadata.json``; returns the folder."""
-    named = {LAGRANGEBENCH_SPLITS.get(k, k): v for k, v in splits.items()}
+    named = {PEER_SPLITS.get(k, k): v for k, v in splits.items()}
+    check_lengths("lagrangebench", named)
     for split, trajs in named.items():
         lengths = sorted({t.n_frames for t in trajs})
         if len(lengths) > 1:
@@ -162,25 +208,25 @@ def write_lagrangebench(folder: str | Path, splits: dict[str, list[Trajectory]])
                     moving = np.full(traj.n_spheres, LAGRANGEBENCH_MOVING, np.int64)
                     group.create_dataset("particle_type", data=moving)
                     group.create_dataset("material", data=traj.material.astype(np.int64))
-        (staging / "metadata.json").write_text(json.dumps(metadata(named), indent=2))
+        _write_metadata(staging / "metadata.json", metadata(named))
     return Path(folder)
 
 
 def read_lagrangebench(
     folder: str | Path, split: str, radius: float | np.ndarray
 ) -> list[Trajectory]:
-    """The trajectories of ``<folder>/<split>.h5`` (``split``: train, valid or test) with
-    spheres of ``radius``, ``dt`` and the material tables from ``metadata.json``."""
+    """The trajectories of ``<folder>/<split>.h5`` (``split``: train, valid (or val) or test)
+    with spheres of ``radius``, ``dt`` and the material tables from ``metadata.json``."""
     folder = Path(folder)
     meta = _metadata(folder)
-    path = folder / f"{split}.h5"
+    path, split = _split_file(folder, split, "h5")
     try:
         with h5py.File(path, "r") as f:
             keys = sorted(f.keys())
             groups = [(f[k]["position"][()], _lb_material(f[k])) for k in keys]
     except Exception as e:  # a truncated file, not HDF5, groups of another layout
         raise _unreadable(path, "lagrangebench", e) from None
-    tables = meta.get("materials", {}).get(split, [None] * len(keys))
+    tables = _tables(meta, split, len(keys))
     return [
         _from_arrays(path, pos, radius, meta["dt"], material, table, key)
         for key, (pos, material), table in zip(keys, groups, tables, strict=True)
@@ -192,6 +238,21 @@ def _lb_material(group) -> np.ndarray:
     if "material" in group:
         return group["material"][()]
     return np.zeros(len(group["particle_type"]), np.int64)
+
+
+def _split_file(folder: Path, split: str, suffix: str) -> tuple[Path, str]:
+    """The file of ``split`` (physgnn's ``val`` is the peers' ``valid``) and the name it was
+    written as: an earlier export's ``val.<suffix>`` where there is no ``valid.<suffix>``."""
+    name = PEER_SPLITS.get(split, split)
+    path = folder / f"{name}.{suffix}"
+    if name == "valid" and not path.exists() and (folder / f"val.{suffix}").exists():
+        return folder / f"val.{suffix}", "val"
+    return path, name
+
+
+def _tables(meta: dict, split: str, count: int) -> list:
+    """The material tables of ``split`` in ``metadata.json`` (None each where it has none)."""
+    return meta.get("materials", {}).get(split, [None] * count)
 
 
 def _metadata(folder: Path) -> dict:
