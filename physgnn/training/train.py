@@ -115,6 +115,12 @@ def train(cfg: DictConfig) -> dict:
         return _train(cfg, run_dir)
 
 
+def val_loss(cfg: DictConfig) -> float | None:
+    """:func:`train`, returning its final validation loss (what ``python -m physgnn.train``
+    returns: the value a Hydra sweeper optimises)."""
+    return train(cfg)["val_loss"]
+
+
 def _train(cfg: DictConfig, run_dir: Path) -> dict:
     """:func:`train` in ``run_dir``, once it may train there; run.json records how it ends."""
     _keep_config(cfg, run_dir)
