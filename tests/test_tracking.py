@@ -1,19 +1,30 @@
 """What the loggers learn of a run: the whole config as hyperparameters, a name per run of a
-sweep from the experiment and its overrides, the experiment as wandb's group."""
+sweep from the experiment and its overrides, the experiment as wandb's group; and what a
+training prints: none of Lightning's known-harmless warnings and tips."""
 
 from __future__ import annotations
 
 import importlib.util
+import os
+import subprocess
 import sys
+import warnings
+from pathlib import Path
 
 import pytest
 import yaml
 from hydra.core.hydra_config import HydraConfig
 from hydra.utils import instantiate
+from lightning.pytorch.utilities.warnings import PossibleUserWarning
 from trainkit import SHORT, compose_train, outputs_of
 
 from physgnn import train as train_command
+from physgnn.training.quiet import quiet_lightning
 from physgnn.training.tracking import NAME_CHARS, log_config, run_name
+
+ROOT = Path(__file__).resolve().parents[1]
+# Lightning's words that a plain training printed on its first screen
+HARMLESS = ("litlogger", "💡 Tip", "LeafSpec", "does not have many workers", "weights_only")
 
 
 def _keys(hparams: dict) -> None:
@@ -72,3 +83,36 @@ def test_wandb_groups_the_runs_of_an_experiment(tmp_path, monkeypatch):
         assert logger.experiment.config["model"]["network"]["M"] == 3
     finally:
         logger.experiment.finish()
+
+
+def test_a_tiny_training_prints_none_of_lightnings_harmless_warnings(tiny_dataset, tmp_path):
+    args = ["data=tiny", f"paths.outputs={outputs_of(tiny_dataset)}", f"run_dir={tmp_path}"]
+    done = subprocess.run(
+        [sys.executable, "-m", "physgnn.train", *args, *SHORT],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    printed = done.stdout + done.stderr
+    assert "finished after 2 steps" in printed
+    assert not [words for words in HARMLESS if words in printed], printed
+
+
+def test_the_filters_are_by_message_not_by_kind():
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        quiet_lightning()
+        quiet_lightning()  # twice: each filter once
+        for message, category in [
+            ("The 'val_dataloader' does not have many workers ...", PossibleUserWarning),
+            ("`isinstance(treespec, LeafSpec)` is deprecated, use ...", FutureWarning),
+            ("The 'val_dataloader' holds NaN", PossibleUserWarning),
+            ("something else is deprecated", FutureWarning),
+        ]:
+            warnings.warn(message, category, stacklevel=1)
+    assert [str(w.message) for w in caught] == [
+        "The 'val_dataloader' holds NaN",
+        "something else is deprecated",
+    ]
