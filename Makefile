@@ -67,7 +67,7 @@ eval: ## Evaluate every finished run under outputs/ and write outputs/report/ (A
 
 ship: ## Export a run's best weights as the shipped model run=pretrained loads (RUN=<run folder> [OUT=<folder>] [CHECKPOINT=<file>])
 	@test -n "$(RUN)" || { echo "error: make ship needs RUN=<a finished run folder> (e.g. make ship RUN=outputs/runs/baseline/<time>)" >&2; exit 2; }
-	$(PY) -m physgnn.training.export $(RUN) $(or $(OUT),physgnn/pretrained) $(CHECKPOINT)
+	$(PY) -m physgnn.ship $(RUN) $(or $(OUT),physgnn/pretrained) $(CHECKPOINT)
 
 default-table: ## The default model's table per seed from the study's registry, with each figure's commit (docs/results/default.md; REGISTRY= OUT= KEY= STEPS=)
 	$(PY) -m physgnn.ablation.default_table $(or $(REGISTRY),docs/results/registry.jsonl) $(or $(OUT),docs/results/default.md) $(or $(KEY),baseline) $(STEPS)

@@ -17,7 +17,7 @@ COMMANDS = {
     "simulate": ("physgnn.simulate", "simulate a scene file, and roll a run out on it"),
     "study": ("physgnn.study", "the ablation study (every sweep x 3 seeds)"),
     "bench": ("physgnn.bench", "accuracy versus time"),
-    "ship": ("physgnn.training.export", "export a run's weights as the shipped model"),
+    "ship": ("physgnn.ship", "export a run's weights as the shipped model"),
     "data-report": ("physgnn.data_report", "Table 1 of a dataset"),
     "sleep-study": ("physgnn.sleep_study", "sleeping spheres off versus on"),
 }

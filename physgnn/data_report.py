@@ -2,13 +2,12 @@
 (``make data-report PRESET=NAME``).
 
 The work is :func:`physgnn.evaluation.data_report.data_report` (prints the table, writes
-``<dataset>/report.json``).
+``<dataset>/report.json``; imported once the command line composes: :mod:`physgnn.cli`).
 """
 
 from physgnn.cli import command
-from physgnn.evaluation.data_report import data_report
 
-main = command("data_report", data_report)
+main = command("data_report", "physgnn.evaluation.data_report:data_report")
 
 if __name__ == "__main__":
     main()

@@ -1,15 +1,16 @@
 """``python -m physgnn.study [--dry-run] [key=value ...]``: the ablation study (``make study``).
 
-The work is :func:`physgnn.ablation.study.run_study`; config ``conf/study.yaml``. ``--dry-run``
-(= ``dry_run=true``) lists the jobs, which are already in the registry and the estimated time.
+The work is :func:`physgnn.ablation.study.run_study` (imported once the command line
+composes: :mod:`physgnn.cli`); config ``conf/study.yaml``. ``--dry-run`` (= ``dry_run=true``)
+lists the jobs, which are already in the registry and the estimated time.
 """
 
 import sys
 
-from physgnn.ablation.study import run_study, written
 from physgnn.cli import command
 
-_main = command("study", run_study, done=written)
+WORK = "physgnn.ablation.study"
+_main = command("study", f"{WORK}:run_study", done=f"{WORK}:written")
 
 
 def main():

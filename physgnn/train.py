@@ -1,20 +1,17 @@
 """``python -m physgnn.train [overrides]``: train a learned simulator (``make train``).
 
-The work is :func:`physgnn.training.train.train`; ``main`` returns the final validation loss,
-the value a Hydra sweeper optimises.
+The work is :func:`physgnn.training.train.train` (imported once the command line composes:
+:mod:`physgnn.cli`); ``main`` returns the final validation loss, the value a Hydra sweeper
+optimises.
 """
 
 from physgnn.cli import command
-from physgnn.training.checks import check_resume_argv
-from physgnn.training.train import train
+from physgnn.training.layout import check_renamed
 
-
-def _val_loss(cfg) -> float | None:
-    return train(cfg)["val_loss"]
-
-
-# A resume with other overrides is refused before Hydra rewrites the run's .hydra folder.
-main = command("train", _val_loss, before=check_resume_argv)
+# A flat recipe key of an earlier physgnn names today's before the config composes; a resume
+# with other overrides is refused before Hydra rewrites the run's .hydra folder.
+CHECKS = (check_renamed, "physgnn.training.checks:check_resume_argv")
+main = command("train", "physgnn.training.train:val_loss", before=CHECKS)
 
 if __name__ == "__main__":
     main()

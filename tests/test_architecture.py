@@ -10,12 +10,23 @@ Hydra, and modules and functions of a readable size.
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "physgnn"
-COMMANDS = {"train", "generate", "eval", "bench", "data_report", "sleep_study", "simulate", "study"}
+COMMANDS = {
+    "train",
+    "generate",
+    "eval",
+    "bench",
+    "data_report",
+    "sleep_study",
+    "simulate",
+    "study",
+    "ship",
+}
 
 # part -> the parts it may import (besides itself). "base" is physgnn/__init__, errors, files.
 ALLOWED = {
@@ -209,6 +220,35 @@ def test_command_modules_are_thin_wrappers_of_one_function():
         module = f"physgnn.{command}"
         assert len(MODULES[module].read_text().splitlines()) <= 25, module
         assert "physgnn.cli" in project_imports(module), f"{module} does not use physgnn.cli"
+
+
+def named_modules(tree: ast.AST) -> list[str]:
+    """The project modules a module names in a string (``"physgnn.training.train:val_loss"``,
+    or ``"physgnn.groundtruth.generate"`` joined to its function in an f-string): the work
+    :func:`physgnn.cli.resolve` imports when a command runs."""
+    return [
+        node.value.partition(":")[0]
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Constant)
+        and isinstance(node.value, str)
+        and re.fullmatch(r"physgnn(\.\w+)+(:\w+)?", node.value)
+    ]
+
+
+def test_the_work_a_command_names_is_of_a_part_it_may_use():
+    """A command module imports its work by name once its command line composes (rule 3 would
+    have it at the top, and a typo would wait for torch_geometric): the names obey rules 1
+    and 4 as an import would."""
+    wrong, named = [], 0
+    for command in sorted(COMMANDS):
+        for target in named_modules(TREES[f"physgnn.{command}"]):
+            named += 1
+            if target not in MODULES:
+                wrong.append(f"physgnn.{command} names {target}, no module")
+            elif part_of(target) not in ALLOWED["commands"]:
+                wrong.append(f"physgnn.{command} names {target} ({part_of(target)})")
+    assert not wrong, "\n".join(wrong)
+    assert named >= len(COMMANDS)
 
 
 def test_every_hydra_main_is_made_by_the_cli_wrapper():

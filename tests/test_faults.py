@@ -352,6 +352,14 @@ def test_any_command_stopped_by_ctrl_c_is_one_line(capsys):
     [
         ("workers=abc", "workers must be a whole number >= 1 (processes), got 'abc'"),
         ("workers=-1", "workers must be a whole number >= 1 (processes), got -1"),
+        (
+            "data.scene.side_min=-6",
+            "data.scene.side_min must be a number >= 2 (m, an arena's side: the largest "
+            "sphere's diameter 2 × radius_max), got -6",
+        ),
+        ("data.scene.side_max=5", "data.scene.side_max must be a number >= 6 (m, at least"),
+        ("data.scene.n_max=1", "data.scene.n_max must be a whole number >= 2 (spheres, at"),
+        ("data.scene.h_max=0.5", "data.scene.h_max must be a number >= 1 (m, the highest"),
     ],
 )
 def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, override, message):
@@ -360,7 +368,9 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
     with pytest.raises(SystemExit) as exit_info:
         generate_command.main()
     assert exit_info.value.code == 2
-    assert capsys.readouterr().err.strip().splitlines() == [f"error: {message}"]
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith(f"error: {message}")
+    assert not (tmp_path / "data").exists() or not any((tmp_path / "data").iterdir())
 
 
 @pytest.mark.parametrize(

@@ -271,6 +271,8 @@ def test_an_interrupted_run_of_flat_overrides_resumes_with_todays_spelling(tmp_p
     info = {"status": "interrupted", "overrides": ["lit.noise_std=0.01", "model.M=3"]}
     (tmp_path / "run.json").write_text(json.dumps(info))
     check_resume_overrides(tmp_path, ["lit.noise.std=0.01", "model.network.M=3"])
+    # the run's name in the loggers is not what it trains (a study's job named since)
+    check_resume_overrides(tmp_path, ["lit.noise.std=0.01", "model.network.M=3", "run_name=x"])
     with pytest.raises(ConfigError, match="missing: lit.noise.std=0.01; new: lit.noise.std=0.02"):
         check_resume_overrides(tmp_path, ["lit.noise.std=0.02", "model.network.M=3"])
 

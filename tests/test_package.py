@@ -4,6 +4,7 @@ simulates from another folder."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -75,6 +76,85 @@ def test_every_kind_of_command_answers_help(name, monkeypatch, capsys):
         physgnn_main([name, "--help"])
     assert exit_.value.code in (0, None)
     assert capsys.readouterr().out.strip()
+
+
+def test_every_command_is_the_python_m_module_of_its_name():
+    """``physgnn X`` runs ``python -m physgnn.X`` (``data-report``: ``physgnn.data_report``),
+    as the README says: ``ship`` too."""
+    for name, (module, _) in COMMANDS.items():
+        assert module == f"physgnn.{name.replace('-', '_')}", name
+        assert (ROOT / "physgnn" / f"{module.split('.')[1]}.py").is_file(), module
+
+
+def test_python_m_physgnn_ship_answers_help_and_usage():
+    run = [sys.executable, "-m", "physgnn.ship"]
+    helped = subprocess.run([*run, "--help"], capture_output=True, text=True, cwd=ROOT)
+    assert helped.returncode == 0 and "physgnn ship" in helped.stdout
+    assert "training.export RUN_DIR" not in helped.stdout
+    bare = subprocess.run(run, capture_output=True, text=True, cwd=ROOT)
+    assert bare.returncode == 2 and bare.stdout.startswith("usage: physgnn ship RUN_DIR")
+
+
+# What a command imports only to do its work: a second and more each (torch_geometric pulls in
+# torch._dynamo), never paid by --help or a mistyped key.
+HEAVY = ("torch", "torch_geometric", "lightning", "pybullet")
+
+
+def _imported(argv: list[str]) -> tuple[subprocess.CompletedProcess, set[str]]:
+    """``python -X importtime -m <argv>``, and the top-level modules it imported."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    done = subprocess.run(
+        [sys.executable, "-X", "importtime", "-m", *argv],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=env,
+    )
+    lines = [line for line in done.stderr.splitlines() if line.startswith("import time:")]
+    names = {line.rsplit("|", 1)[1].strip().split(".")[0] for line in lines}
+    done.stderr = "\n".join(line for line in done.stderr.splitlines() if line not in lines)
+    return done, names
+
+
+@pytest.mark.parametrize("name", [n for n in COMMANDS if n != "ship"])
+def test_a_mistyped_key_is_one_line_before_any_heavy_import(name):
+    done, names = _imported(["physgnn", name, "nonexistent_key=1"])
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip() == (
+        f"error: nonexistent_key=1: nonexistent_key is not a key of the "
+        f"{name.replace('-', '_')} config"
+    )
+    assert not names & set(HEAVY), sorted(names & set(HEAVY))
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["physgnn.train", "--help"],
+        ["physgnn.train", "model.nonexistent=3"],
+        ["physgnn.ship", "--help"],
+        ["physgnn", "--version"],
+        ["physgnn", "simulate", "--help"],
+    ],
+    ids=" ".join,
+)
+def test_help_version_and_a_refused_override_import_nothing_heavy(argv):
+    done, names = _imported(argv)
+    assert done.returncode in (0, 2), done.stderr
+    assert not names & set(HEAVY), sorted(names & set(HEAVY))
+
+
+def test_a_key_without_its_plus_is_one_line_with_the_closest_key(monkeypatch, capsys):
+    """``trainer.max_epoch=1`` (an ``s`` short): not Hydra's "Could not override" of five
+    lines, one line naming the closest key."""
+    monkeypatch.setattr(sys, "argv", sys.argv[:])
+    with pytest.raises(SystemExit) as exit_:
+        physgnn_main(["train", "trainer.max_epoch=1"])
+    assert exit_.value.code == 2
+    assert capsys.readouterr().err.strip() == (
+        "error: trainer.max_epoch=1: trainer.max_epoch is not a key of the train config: did "
+        "you mean trainer.max_epochs?"
+    )
 
 
 # Left out of the copy a wheel is built from: outputs, environments and build leftovers (a

@@ -86,11 +86,11 @@ def test_trained_model_on_the_resting_pile_reports_a_finite_drift(
 @pytest.mark.parametrize(
     "module, override, problem",
     [
-        ("physgnn.train", "model.MM=3", "Could not override 'model.MM'"),
-        ("physgnn.train", "trainer=cpuu", "Could not find 'trainer/cpuu'"),
-        ("physgnn.train", "+experiment=nope", "Could not find 'experiment/nope'"),
-        ("physgnn.generate", "data=nope", "Could not find 'data/nope'"),
-        ("physgnn.eval", "stabilty=false", "Could not override 'stabilty'"),
+        ("physgnn.train", "model.MM=3", "model.MM is not a key of the train config"),
+        ("physgnn.train", "trainer=cpuu", "no 'cpuu' in the config group trainer"),
+        ("physgnn.train", "+experiment=nope", "no 'nope' in the config group experiment"),
+        ("physgnn.generate", "data=nope", "no 'nope' in the config group data"),
+        ("physgnn.eval", "stabilty=false", "stabilty is not a key of the eval config: did you"),
     ],
 )
 def test_cli_config_errors_name_the_problem_without_traceback(module, override, problem, tmp_path):

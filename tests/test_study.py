@@ -28,6 +28,7 @@ from physgnn.ablation.jobs import (
 from physgnn.ablation.measure import FIGURES, measure_trajectory
 from physgnn.ablation.registry import append_record, done_ids, read_registry
 from physgnn.ablation.report import write_study_report
+from physgnn.ablation.runner import train_command
 from physgnn.ablation.study import run_study
 from physgnn.cli import compose_config
 from physgnn.metrics import trajectory_metrics
@@ -274,6 +275,22 @@ def test_measures_are_the_same_for_truth_and_rollout_and_none_after_divergence()
     gone = measure_trajectory(Runaway(), traj, speed_factor=10.0)
     assert 0 < gone["diverged_at"] < 39
     assert all(gone[k] is None for k in FIGURES)  # no figures of the prefix
+
+
+def test_a_study_job_is_named_in_the_loggers_by_its_changes_and_seed():
+    """The study's runs, all of experiment ``study``, told apart in wandb and TensorBoard."""
+    spec = {"run_dir": "/r", "seed": 2, "common": ["trainer.max_epochs=1"]}
+    names = {
+        run_name_of(train_command({**spec, "overrides": o})) for o in ([], ["model.network.M=1"])
+    }
+    assert names == {"study_seed=2", "study_network.M=1_seed=2"}
+    cfg = compose_config("train", ["run_name='study_network.M=1_seed=2'"])
+    assert cfg.run_name == "study_network.M=1_seed=2"  # Hydra takes the quoted name
+
+
+def run_name_of(argv: list[str]) -> str:
+    (given,) = [arg for arg in argv if arg.startswith("run_name=")]
+    return given.removeprefix("run_name=").strip("'")
 
 
 def test_dry_run_lists_every_job_and_trains_nothing(tmp_path, capsys):

@@ -25,18 +25,22 @@ from physgnn.benchmark.machine import cpu_name
 from physgnn.errors import one_line
 from physgnn.files import portable
 from physgnn.training.runs import checkpoint_of, read_run_json
+from physgnn.training.tracking import run_name
 
 TRAINED = ("finished", "truncated")
 
 
 def train_command(spec: dict) -> list[str]:
-    """``python -m physgnn.train`` with the job's folder, seed, budget and configuration."""
+    """``python -m physgnn.train`` with the job's folder, seed, budget and configuration; in the
+    loggers, its name is the configuration's changes and the seed (the group: ``study``)."""
+    name = run_name("study", [*spec["overrides"], f"seed={spec['seed']}"])
     return [
         sys.executable,
         "-m",
         "physgnn.train",
         f"hydra.run.dir={spec['run_dir']}",
         "experiment_name=study",
+        f"run_name='{name}'",
         f"seed={spec['seed']}",
         "trainer.enable_progress_bar=false",
         "trainer.enable_model_summary=false",

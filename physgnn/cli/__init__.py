@@ -10,6 +10,13 @@ otherwise); anything else is a bug and keeps its traceback. A key added with ``+
 reads is refused first (:mod:`physgnn.cli.overrides`). Ctrl-C and SIGTERM print one
 line too and exit with 128 + the signal (:class:`~physgnn.errors.Interrupted`).
 
+The command line is checked before anything heavy is imported: a key or an option the config
+lacks is one line with the keys most like it (:func:`~physgnn.cli.overrides.check_composes`),
+in a second or two, not after the ten seconds torch_geometric and Lightning take to import.
+So the work (``run``, ``done``, a ``before`` check that needs it) is given by name,
+``"physgnn.training.train:val_loss"``, and imported (:func:`resolve`) only once the command
+line composes; a command module imports nothing but this module and light checks.
+
 In a sweep (``-m``, ``hydra.mode=MULTIRUN``) a failing job does not end the sweep: its error
 is printed (one line, or the traceback of a bug) and the job returns None; the run records the
 failure (``run.json``) and the sweep's summary counts it. An interruption still stops it.
@@ -24,17 +31,17 @@ from __future__ import annotations
 
 import errno
 import functools
+import importlib
 import math
 import os
 import sys
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import NoReturn
 
 import hydra
-import torch
 from hydra.core.hydra_config import HydraConfig
 from hydra.errors import HydraException
 from hydra.types import RunMode
@@ -43,7 +50,12 @@ from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
 from physgnn.cli.outputs import OWN_FOLDER, check_outputs_env
-from physgnn.cli.overrides import check_added_keys, check_quoting, compose_config  # noqa: F401
+from physgnn.cli.overrides import (  # noqa: F401
+    check_added_keys,
+    check_composes,
+    check_quoting,
+    compose_config,
+)
 from physgnn.errors import (
     ConfigError,
     Interrupted,
@@ -119,6 +131,8 @@ def free_threads() -> int | None:
     ``OMP_NUM_THREADS`` is set."""
     if os.environ.get("OMP_NUM_THREADS"):
         return None
+    import torch  # not at import: a command line is checked before torch is (module doc)
+
     cpus = own_cpus()
     busy = busy_cores(cpus)
     threads = max(1, min(len(cpus), len(cpus) - math.floor(busy + 0.5)))
@@ -170,17 +184,33 @@ def cpu_times(cpus: list[int], stat: str = "/proc/stat") -> tuple[int, int] | No
     return (busy, total) if found == len(wanted) else None
 
 
+# What a command runs: a function, or its name "package.module:function", imported when used
+Work = Callable | str
+
+
+def resolve(work: Work | None) -> Callable | None:
+    """The function ``work`` names (``"physgnn.training.train:val_loss"``), imported now; a
+    function as it is."""
+    if work is None or callable(work):
+        return work
+    module, _, attribute = work.partition(":")
+    return getattr(importlib.import_module(module), attribute)
+
+
 def command(
     name: str,
-    run: Callable[[DictConfig], object],
-    done: Callable[[object], str] | None = None,
-    before: Callable[[list[str]], None] | None = None,
+    run: Work,
+    done: Work | None = None,
+    before: Work | tuple[Work, ...] | None = None,
+    missing: Mapping[str, str] | None = None,
 ) -> Callable:
     """``main`` of ``python -m physgnn.<name>`` (config ``conf/<name>.yaml``); it returns what
     ``run`` returns (a Hydra sweeper optimises it). ``main.__wrapped__(cfg)`` is the body
-    without Hydra (for tests). ``before(argv)`` checks the command line before Hydra writes
-    anything (its error printed as one line; :func:`~physgnn.cli.overrides.check_composes`:
-    every key is the config's)."""
+    without Hydra (for tests). Before Hydra writes anything, the command line is checked:
+    ``before``'s functions (light: the command module imported them), then that it composes
+    (:func:`~physgnn.cli.overrides.check_composes`, ``missing``: what to give instead of an
+    option a group lacks), then ``before``'s checks given by name; each error one line.
+    ``run``, ``done`` and named checks are imported only when needed (module doc)."""
 
     def main(cfg: DictConfig):
         free_threads()
@@ -188,7 +218,7 @@ def command(
             if HydraConfig.initialized():
                 check_added_keys(cfg, list(HydraConfig.get().overrides.task), name)
             with sigterm_interrupts():
-                result = run(cfg)
+                result = resolve(run)(cfg)
         except KeyboardInterrupt as err:
             signum = interrupt_signal(err)
             fail(Interrupted(f"{name} interrupted (exit code {128 + signum})", signum))
@@ -202,14 +232,28 @@ def command(
                 fail(disk_error(err))
             raise
         if done is not None:
-            print(done(result))
+            print(resolve(done)(result))
         return result
 
     # Hydra names the job (and its log file) after the module of the task function.
     main.__module__ = f"physgnn.{name}"
+    checks = before if isinstance(before, tuple) else (before,) if before else ()
+    first = [check for check in checks if callable(check)]
+    composes = functools.partial(check_composes, name, missing=missing)
+    checks = (*first, composes, *(check for check in checks if not callable(check)))
     return _outputs_checked(
-        hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main), before, name
+        hydra.main(version_base="1.3", config_path=CONF_DIR, config_name=name)(main), checks, name
     )
+
+
+# Hydra's flags that print something and exit (help, the config, the shell completion)
+PRINTING_FLAGS = ("-h", "--help", "--hydra-help", "-i", "--info", "-c", "--cfg", "-sc")
+
+
+def prints_only(argv: list[str]) -> bool:
+    """``argv`` asks Hydra to print something and run nothing (``--help``, ``--cfg job``): the
+    checks given by name (heavy, for a command that runs) are not needed."""
+    return any(arg.split("=")[0] in PRINTING_FLAGS + ("--shell-completion",) for arg in argv)
 
 
 def run_dir_is_hydras(argv: list[str]) -> list[str]:
@@ -223,11 +267,12 @@ def run_dir_is_hydras(argv: list[str]) -> list[str]:
 
 
 def _outputs_checked(
-    hydra_main: Callable, before: Callable | None = None, name: str = ""
+    hydra_main: Callable, before: tuple[Work, ...] = (), name: str = ""
 ) -> Callable:
-    """``hydra_main`` after :func:`check_outputs_env` (command ``name``) and ``before(argv)``
-    (their errors printed as one line). ``main(argv)`` runs it as if ``argv`` followed the
-    command on the command line (default: ``sys.argv[1:]`` as it is)."""
+    """``hydra_main`` after :func:`check_outputs_env` (command ``name``) and each check of
+    ``before`` on the command line (:func:`resolve`; their errors printed as one line; a named
+    one not for a command line that only prints: :func:`prints_only`). ``main(argv)`` runs it
+    as if ``argv`` followed the command on the command line (default: ``sys.argv[1:]``)."""
 
     @functools.wraps(hydra_main)
     def main(argv: list[str] | None = None):
@@ -240,8 +285,9 @@ def _outputs_checked(
         try:
             check_outputs_env(own=OWN_FOLDER.get(name, "paths.outputs"))
             check_quoting(sys.argv[1:])
-            if before is not None:
-                before(sys.argv[1:])
+            for check in before:
+                if callable(check) or not prints_only(sys.argv[1:]):
+                    resolve(check)(sys.argv[1:])
         except USER_ERRORS as err:
             fail(err)
         sys.argv[1:] = run_dir_is_hydras(sys.argv[1:])

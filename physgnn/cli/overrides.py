@@ -99,7 +99,9 @@ def _not_composed(err: Exception, command: str, overrides: list[str], missing) -
     """The one line of :func:`check_composes`."""
     if isinstance(err, MissingConfigException) and err.missing_cfg_file and err.options:
         group, _, option = err.missing_cfg_file.partition("/")
-        given = next((o for o in overrides if o.startswith(f"{group}=")), f"{group}={option}")
+        given = next(
+            (o for o in overrides if o.lstrip("+~").startswith(f"{group}=")), f"{group}={option}"
+        )
         extra = f"; {missing[group].format(option=option)}" if group in missing else ""
         return (
             f"{given}: no {option!r} in the config group {group} (options: "
@@ -107,7 +109,7 @@ def _not_composed(err: Exception, command: str, overrides: list[str], missing) -
         )
     key = re.match(r"Could not override '([^']+)'", str(err))
     if key:
-        given = next((o for o in overrides if o.startswith(f"{key[1]}=")), key[1])
+        given = next((o for o in overrides if o.lstrip("+~").startswith(f"{key[1]}=")), key[1])
         like = _resembling(compose_config(command), key[1])
         hint = f": did you mean {' or '.join(like)}?" if like else ""
         return f"{given}: {key[1]} is not a key of the {command} config{hint}"

@@ -60,8 +60,6 @@ from physgnn.training.runs import load_run, resolve_run
 # What a simulate writes into its out (replaced whole by the next one).
 SIMULATE_OUTPUTS = ("simulate.h5", "metrics.json", "video.gif", "video.mp4", "video_frame.png")
 METRIC_KEYS = ("mse", "mse20", "chamfer", "energy_gain", "rotation_error", "diverged_at")
-# What to say where ``scene=NAME`` names no entry of the scene group (a file of the user's).
-NOT_IN_GROUP = {"scene": "a YAML scene file of yours is scene_file={option}"}
 
 
 class SimulateError(PhysgnnError, ValueError):

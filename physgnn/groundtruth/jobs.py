@@ -18,6 +18,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from physgnn.errors import ConfigError, forked_worker
 from physgnn.groundtruth.engine import as_stored, simulate
 from physgnn.groundtruth.families import build_scene
+from physgnn.groundtruth.family_ranges import check_preset_scenes
 from physgnn.physics.scene import SceneError
 from physgnn.physics.trajectory import Trajectory
 
@@ -48,8 +49,10 @@ def plan(data: DictConfig, engine: dict) -> list[Job]:
     training family, so test figures stay comparable across training distributions."""
     jobs = []
     test_scene = OmegaConf.to_container(data.scene, resolve=True)
-    fit = data.get("fit_scene")
-    fit_scene = test_scene | (OmegaConf.to_container(fit, resolve=True) if fit else {})
+    fit = OmegaConf.to_container(data.fit_scene, resolve=True) if data.get("fit_scene") else {}
+    fit_scene = test_scene | fit
+    ood_scenes = OmegaConf.to_container(data.ood, resolve=True) if data.get("ood") else {}
+    check_preset_scenes(test_scene, fit, ood_scenes)
     for split in ("train", "val", "test"):
         n = int(data.splits[split])
         if n < 1:
@@ -59,8 +62,7 @@ def plan(data: DictConfig, engine: dict) -> list[Job]:
             jobs.append(
                 Job(split, i, f"traj_{i:05d}", scene, engine, trajectory_seed(data.seed, split, i))
             )
-    for i, (key, cfg) in enumerate((data.get("ood") or {}).items()):
-        ood = OmegaConf.to_container(cfg, resolve=True)
+    for i, (key, ood) in enumerate(ood_scenes.items()):
         jobs.append(Job("ood", i, str(key), ood, engine, trajectory_seed(data.seed, "ood", i)))
     return jobs
 

@@ -30,6 +30,7 @@ from physgnn.training.checks import (
     check_optimizer,
 )
 from physgnn.training.schedule import check_scheduler
+from physgnn.training.tracking import log_config
 
 NUMERIC_TRAINER_KEYS = ("max_epochs", "max_steps", "gradient_clip_val", "log_every_n_steps")
 FINDS_UNUSED = "_find_unused_parameters_true"
@@ -122,14 +123,15 @@ def check_trainer(cfg: DictConfig) -> None:
 
 def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
     """The Lightning trainer of ``cfg.trainer`` (its strategy: :func:`strategy_of`) with
-    ``cfg.callbacks`` (then ``extra_callbacks``) and ``cfg.logger``."""
+    ``cfg.callbacks`` (then ``extra_callbacks``) and ``cfg.logger``, which gets the whole
+    config (:func:`~physgnn.training.tracking.log_config`)."""
     check_trainer(cfg)
     callbacks = [instantiate(c) for c in (cfg.get("callbacks") or {}).values()]
     callbacks += list(extra_callbacks)
     logger = instantiate(cfg.logger) if cfg.get("logger") else False
     # The data module shares the pairs out between DDP processes itself (EpochSampler);
     # checkpoints go through a temporary file and a rename (checkpoint_io.py)
-    return instantiate(
+    trainer = instantiate(
         cfg.trainer,
         strategy=strategy_of(cfg.trainer),
         callbacks=callbacks,
@@ -138,6 +140,8 @@ def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
         use_distributed_sampler=False,
         plugins=[AtomicCheckpointIO()],
     )
+    log_config(trainer.loggers, cfg)
+    return trainer
 
 
 def build(cfg: DictConfig, extra_callbacks=()):

@@ -215,9 +215,10 @@ def resumed_here(run_dir: Path) -> bool:
 
 
 def _changeable(override: str) -> bool:
-    """Overrides that may differ on a resume: the folder named, Hydra's own settings."""
+    """Whether ``override`` must be the same on a resume: all but the folder named, the run's
+    name in the loggers (a study's job started before it had one) and Hydra's own settings."""
     key = override.lstrip("+~").partition("=")[0]
-    return key not in ("run_dir", "ckpt_path") and not key.startswith("hydra")
+    return key not in ("run_dir", "ckpt_path", "run_name") and not key.startswith("hydra")
 
 
 def check_resume_overrides(run_dir: Path, overrides: list[str]) -> None:

@@ -1,8 +1,8 @@
 """Shipping a trained run: a small run folder of weights only, loadable wherever a run is.
 
-``python -m physgnn.training.export RUN_DIR [OUT_DIR] [CHECKPOINT]`` (``make ship RUN=...``)
-writes ``OUT_DIR`` (default ``physgnn/pretrained``, what ``run=pretrained`` names) as a run
-folder holding only what the trained simulator needs:
+``python -m physgnn.ship RUN_DIR [OUT_DIR] [CHECKPOINT]`` (``physgnn ship``, ``make ship
+RUN=...``; :func:`main`) writes ``OUT_DIR`` (default ``physgnn/pretrained``, what
+``run=pretrained`` names) as a run folder holding only what the trained simulator needs:
 
 - ``.hydra/config.yaml``: the run's own config (model, training recipe, dataset preset; its
   paths are interpolations, no machine's path);
@@ -97,13 +97,11 @@ def _commit() -> str | None:
     return out.stdout.strip() or None
 
 
-USAGE = "usage: python -m physgnn.training.export RUN_DIR [OUT_DIR] [CHECKPOINT]"
+USAGE = "usage: physgnn ship RUN_DIR [OUT_DIR] [CHECKPOINT]   (python -m physgnn.ship; --help)"
 
 
 def main(argv: list[str]) -> int:
-    if argv and argv[0] in ("-h", "--help"):
-        print(f"{USAGE}\n\n{__doc__.strip()}")
-        return 0
+    """``physgnn ship``'s work on its arguments (:mod:`physgnn.ship`): 0, or 2 after one line."""
     if not 1 <= len(argv) <= 3:
         print(USAGE)
         return 2
@@ -116,7 +114,3 @@ def main(argv: list[str]) -> int:
     size = target.stat().st_size / 1e6
     print(f"exported {argv[0]} to {portable(out)} ({target.name}, {size:.1f} MB)")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))

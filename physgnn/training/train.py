@@ -31,6 +31,7 @@ from physgnn.training.checks import check_checkpoint, check_run_dir, resume_from
 from physgnn.training.datamodule import dataset_identity
 from physgnn.training.lit import NonFiniteLossError
 from physgnn.training.progress import RunProgress, StopOnSignal, StopTraining, save_last
+from physgnn.training.quiet import quiet_lightning
 from physgnn.training.runlog import run_log
 from physgnn.training.runs import write_run_json
 
@@ -106,6 +107,7 @@ def _start(cfg: DictConfig, run_dir: Path) -> dict:
 
 def train(cfg: DictConfig) -> dict:
     """Train ``cfg.model`` on ``cfg.datamodule``; returns the run's summary (also run.json)."""
+    quiet_lightning()
     _log_to_run_file()
     run_dir = Path(cfg.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -113,6 +115,12 @@ def train(cfg: DictConfig) -> dict:
     check_run_dir(cfg, run_dir, _overrides() if HydraConfig.initialized() else None)
     with run_log(run_dir):
         return _train(cfg, run_dir)
+
+
+def val_loss(cfg: DictConfig) -> float | None:
+    """:func:`train`, returning its final validation loss (what ``python -m physgnn.train``
+    returns: the value a Hydra sweeper optimises)."""
+    return train(cfg)["val_loss"]
 
 
 def _train(cfg: DictConfig, run_dir: Path) -> dict:
