@@ -1,16 +1,16 @@
 """physgnn in a notebook: a model, a scene, its truth, a rollout, scores, a film, exports.
 
-::
+```python
+import physgnn.api as pg
 
-    import physgnn.api as pg
-
-    model = pg.load_model("pretrained")     # the shipped weights, or a run folder
-    scene = pg.load_scene("throw")          # a YAML scene file, or an example scene's name
-    truth = pg.simulate(scene, frames=40)   # pybullet's trajectory
-    pred = pg.roll_out(model, truth)        # the learned rollout from truth's first H+1 frames
-    pg.score(pred, truth)                   # {"mse": ..., "chamfer": ..., "energy_gain": ...}
-    pg.animate(truth, pred, "throw")        # throw.gif, throw.mp4, throw_frame.png
-    pg.export(pred, "throw_vtk", "vtk")     # ParaView; or "gns", "lagrangebench", "hdf5"
+model = pg.load_model("pretrained")     # the shipped weights, or a run folder
+scene = pg.load_scene("throw")          # a YAML scene file, or an example scene's name
+truth = pg.simulate(scene, frames=40)   # pybullet's trajectory
+pred = pg.roll_out(model, truth)        # the learned rollout from truth's first H+1 frames
+pg.score(pred, truth)                   # {"mse": ..., "chamfer": ..., "energy_gain": ...}
+pg.animate(truth, pred, "throw")        # throw.gif, throw.mp4, throw_frame.png
+pg.export(pred, "throw_vtk", "vtk")     # ParaView; or "gns", "lagrangebench", "hdf5"
+```
 
 A scene from arrays: ``pg.scene_from_arrays(pos [N, 3], radius, vel=[N, 3], frames=T)``; a
 trajectory from another engine: ``pg.trajectory_from_arrays(pos [T, N, 3], radius, dt)``.
