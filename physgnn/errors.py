@@ -31,6 +31,17 @@ def one_line(err: BaseException) -> str:
     return "; ".join(line.strip() for line in str(err).splitlines() if line.strip())
 
 
+# What torch and h5py say (in a RuntimeError) when a write hit a full or read-only disk
+# (torch's stream writer on a full disk: "file write failed", or "unexpected pos").
+DISK_WORDS = (
+    "No space left on device",
+    "Read-only file system",
+    "file write failed",
+    "unexpected pos",
+    "Disk quota exceeded",
+)
+
+
 class ConfigError(PhysgnnError, ValueError):
     """A config value that cannot be used (missing, of the wrong kind or out of range)."""
 

@@ -45,6 +45,7 @@ from physgnn import CONF_DIR
 from physgnn.cli.outputs import OWN_FOLDER, check_outputs_env
 from physgnn.cli.overrides import check_added_keys, check_quoting, compose_config  # noqa: F401
 from physgnn.errors import (
+    DISK_WORDS,
     ConfigError,
     Interrupted,
     PhysgnnError,
@@ -79,15 +80,6 @@ USER_ERRORS = (
 
 # A disk that is full or not writable is the user's to fix, not a bug.
 DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM)
-
-
-# What torch and h5py say (in a RuntimeError) when a write hit a full or read-only disk.
-DISK_WORDS = (
-    "No space left on device",
-    "Read-only file system",
-    "file write failed",
-    "Disk quota exceeded",
-)
 
 
 def disk_problem(err: BaseException) -> bool:
