@@ -14,6 +14,7 @@ import pytest
 from simdata import trajectory
 
 import physgnn.api as pg
+from physgnn.data.dataset import DatasetError
 from physgnn.metrics import MetricError
 from physgnn.physics.scene import SceneError
 from physgnn.training.runs import PRETRAINED_DIR, RunError
@@ -218,3 +219,30 @@ def test_animate_refuses_a_prediction_of_another_scene(truth, tmp_path):
         "(roll_out(model, truth))"
     )
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    "name,advice",
+    [
+        (
+            "trajectories.h5",
+            "; if it is still to be made, an hdf5 export writes it: "
+            "physgnn.api.export(trajs, '{folder}', 'hdf5')",
+        ),
+        (
+            "simulate.h5",
+            "; if it is still to be made, simulate writes it: python -m physgnn.simulate ... "
+            "out={folder}",
+        ),
+        ("mine.h5", ""),
+    ],
+)
+def test_load_trajectories_of_a_missing_file_says_to_check_the_path(tmp_path, name, advice):
+    path = tmp_path / "export" / name
+    with pytest.raises(DatasetError) as err:
+        pg.load_trajectories(path)
+    folder = tmp_path / "export"
+    assert one_line(err) == f"HDF5 file {path} not found: check the path" + advice.format(
+        folder=folder
+    )
+    assert "generate" not in one_line(err)
