@@ -22,7 +22,6 @@ only waits for a core, and steps ran several times slower than on one thread.
 
 from __future__ import annotations
 
-import errno
 import functools
 import math
 import os
@@ -45,10 +44,10 @@ from physgnn import CONF_DIR
 from physgnn.cli.outputs import OWN_FOLDER, check_outputs_env
 from physgnn.cli.overrides import check_added_keys, check_quoting, compose_config  # noqa: F401
 from physgnn.errors import (
-    DISK_WORDS,
     ConfigError,
     Interrupted,
     PhysgnnError,
+    disk_problem,
     interrupt_signal,
     one_line,
     sigterm_interrupts,
@@ -76,18 +75,6 @@ USER_ERRORS = (
     FileNotFoundError,
     FileExistsError,
 )
-
-
-# A disk that is full or not writable is the user's to fix, not a bug.
-DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM)
-
-
-def disk_problem(err: BaseException) -> bool:
-    """``err`` is an OSError of a full, read-only or forbidden place to write, or torch's or
-    h5py's RuntimeError wrapping one."""
-    if isinstance(err, OSError):
-        return err.errno in DISK_ERRNOS
-    return isinstance(err, RuntimeError) and any(w in str(err) for w in DISK_WORDS)
 
 
 def disk_error(err: BaseException) -> ConfigError:
