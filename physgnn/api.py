@@ -1,16 +1,16 @@
 """physgnn in a notebook: a model, a scene, its truth, a rollout, scores, a film, exports.
 
-::
+```python
+import physgnn.api as pg
 
-    import physgnn.api as pg
-
-    model = pg.load_model("pretrained")     # the shipped weights, or a run folder
-    scene = pg.load_scene("throw")          # a YAML scene file, or an example scene's name
-    truth = pg.simulate(scene, frames=40)   # pybullet's trajectory
-    pred = pg.roll_out(model, truth)        # the learned rollout from truth's first H+1 frames
-    pg.score(pred, truth)                   # {"mse": ..., "chamfer": ..., "energy_gain": ...}
-    pg.animate(truth, pred, "throw")        # throw.gif, throw.mp4, throw_frame.png
-    pg.export(pred, "throw_vtk", "vtk")     # ParaView; or "gns", "lagrangebench", "hdf5"
+model = pg.load_model("pretrained")     # the shipped weights, or a run folder
+scene = pg.load_scene("throw")          # a YAML scene file, or an example scene's name
+truth = pg.simulate(scene, frames=40)   # pybullet's trajectory
+pred = pg.roll_out(model, truth)        # the learned rollout from truth's first H+1 frames
+pg.score(pred, truth)                   # {"mse": ..., "chamfer": ..., "energy_gain": ...}
+pg.animate(truth, pred, "throw")        # throw.gif, throw.mp4, throw_frame.png
+pg.export(pred, "throw_vtk", "vtk")     # ParaView; or "gns", "lagrangebench", "hdf5"
+```
 
 A scene from arrays: ``pg.scene_from_arrays(pos [N, 3], radius, vel=[N, 3], frames=T)``; a
 trajectory from another engine: ``pg.trajectory_from_arrays(pos [T, N, 3], radius, dt)``.
@@ -31,6 +31,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from omegaconf import DictConfig
 
 from physgnn.data import exports, interchange, vtk
@@ -38,7 +39,7 @@ from physgnn.errors import PhysgnnError, check_whole
 from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.simulate import scene_metrics
 from physgnn.evaluation.video3d import render_side_by_side
-from physgnn.groundtruth import scenefile
+from physgnn.groundtruth import scene_values, scenefile
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.metrics import check_tolerance
 from physgnn.models.constrained import ConstrainedSimulator
@@ -108,14 +109,27 @@ def scene_from_arrays(
     """A scene from its start: pos ``[N, 3]``, radius ``[N]`` (or one number), ``frames`` to
     simulate at interval ``dt``; ``vel``, ``angvel`` ``[N, 3]`` (default zero); ``fields``:
     quat ``[N, 4]``, and mass, materials, planes, effects as in
-    :meth:`Trajectory.from_arrays`."""
+    :meth:`Trajectory.from_arrays`. Its values are checked as a scene file's are (placement,
+    materials' coefficients, orientations: :func:`physgnn.groundtruth.scene_values.arrays`)."""
     frames = check_whole("frames", frames, 2, "the first frame is the start", ArgumentError)
+    _positions(pos)
     start = {k: [v] if k == "quat" else v for k, v in fields.items()}
     velocities = tuple(None if v is None else [v] for v in (vel, angvel))
     first = Trajectory.from_arrays([pos], radius, dt, velocities=velocities, name=name, **start)
     scene = dataclasses.replace(scene_of(first), n_frames=frames).validate()
     scenefile.check_placement(f"scene '{name}'", scene.pos, scene.radius, scene.planes)
-    return scene
+    return scene_values.arrays(f"scene '{name}'", scene)  # materials, orientations
+
+
+def _positions(pos) -> None:
+    """``pos`` is ``[N, 3]`` numbers; else one line naming it."""
+    try:
+        shape = np.shape(np.asarray(pos, np.float64))
+    except (TypeError, ValueError):  # "abc", ragged rows
+        shape = None
+    if shape is None or len(shape) != 2 or shape[1] != 3:
+        got = f"{pos!r:.40}" if shape is None else f"shape {list(shape)}"
+        raise ArgumentError(f"pos must be an array [N, 3] of numbers (metres), got {got}")
 
 
 def scene_of(traj: Trajectory) -> Scene:
@@ -173,6 +187,11 @@ def animate(
     _of_type("truth", truth, Trajectory, "a Trajectory: simulate(scene) gives a scene's truth")
     _of_type("pred", pred, (Trajectory, type(None)), "a Trajectory (roll_out's) or None")
     max_frames = check_whole("max_frames", max_frames, 2, "frames of the film", ArgumentError)
+    if pred is not None and pred.n_spheres != truth.n_spheres:
+        raise ArgumentError(
+            f"pred has {pred.n_spheres} spheres, truth {truth.n_spheres}: animate a prediction "
+            "of truth's own scene (roll_out(model, truth))"
+        )
     panel = (truth, "ground truth") if pred is None else (pred, "prediction")
     return render_side_by_side(stem, truth, [panel], title=truth.name, max_frames=max_frames)
 

@@ -12,6 +12,7 @@ raise ``KeyboardInterrupt`` like Ctrl-C, so ``finally`` blocks clean up after bo
 
 from __future__ import annotations
 
+import errno
 import math
 import numbers
 import signal
@@ -29,6 +30,29 @@ class PhysgnnError(Exception):
 def one_line(err: BaseException) -> str:
     """The message of ``err`` on one line (its non-empty lines joined by ``"; "``)."""
     return "; ".join(line.strip() for line in str(err).splitlines() if line.strip())
+
+
+# What torch and h5py say (in a RuntimeError) when a write hit a full or read-only disk
+# (torch's stream writer on a full disk: "file write failed", or "unexpected pos").
+DISK_WORDS = (
+    "No space left on device",
+    "Read-only file system",
+    "file write failed",
+    "unexpected pos",
+    "Disk quota exceeded",
+)
+
+
+# A disk that is full or not writable is the user's to fix, not a bug.
+DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM)
+
+
+def disk_problem(err: BaseException) -> bool:
+    """``err`` is an OSError of a full, read-only or forbidden place to write, or torch's or
+    h5py's RuntimeError wrapping one."""
+    if isinstance(err, OSError):
+        return err.errno in DISK_ERRNOS
+    return isinstance(err, RuntimeError) and any(w in str(err) for w in DISK_WORDS)
 
 
 class ConfigError(PhysgnnError, ValueError):

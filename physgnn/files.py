@@ -11,6 +11,9 @@ import math
 import os
 import shutil
 import socket
+import sys
+import threading
+import time
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from datetime import datetime
@@ -148,12 +151,20 @@ def process_alive(pid) -> bool:
     return True
 
 
+# A lock's holder touches it (its mtime) every LOCK_HEARTBEAT_S while it runs, so a lock of
+# another host (whose pid cannot be asked after) left untouched for LOCK_STALE_S is a lost
+# node's (a killed or requeued cluster job) and is taken over; a fresher one is refused.
+LOCK_HEARTBEAT_S = 30.0
+LOCK_STALE_S = 600.0
+
+
 @contextmanager
 def exclusive(lock: str | Path, what: str, way_out: str) -> Iterator[Path]:
-    """Hold the file ``lock`` while the block runs: it is created exclusively and names this
-    process (pid, host, since when). A live holder makes :class:`InUseError` (``what`` is in
-    use ..., then ``way_out``); the lock of a dead process of this host is taken over. The
-    lock is removed at the end, whatever happened."""
+    """Hold the file ``lock`` while the block runs: it is created exclusively, names this
+    process (pid, host, since when) and is touched every :data:`LOCK_HEARTBEAT_S` (a
+    heartbeat). A live holder makes :class:`InUseError` (``what`` is in use ..., then
+    ``way_out``); the lock of a dead process of this host, or of another host untouched for
+    :data:`LOCK_STALE_S`, is taken over. The lock is removed at the end, whatever happened."""
     lock = Path(lock)
     lock.parent.mkdir(parents=True, exist_ok=True)
     mine = {
@@ -172,11 +183,25 @@ def exclusive(lock: str | Path, what: str, way_out: str) -> Iterator[Path]:
         break
     else:
         raise InUseError(f"{what} is in use (lock {lock} keeps changing hands): {way_out}")
+    stop = threading.Event()
+    beating = threading.Thread(target=_heartbeat, args=(lock, stop), daemon=True)
+    beating.start()
     try:
         yield lock
     finally:
+        stop.set()
+        beating.join()
         if _holder(lock).get("pid") == mine["pid"]:
             lock.unlink(missing_ok=True)
+
+
+def _heartbeat(lock: Path, stop: threading.Event) -> None:
+    """Touch ``lock`` every :data:`LOCK_HEARTBEAT_S` until ``stop``: the holder still runs."""
+    while not stop.wait(LOCK_HEARTBEAT_S):
+        try:
+            os.utime(lock)
+        except OSError:  # removed by hand, or its disk went away: nothing to keep fresh
+            pass
 
 
 def _holder(lock: Path) -> dict:
@@ -186,16 +211,43 @@ def _holder(lock: Path) -> dict:
         return {}
 
 
+def _age(seconds: float) -> str:
+    """``seconds`` in words: ``40 s``, ``12 min``, ``3.0 h``."""
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    return f"{seconds / 60:.0f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h"
+
+
 def _refuse_or_clear(lock: Path, what: str, way_out: str) -> None:
-    """A lock held by a live process (or one of another host) is refused; a dead one's, or
-    an unreadable one (its writer died at once), is removed."""
+    """A lock held by a live process of this host, or of another host touched within
+    :data:`LOCK_STALE_S`, is refused (naming the holder, the lock's age and how to remove
+    it); a dead one's, a silent one of another host (a warning line), or an unreadable one
+    (its writer died at once), is removed."""
     holder = _holder(lock)
     here = holder.get("host") == socket.gethostname()
-    if holder and (not here or process_alive(holder.get("pid"))):
+    try:
+        silent = time.time() - lock.stat().st_mtime
+    except OSError:  # released meanwhile
+        return
+    pid, host = holder.get("pid"), holder.get("host")
+    if holder and not here and silent > LOCK_STALE_S:
+        print(
+            f"warning: {what}: taking over the lock {lock} of pid {pid} on {host}, untouched for"
+            f" {_age(silent)} (a running holder touches it every {LOCK_HEARTBEAT_S:g} s: its "
+            "node is gone)",
+            file=sys.stderr,
+        )
+    elif holder and (not here or process_alive(pid)):
+        gone = (
+            f"if pid {pid} is not a physgnn process (its pid reused), remove the lock file {lock}"
+            if here
+            else f"remove {lock} if that process is gone (a lock of another host untouched "
+            f"for {_age(LOCK_STALE_S)} is taken over: its holder touches it every "
+            f"{LOCK_HEARTBEAT_S:g} s)"
+        )
         raise InUseError(
-            f"{what} is in use: pid {holder.get('pid')} on {holder.get('host')} writes there "
-            f"since {holder.get('since')} (lock {lock}): {way_out}"
-            + ("" if here else f"; remove {lock} if that process is gone")
+            f"{what} is in use: pid {pid} on {host} writes there since {holder.get('since')} "
+            f"(lock {lock}, touched {_age(silent)} ago): {way_out}; {gone}"
         )
     lock.unlink(missing_ok=True)
 

@@ -14,6 +14,7 @@ import pytest
 from simdata import trajectory
 
 import physgnn.api as pg
+from physgnn.data.dataset import DatasetError
 from physgnn.metrics import MetricError
 from physgnn.physics.scene import SceneError
 from physgnn.training.runs import PRETRAINED_DIR, RunError
@@ -156,3 +157,92 @@ def test_load_model_refuses_a_run_still_training(tmp_path):
         "2026-11-23T10:00:00): its checkpoints are mid-run; load it when it has finished"
     )
     assert os.path.exists(run / "run.json")
+
+
+@pytest.mark.parametrize(
+    "fields,message",
+    [
+        ({"quat": [[0, 0, 0, 0]]}, "scene 'arrays': quat[0]: has length 0 (needs a direction)"),
+        (
+            {"materials": [[1.5, 0.5, 0.001, 0.001]]},
+            "scene 'arrays': materials[0].restitution: must be in [0, 1], got 1.5",
+        ),
+        (
+            {"materials": [[0.5, -1, 0.001, 0.001]]},
+            "scene 'arrays': materials[0].lateral_friction: must be >= 0, got -1",
+        ),
+        (
+            {"effects": {"gravity": "no"}},
+            "Trajectory.from_arrays: effects: effect gravity must be true or false, got 'no'",
+        ),
+        (
+            {"effects": "no"},
+            "Trajectory.from_arrays: effects must be an Effects or a dict of switches, e.g. "
+            "{'gravity': False}, got str",
+        ),
+    ],
+)
+def test_scene_from_arrays_checks_values_as_a_scene_file_does(fields, message):
+    with pytest.raises(SceneError) as err:
+        pg.scene_from_arrays([[0.0, 0.0, 1.0]], 0.5, frames=5, **fields)
+    assert one_line(err) == message
+
+
+def test_scene_from_arrays_normalises_an_orientation_as_a_scene_file_does():
+    scene = pg.scene_from_arrays([[0.0, 0.0, 1.0]], 0.5, quat=[[2.0, 0, 0, 0]], frames=3)
+    np.testing.assert_allclose(scene.quat, [[1.0, 0, 0, 0]])
+
+
+@pytest.mark.parametrize(
+    "pos,got", [("abc", "'abc'"), ([0.0, 0.0, 1.0], "shape [3]"), ([[1, 2]], "shape [1, 2]")]
+)
+def test_scene_from_arrays_names_positions_that_are_not_n_by_3_numbers(pos, got):
+    with pytest.raises(pg.ArgumentError) as err:
+        pg.scene_from_arrays(pos, 0.5)
+    assert one_line(err) == f"pos must be an array [N, 3] of numbers (metres), got {got}"
+
+
+def test_trajectory_from_arrays_names_a_value_that_is_not_numbers():
+    with pytest.raises(SceneError) as err:
+        pg.trajectory_from_arrays([[[0.0, 0.0, 1.0]]], 0.5, 0.1, mass="heavy")
+    assert one_line(err) == (
+        "Trajectory.from_arrays: mass must be an array of numbers [1], got 'heavy'"
+    )
+
+
+def test_animate_refuses_a_prediction_of_another_scene(truth, tmp_path):
+    other = trajectory(n=3, frames=6)
+    with pytest.raises(pg.ArgumentError) as err:
+        pg.animate(truth, other, tmp_path / "film")
+    assert one_line(err) == (
+        "pred has 3 spheres, truth 2: animate a prediction of truth's own scene "
+        "(roll_out(model, truth))"
+    )
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    "name,advice",
+    [
+        (
+            "trajectories.h5",
+            "; if it is still to be made, an hdf5 export writes it: "
+            "physgnn.api.export(trajs, '{folder}', 'hdf5')",
+        ),
+        (
+            "simulate.h5",
+            "; if it is still to be made, simulate writes it: python -m physgnn.simulate ... "
+            "out={folder}",
+        ),
+        ("mine.h5", ""),
+    ],
+)
+def test_load_trajectories_of_a_missing_file_says_to_check_the_path(tmp_path, name, advice):
+    path = tmp_path / "export" / name
+    with pytest.raises(DatasetError) as err:
+        pg.load_trajectories(path)
+    folder = tmp_path / "export"
+    assert one_line(err) == f"HDF5 file {path} not found: check the path" + advice.format(
+        folder=folder
+    )
+    assert "generate" not in one_line(err)

@@ -4,7 +4,9 @@ is installed (the ``docs`` extra), the site builds with ``mkdocs build --strict`
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
+import inspect
 import re
 import shutil
 import subprocess
@@ -135,6 +137,31 @@ def test_every_readme_section_the_site_shows_exists():
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     for page in mkdocs_hooks.README_PAGES:
         assert mkdocs_hooks.readme_page(page, readme).startswith("# ")
+
+
+def reference_docstrings() -> dict[str, str]:
+    """The docstrings the API reference (docs/reference/api.md) shows: each ``::: module``'s
+    and its public functions', classes' and their methods', by name."""
+    found = {}
+    page = (ROOT / "docs" / "reference" / "api.md").read_text(encoding="utf-8")
+    for name in re.findall(r"^::: (\S+)", page, re.M):
+        module = importlib.import_module(name)
+        found[name] = inspect.getdoc(module) or ""
+        for key, value in vars(module).items():
+            if key.startswith("_") or getattr(value, "__module__", None) != name:
+                continue
+            found[f"{name}.{key}"] = inspect.getdoc(value) or ""
+            for member, inner in vars(value).items() if inspect.isclass(value) else ():
+                if not member.startswith("_") and callable(inner):
+                    found[f"{name}.{key}.{member}"] = inspect.getdoc(inner) or ""
+    return found
+
+
+def test_the_api_reference_shows_no_restructuredtext_literal_marker():
+    # mkdocstrings renders Markdown: a reST "::" before a code block shows as a stray "::"
+    for name, doc in reference_docstrings().items():
+        marked = [line for line in doc.splitlines() if line.rstrip().endswith("::")]
+        assert not marked, f"{name}: {marked} (use a fenced ```python block)"
 
 
 @pytest.mark.slow

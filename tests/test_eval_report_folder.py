@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
-from fakeruns import Exploding, Falling, eval_cfg, evaluate_fake_runs
+from fakeruns import Exploding, Falling, eval_cfg, evaluate_fake_runs, make_run
 from omegaconf import OmegaConf
 
 import physgnn.evaluation.evaluate as ev
@@ -69,3 +69,19 @@ def test_overwrite_into_a_folder_of_yours_keeps_your_files_in_rollouts_and_figur
         assert (mine / name).read_text() == "mine", name
     assert (mine / "rollouts" / "runs" / "baseline" / "2026-01-01_00-00-00" / "test.h5").is_file()
     assert (mine / "figures" / "energy_ood.png").is_file() and (mine / "report.md").is_file()
+
+
+def test_rollouts_of_a_run_outside_the_outputs_go_under_the_report_dir_only(tmp_path):
+    outputs, report = tmp_path / "outputs", tmp_path / "R"
+    run = make_run(tmp_path / "elsewhere" / "myrun")  # runs=<an absolute path>: its name
+    overrides = (f"runs={run}", f"report_dir={report}", "videos=false", "save_rollouts=true")
+    interrupted = pytest.MonkeyPatch.context()
+    with interrupted as mp, pytest.raises(KeyboardInterrupt):  # SIGTERM after the rollouts
+        mp.setattr(ev, "write_report", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
+        evaluate_fake_runs(outputs, *overrides, NO_PYBULLET)
+    assert sorted(p.name for p in run.iterdir()) == [".hydra", "run.json"]
+    assert not (report / "rollouts").exists()
+    evaluate_again(outputs, *overrides, NO_PYBULLET)
+    assert sorted(p.name for p in run.iterdir()) == [".hydra", "run.json"]
+    saved = report / "rollouts" / Path(*run.parts[1:])  # the run's name, under rollouts/
+    assert sorted(p.name for p in saved.iterdir()) == ["ood.h5", "test.h5"]

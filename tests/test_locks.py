@@ -10,14 +10,17 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 
 import pytest
 from processes import start, wait_for
 
 import physgnn.generate as generate_command
 import physgnn.train as train_command
+from physgnn import files
 from physgnn.evaluation.runs import EvalError, find_runs
 from physgnn.files import InUseError, exclusive
+from physgnn.training.claim import claim_run_dir, release
 
 
 def dead_pid() -> int:
@@ -40,7 +43,12 @@ def test_a_live_holder_is_named_and_its_lock_kept(tmp_path):
             pass
         message = str(err.value)
         assert "\n" not in message and f"pid {sleeper.pid} on {socket.gethostname()}" in message
-        assert "since 2026-11-23T10:00:00" in message and message.endswith("wait for it")
+        assert "since 2026-11-23T10:00:00" in message and "touched 0 s ago): wait for it" in message
+        # the pid may be an unrelated process that took a dead holder's number
+        assert message.endswith(
+            f"; if pid {sleeper.pid} is not a physgnn process (its pid reused), remove the lock "
+            f"file {lock}"
+        )
         assert json.loads(lock.read_text())["pid"] == sleeper.pid
     finally:
         sleeper.kill()
@@ -64,6 +72,53 @@ def test_a_lock_of_another_host_is_refused_with_the_way_to_free_it(tmp_path):
     with pytest.raises(InUseError, match=f"remove {lock} if that process is gone"):
         with exclusive(lock, "data.dir X", "wait"):
             pass
+
+
+def test_a_fresh_lock_of_another_host_names_its_holder_age_and_the_way_to_free_it(tmp_path):
+    lock = tmp_path / "run.lock"
+    write_lock(lock, 12345, host="otherhost")
+    then = time.time() - 40
+    os.utime(lock, (then, then))
+    with pytest.raises(InUseError) as err, exclusive(lock, "run_dir X", "wait"):
+        pass
+    assert str(err.value) == (
+        f"run_dir X is in use: pid 12345 on otherhost writes there since 2026-11-23T10:00:00 "
+        f"(lock {lock}, touched 40 s ago): wait; remove {lock} if that process is gone (a lock "
+        "of another host untouched for 10 min is taken over: its holder touches it every 30 s)"
+    )
+    assert json.loads(lock.read_text())["host"] == "otherhost"
+
+
+def test_a_lost_nodes_lock_is_taken_over_by_a_requeued_training(tmp_path, capsys):
+    """A lock of another host untouched past files.LOCK_STALE_S: its node is gone."""
+    run_dir = tmp_path / "X"
+    lock = tmp_path / "X.lock"
+    write_lock(lock, 12345, host="otherhost")
+    then = time.time() - 3600
+    os.utime(lock, (then, then))
+    try:
+        assert claim_run_dir(run_dir) == lock
+        assert json.loads(lock.read_text())["pid"] == os.getpid()
+    finally:
+        release()
+    assert not lock.exists()
+    assert capsys.readouterr().err == (
+        f"warning: run_dir {run_dir}: taking over the lock {lock} of pid 12345 on otherhost, "
+        "untouched for 60 min (a running holder touches it every 30 s: its node is gone)\n"
+    )
+
+
+def test_the_holder_touches_its_lock_while_it_runs(tmp_path, monkeypatch):
+    monkeypatch.setattr(files, "LOCK_HEARTBEAT_S", 0.02)
+    lock = tmp_path / "data.lock"
+    with exclusive(lock, "data.dir X", "wait"):
+        then = time.time() - 3600
+        os.utime(lock, (then, then))
+        deadline = time.time() + 10
+        while lock.stat().st_mtime < time.time() - 60 and time.time() < deadline:
+            time.sleep(0.02)
+        assert lock.stat().st_mtime > time.time() - 60
+    assert not lock.exists()
 
 
 def test_two_generates_into_one_folder_one_writes_the_other_is_refused(

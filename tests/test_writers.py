@@ -86,7 +86,11 @@ def test_two_evals_into_one_report_dir_the_second_is_refused(tmp_path, live_pid,
     err = capsys.readouterr().err
     assert exit_info.value.code == 2 and len(err.splitlines()) == 1
     assert err.startswith(f"error: report_dir {report_dir} is in use: pid {live_pid}")
-    assert err.rstrip().endswith("wait for it to end, or choose another report_dir")
+    assert err.rstrip().endswith(
+        "wait for it to end, or choose another report_dir; if pid "
+        f"{live_pid} is not a physgnn process (its pid reused), remove the lock file "
+        f"{report_dir}.lock"
+    )
     assert (report_dir / "report.md").read_text() == "the first eval's"
 
 

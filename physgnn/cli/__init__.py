@@ -29,7 +29,6 @@ only waits for a core, and steps ran several times slower than on one thread.
 
 from __future__ import annotations
 
-import errno
 import functools
 import importlib
 import math
@@ -60,6 +59,7 @@ from physgnn.errors import (
     ConfigError,
     Interrupted,
     PhysgnnError,
+    disk_problem,
     interrupt_signal,
     one_line,
     sigterm_interrupts,
@@ -87,27 +87,6 @@ USER_ERRORS = (
     FileNotFoundError,
     FileExistsError,
 )
-
-
-# A disk that is full or not writable is the user's to fix, not a bug.
-DISK_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM)
-
-
-# What torch and h5py say (in a RuntimeError) when a write hit a full or read-only disk.
-DISK_WORDS = (
-    "No space left on device",
-    "Read-only file system",
-    "file write failed",
-    "Disk quota exceeded",
-)
-
-
-def disk_problem(err: BaseException) -> bool:
-    """``err`` is an OSError of a full, read-only or forbidden place to write, or torch's or
-    h5py's RuntimeError wrapping one."""
-    if isinstance(err, OSError):
-        return err.errno in DISK_ERRNOS
-    return isinstance(err, RuntimeError) and any(w in str(err) for w in DISK_WORDS)
 
 
 def disk_error(err: BaseException) -> ConfigError:

@@ -197,7 +197,7 @@ def read_split(path) -> list[Trajectory]:
     """All trajectories of a split file, checked (raises :class:`DatasetError`)."""
     path = Path(path)
     if not path.exists():
-        raise DatasetError(f"dataset file {path} not found: {_generate_hint(path)}")
+        raise DatasetError(_missing(path))
     try:
         with h5py.File(path, "r") as f:
             version = f.attrs.get("schema_version")
@@ -218,6 +218,21 @@ def read_split(path) -> list[Trajectory]:
 
 
 SPLIT_FILES = ("train", "val", "test", "ood")  # each names itself in its attribute ``split``
+
+
+def _missing(path: Path) -> str:
+    """What to do about a missing file: a dataset's split is generated; any other is a path
+    to check, or a file a command writes (an hdf5 export's, simulate's)."""
+    if path.stem in SPLIT_FILES:
+        return f"dataset file {path} not found: {_generate_hint(path)}"
+    made = {
+        "trajectories.h5": f"an hdf5 export writes it: physgnn.api.export(trajs, "
+        f"'{path.parent}', 'hdf5')",
+        "simulate.h5": f"simulate writes it: python -m physgnn.simulate ... out={path.parent}",
+    }
+    return f"HDF5 file {path} not found: check the path" + (
+        f"; if it is still to be made, {made[path.name]}" if path.name in made else ""
+    )
 
 
 def _check_split(path: Path, split) -> None:

@@ -18,7 +18,7 @@ A ``report_dir`` holding files physgnn did not write is refused unless ``overwri
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -220,11 +220,14 @@ def write_videos(video_dir: Path, films: dict, max_frames: int) -> list[Path]:
 
 def write_rollouts(folder: Path, saved: dict) -> list[Path]:
     """``<folder>/<run name>/<split>.h5`` per learned run and split: its rollouts in the dataset
-    schema (groups named as the truth's), with what made them in each group's attributes."""
+    schema (groups named as the truth's), with what made them in each group's attributes.
+    Always under ``folder``: the name of a run outside ``paths.outputs`` (its path) is taken
+    without its root, never as the run's own folder."""
     paths = []
     for (name, split), preds in sorted(saved.items()):
         trajs = [dataclasses.replace(p, attrs=p.attrs | made_by(p, name)) for p in preds]
-        path = folder / name.replace(" ", "") / f"{split}.h5"
+        parts = PurePosixPath(name.replace(" ", "")).parts
+        path = folder.joinpath(*[p for p in parts if p not in ("/", ".", "..")], f"{split}.h5")
         paths.append(write_split(path, trajs, {"split": split, "preset": f"rollouts of {name}"}))
     return paths
 

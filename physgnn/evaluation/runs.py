@@ -58,7 +58,7 @@ def all_runs(target: str | None, outputs: Path) -> list[Path]:
 
 
 # A truncated run (its step budget cut short by the time guard) is evaluated, and named so.
-EVALUATED = ("finished", "truncated")
+EVALUATED = training_runs.DONE
 
 
 def find_runs(target: str | None, outputs: Path) -> list[Path]:
@@ -67,10 +67,8 @@ def find_runs(target: str | None, outputs: Path) -> list[Path]:
     runs = [p for p in all_runs(target, outputs) if training_runs.run_status(p) in EVALUATED]
     if target is not None and not runs:
         folder = training_runs.resolve_run(target)
-        status = training_runs.run_status(folder) if (folder / "run.json").exists() else None
-        training_runs.check_not_training(folder, "evaluate it", EvalError)
-        if status is not None:
-            raise EvalError(f"run {target} has not finished (run.json status is '{status}')")
+        if (folder / "run.json").exists():
+            training_runs.check_done(folder, "evaluate it", EvalError)
         raise EvalError(f"no finished run (run.json with status 'finished') under {target}")
     return runs
 

@@ -31,6 +31,8 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +42,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from physgnn import metrics
 from physgnn.data.dataset import write_split
-from physgnn.errors import PhysgnnError, check_flag, check_whole
+from physgnn.errors import PhysgnnError, check_flag, check_whole, disk_problem, one_line
 from physgnn.evaluation import rerun_log
 from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.video3d import render_side_by_side
@@ -114,22 +116,26 @@ def learned(
         raise SimulateError(f"run folder {run_dir} does not exist")
     simulator, cfg, info = load_run(folder)
     history = int(simulator.H)
-    compile_s = None if compile_cache is None else compile_ahead(simulator, truth, compile_cache)
-    if constraints > 0:
-        simulator = ConstrainedSimulator(simulator, constraints)
-    if truth.n_spheres * truth.n_frames >= LONG:
-        print(
-            f"rolling the learned simulator out: {truth.n_spheres} spheres, {truth.n_frames} "
-            "frames ...",
-            file=sys.stderr,
-            flush=True,
-        )
-    graphs = compiled_graphs()
-    start = time.perf_counter()
-    pred = rollout_prediction(simulator, truth)
+    fresh = compile_cache is not None and not any(Path(compile_cache).glob("*"))
+    compile_s = None
+    with compile_guard(compile_cache):
+        if compile_cache is not None:
+            compile_s = compile_ahead(simulator, truth, compile_cache)
+        if constraints > 0:
+            simulator = ConstrainedSimulator(simulator, constraints)
+        if truth.n_spheres * truth.n_frames >= LONG:
+            print(
+                f"rolling the learned simulator out: {truth.n_spheres} spheres, {truth.n_frames} "
+                "frames ...",
+                file=sys.stderr,
+                flush=True,
+            )
+        graphs = compiled_graphs()
+        start = time.perf_counter()
+        pred = rollout_prediction(simulator, truth)
     steps = max(pred.n_frames - history - 1, 1)
     graphs = compiled_graphs() - graphs
-    if compile_s is not None and graphs > 0:
+    if compile_s is not None and graphs > 0 and fresh:  # a second call loaded them: no note
         print(
             f"note: ms_per_frame includes compiling {graphs} more graph(s) "
             "for edge counts the first frames did not have (0 or 1 pair); a second call "
@@ -140,6 +146,56 @@ def learned(
     source |= {"H": history, "constraints": constraints, "cfg": cfg, "compile_s": compile_s}
     source["ms_per_frame"] = 1000 * (time.perf_counter() - start) / steps
     return pred, source
+
+
+@contextmanager
+def compile_guard(cache_dir: str | None) -> Iterator[None]:
+    """With a compile cache (``cache_dir``; None: nothing guarded), a failing compile is one
+    line naming ``paths.compile_cache``: a full, read-only or forbidden one (the files this
+    compile left there removed), or one that may be corrupt (truncated ``.so`` files), with
+    how to clear it."""
+    if cache_dir is None:
+        yield
+        return
+    cache = Path(cache_dir)
+    before = set(cache.rglob("*")) if cache.is_dir() else set()
+    try:
+        yield
+    except (PhysgnnError, KeyboardInterrupt):
+        raise
+    except Exception as err:
+        failed = err
+    else:
+        return
+    disk = next((e for e in _chain(failed) if disk_problem(e)), None)
+    what = f"{type(failed).__name__}: {one_line(failed)}"[:300]
+    reason = disk and (getattr(disk, "strerror", None) or "disk full or read-only")
+    del failed, disk  # their frames hold the compiler's open files
+    if reason is None:
+        raise SimulateError(
+            f"compiling the learned step failed ({what}); the compile cache "
+            f"paths.compile_cache={cache} may be corrupt (truncated files): clear it (rm -r "
+            f"{cache}) and run again, or run with compile=false"
+        )
+    for path in sorted(set(cache.rglob("*")) - before, reverse=True):  # files, then folders
+        try:
+            path.unlink() if path.is_file() or path.is_symlink() else path.rmdir()
+        except OSError:
+            pass
+    raise SimulateError(
+        f"paths.compile_cache={cache} cannot be written ({reason}; what this compile wrote "
+        "there was removed): free space there, or choose a writable paths.compile_cache (or "
+        "compile=false)"
+    )
+
+
+def _chain(err: BaseException) -> Iterator[BaseException]:
+    """``err`` and the errors it was raised from or during (inductor wraps a failed write)."""
+    seen = set()
+    while err is not None and id(err) not in seen:
+        seen.add(id(err))
+        yield err
+        err = err.__cause__ or err.__context__
 
 
 def compile_ahead(simulator, truth: Trajectory, cache_dir: str) -> float:

@@ -1,12 +1,17 @@
 """Checked values of a scene file (:mod:`physgnn.groundtruth.scenefile`): mappings of known
-keys, numbers, vectors, directions and restitutions, each wrong one a one-line
-:class:`~physgnn.physics.scene.SceneError` naming its place (``where``)."""
+keys, numbers, vectors, directions, restitutions and materials, each wrong one a one-line
+:class:`~physgnn.physics.scene.SceneError` naming its place (``where``); and a scene of arrays
+(:func:`physgnn.api.scene_from_arrays`) checked by the same functions (:func:`arrays`)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
-from physgnn.physics.scene import SceneError
+from physgnn.physics.scene import Material, Scene, SceneError, as_float32
+
+MATERIAL_KEYS = tuple(f.name for f in dataclasses.fields(Material))
 
 
 def known_keys(where: str, d, schema: dict) -> dict:
@@ -51,3 +56,24 @@ def restitution(where: str, x) -> float:
     if not 0 <= e <= 1:
         raise SceneError(f"{where}: must be in [0, 1], got {e}")
     return e
+
+
+def coefficients(where: str, values: dict) -> dict:
+    """A material's coefficients (keys of :class:`Material`): numbers >= 0, the restitution
+    at most 1."""
+    checked = {k: number(f"{where}.{k}", v) for k, v in values.items()}
+    for key, v in checked.items():
+        if v < 0 or (key == "restitution" and v > 1):
+            bound = "in [0, 1]" if key == "restitution" else ">= 0"
+            raise SceneError(f"{where}.{key}: must be {bound}, got {v:g}")
+    return checked
+
+
+def arrays(where: str, scene: Scene) -> Scene:
+    """``scene`` (made from arrays, not read from a file) once its values pass a scene file's
+    checks: each material's coefficients (:func:`coefficients`), each orientation a direction
+    (:func:`unit`; normalised, as a scene file's)."""
+    for k, row in enumerate(np.asarray(scene.materials, np.float64).tolist()):
+        coefficients(f"{where}: materials[{k}]", dict(zip(MATERIAL_KEYS, row, strict=True)))
+    quat = [unit(f"{where}: quat[{i}]", q, 4) for i, q in enumerate(scene.quat.tolist())]
+    return dataclasses.replace(scene, quat=as_float32(np.reshape(quat, (-1, 4))))

@@ -34,7 +34,14 @@ from physgnn.errors import check_whole
 from physgnn.files import write_text
 from physgnn.groundtruth.layouts import check_above_ground, check_clear_of_planes, check_no_overlap
 from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
-from physgnn.groundtruth.scene_values import known_keys, number, restitution, unit, vector
+from physgnn.groundtruth.scene_values import (
+    coefficients,
+    known_keys,
+    number,
+    restitution,
+    unit,
+    vector,
+)
 from physgnn.groundtruth.scene_yaml import SceneLoader
 from physgnn.physics.scene import (
     GRAVITY,
@@ -61,11 +68,7 @@ def _materials(where: str, d) -> tuple[list[str], np.ndarray]:
     rows = []
     for name, m in d.items():
         w = f"{where}.{name}"
-        m = known_keys(w, m or {}, MATERIAL)
-        values = {k: number(f"{w}.{k}", v) for k, v in m.items()}
-        if any(v < 0 for v in values.values()) or values.get("restitution", 0) > 1:
-            raise SceneError(f"{w}: coefficients must be >= 0 and restitution <= 1")
-        rows.append(Material(**values).as_array())
+        rows.append(Material(**coefficients(w, known_keys(w, m or {}, MATERIAL))).as_array())
     return [str(k) for k in d], np.stack(rows)
 
 

@@ -136,7 +136,7 @@ class Trajectory:
             pos=pos,
             quat=quat,
             dt=float(dt),
-            effects=effects or Effects(),
+            effects=_effects(effects),
             vel=_frames("vel", vel, (t, n, 3), vel_fd),
             attrs=dict(attrs or {}),
             angvel=_frames("angvel", angvel, (t, n, 3), angvel_fd),
@@ -194,6 +194,22 @@ def _static_fields(radius: np.ndarray, mass, materials, planes) -> dict:
     }
 
 
+def _effects(value) -> Effects:
+    """``value`` (None: every effect on, an :class:`Effects`, or a dict of switches) as an
+    :class:`Effects`; else a one-line ``SceneError``."""
+    if value is None or isinstance(value, Effects):
+        return value or Effects()
+    if not isinstance(value, dict):
+        raise SceneError(
+            "Trajectory.from_arrays: effects must be an Effects or a dict of switches, e.g. "
+            f"{{'gravity': False}}, got {type(value).__name__}"
+        )
+    try:
+        return Effects.from_dict(value)
+    except SceneError as e:
+        raise SceneError(f"Trajectory.from_arrays: effects: {e}") from None
+
+
 def _is_pair(value) -> bool:
     return isinstance(value, tuple) and len(value) == 2
 
@@ -205,12 +221,18 @@ def _pair(value) -> tuple:
 
 def _array(key: str, value, dtype, shape: tuple) -> np.ndarray:
     """``value`` as a ``dtype`` array of ``shape`` (None: any size); else a ``SceneError``."""
-    arr = np.asarray(value, dtype=dtype)
+    want = "[" + ", ".join("*" if s is None else str(s) for s in shape) + "]"
+    try:
+        arr = np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError):  # "abc", a ragged list, an object
+        shown = repr(value) if len(repr(value)) <= 40 else f"a {type(value).__name__}"
+        raise SceneError(
+            f"Trajectory.from_arrays: {key} must be an array of numbers {want}, got {shown}"
+        ) from None
     fits = arr.ndim == len(shape) and all(
         s in (None, a) for s, a in zip(shape, arr.shape, strict=True)
     )
     if not fits:
-        want = "[" + ", ".join("*" if s is None else str(s) for s in shape) + "]"
         raise SceneError(
             f"Trajectory.from_arrays: {key} has shape {list(arr.shape)}, expected {want}"
         )

@@ -18,6 +18,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
 from physgnn.files import process_alive
+from physgnn.training.datamodule import dataset_identity
 from physgnn.training.layout import check_renamed, dotted_model, key_of_today, model_of_today
 from physgnn.training.ranges import check_range
 from physgnn.training.runs import RUN_JSON, load_checkpoint, read_run_json, run_status
@@ -185,6 +186,7 @@ def check_run_dir(cfg: DictConfig, run_dir: Path, overrides: list[str] | None = 
     check_own_run_json(run_dir)
     if overrides is not None:
         check_resume_overrides(run_dir, overrides)
+    check_resume_data(cfg, run_dir)
     status = run_status(run_dir) if (run_dir / RUN_JSON).exists() else None
     last = run_dir / "checkpoints" / "last.ckpt"
     if not any((run_dir / "checkpoints").glob("*.ckpt")):
@@ -236,6 +238,29 @@ def check_resume_overrides(run_dir: Path, overrides: list[str]) -> None:
             f"{' '.join(gone) or 'none'}; new: {' '.join(new) or 'none'}): resume with "
             f"exactly {' '.join(sorted(then)) or 'no overrides'} and run_dir={run_dir}, or "
             "train further in a new run_dir with ckpt_path=<its last.ckpt>"
+        )
+
+
+def check_resume_data(cfg: DictConfig, run_dir: Path) -> None:
+    """A resume of the run in ``run_dir`` on another dataset than it was trained on (the
+    ``sha256`` of run.json's ``dataset`` against today's, :func:`dataset_identity`: another
+    seed or preset at the same path, or another ``PHYSGNN_OUTPUTS``) is refused in one line."""
+    if not resumed_here(run_dir) or cfg.get("ckpt_path"):
+        return
+    then = read_run_json(run_dir).get("dataset") or {}
+    try:
+        data_dir = OmegaConf.select(cfg, "datamodule.data_dir", throw_on_missing=False)
+    except Exception:  # an interpolation that only resolves inside Hydra: train() checks again
+        return
+    now = dataset_identity(str(data_dir), "") if data_dir else {}
+    if then.get("sha256") and now.get("sha256") and then["sha256"] != now["sha256"]:
+        last = run_dir / "checkpoints" / "last.ckpt"
+        raise ConfigError(
+            f"run_dir {run_dir} resumes a run trained on another dataset: {then.get('dir')} "
+            f"(sha256 {then['sha256'][:12]}) then, {data_dir} (sha256 {now['sha256'][:12]}) now:"
+            " resume with the dataset it was trained on (data=, data.dir=, PHYSGNN_OUTPUTS as "
+            f"then), or train on from its weights in a new run_dir (ckpt_path={last} "
+            "run_dir=<a new folder>)"
         )
 
 

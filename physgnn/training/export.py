@@ -17,6 +17,7 @@ RUN=...``; :func:`main`) writes ``OUT_DIR`` (default ``physgnn/pretrained``, wha
 
 from __future__ import annotations
 
+import errno
 import platform
 import subprocess
 import sys
@@ -25,11 +26,12 @@ from pathlib import Path
 
 import torch
 
-from physgnn.errors import PhysgnnError
-from physgnn.files import atomic_path, claim_folder, portable, write_text
+from physgnn.errors import DISK_WORDS, PhysgnnError, one_line
+from physgnn.files import atomic_path, claim_folder, portable, staged_outputs, write_text
 from physgnn.training.runs import (
     PRETRAINED_DIR,
     WEIGHTS_FORMAT,
+    check_done,
     checkpoint_of,
     load_checkpoint,
     read_run_json,
@@ -50,30 +52,70 @@ KEPT = (
     "host",
     "pairs_seen",
 )
+# What a package holds (replaced whole by the next ship into its folder).
+SHIPPED = ("checkpoints", ".hydra", "run.json")
 
 
 def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path | None = None):
-    """Write ``out_dir`` from ``run_dir`` (module doc); returns the weights file."""
+    """Write ``out_dir`` from ``run_dir`` (module doc), a finished or truncated run (one still
+    training, interrupted or failed is refused in one line); returns the weights file. The
+    package is written whole into a staging folder beside ``out_dir``, then moved in
+    (:func:`~physgnn.files.staged_outputs`): on any failure (a full disk) the earlier package
+    in ``out_dir`` is left as it was."""
     run_dir, out_dir = Path(run_dir), Path(out_dir)
     if run_dir.resolve() == out_dir.resolve():
         raise PhysgnnError(
             f"RUN_DIR and OUT_DIR are the same folder ({portable(out_dir)}): name the run to "
             "export (make ship RUN=<a finished run folder>)"
         )
+    check_done(run_dir, "ship it")
     source = Path(checkpoint) if checkpoint else checkpoint_of(run_dir)
     full = load_checkpoint(
         source, "export {other} (CHECKPOINT=...), or train the run again", weights_only=True
     )
     weights = {k: v for k, v in full["state_dict"].items() if k.startswith("simulator.")}
     step = int(full.get("global_step", 0))
-    claim_folder(out_dir, "OUT_DIR", overwrite=None)  # ship takes no overwrite=true
-    for old in (out_dir / "checkpoints").glob("*.ckpt"):
-        old.unlink()  # one set of weights per folder
-    target = out_dir / "checkpoints" / f"best-step{step:06d}.ckpt"
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(target) as tmp:
+    name = Path("checkpoints") / f"best-step{step:06d}.ckpt"  # one set of weights per folder
+    failed = None
+    try:
+        claim_folder(out_dir, "OUT_DIR", overwrite=None)  # ship takes no overwrite=true
+        with staged_outputs(out_dir, "OUT_DIR", SHIPPED) as staging:
+            _write_package(staging, run_dir, name, (full, weights, step, source))
+    except (PhysgnnError, FileExistsError):
+        raise
+    except (OSError, RuntimeError) as err:  # torch's writer on a full disk: a RuntimeError
+        failed = _reason(err)
+    if failed is not None:  # raised here, not chained: the failed writer's open file is let go
+        raise ShipError(
+            f"OUT_DIR {portable(out_dir)}: the new package could not be written in its staging "
+            f"folder beside it ({failed}); the earlier package there is as it was: free space "
+            "there, or choose another OUT_DIR"
+        )
+    return out_dir / name
+
+
+class ShipError(PhysgnnError, OSError):
+    """The package could not be written (one line naming the folder and the fix)."""
+
+
+def _reason(err: BaseException) -> str:
+    """Why a write failed, in a few words (a full disk named so, whoever wrapped it)."""
+    text = str(err)
+    wrapped = isinstance(err, RuntimeError) and "Read-only" not in text  # torch's, h5py's words
+    if getattr(err, "errno", None) in (errno.ENOSPC, errno.EDQUOT) or (
+        wrapped and any(w in text for w in DISK_WORDS)  # "... unexpected pos 4160 vs 4096"
+    ):
+        return "no space left on device"
+    return one_line(err)[:200]
+
+
+def _write_package(folder: Path, run_dir: Path, name: Path, loaded: tuple) -> None:
+    """The package's files in ``folder``: the weights ``name``, the config and run.json."""
+    full, weights, step, source = loaded
+    (folder / name).parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(folder / name) as tmp:
         torch.save({"state_dict": weights, "global_step": step, "epoch": full.get("epoch")}, tmp)
-    write_text(out_dir / ".hydra" / "config.yaml", (run_dir / ".hydra" / "config.yaml").read_text())
+    write_text(folder / ".hydra" / "config.yaml", (run_dir / ".hydra" / "config.yaml").read_text())
     info = {k: v for k, v in read_run_json(run_dir).items() if k in KEPT}
     info |= {
         "status": "finished",
@@ -84,8 +126,7 @@ def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path |
         "machine": f"{platform.machine()} {platform.processor() or platform.system()}",
         "exported": datetime.now().isoformat(timespec="seconds"),
     }
-    write_run_json(out_dir, info)
-    return target
+    write_run_json(folder, info)
 
 
 def _commit() -> str | None:

@@ -86,6 +86,25 @@ def check_not_training(run_dir: Path, what: str, error: type = None) -> None:
         )
 
 
+# What a run's status must be for its weights to be used (eval evaluates it, ship ships it):
+# finished, or truncated (its step budget cut short by the time guard).
+DONE = ("finished", "truncated")
+
+
+def check_done(run_dir: Path, what: str, error: type = None) -> None:
+    """A run that is not :data:`DONE` (still training, interrupted, failed, diverged, debug, no
+    run.json) is refused in one line (``what``: what waits for it; ``error``: the class raised,
+    :class:`RunError` by default)."""
+    check_not_training(run_dir, what, error)
+    status = run_status(run_dir)
+    if status not in DONE:
+        resume = " (train again there to resume it)" if status in ("interrupted", "running") else ""
+        raise (error or RunError)(
+            f"run {run_dir} has not finished (run.json status is '{status}'): {what} when it "
+            f"has finished{resume}"
+        )
+
+
 def checkpoint_of(run_dir: Path) -> Path:
     """The best checkpoint of a run, else its last one. Several ``best-*`` files (a run
     resumed after its folder moved: Lightning then forgets the best score so far and keeps
