@@ -27,6 +27,7 @@ from physgnn.physics import integrator
 from physgnn.physics import quaternion as Q
 from physgnn.training.layout import model_of_today
 from physgnn.training.lit import LitSimulator, push_forward
+from physgnn.training.losses import regime_weights
 
 G = 9.81
 ENGINE = STATS | {"substeps": 40}
@@ -174,3 +175,28 @@ def test_runs_before_the_engine_state_load_with_finite_differences():
     today = dict(model, inputs={"engine_state": True})
     assert model_of_today(OmegaConf.create(today)).inputs.engine_state is True
     assert np.isclose(gravity_share(ENGINE), 0.5125)
+
+
+def test_regime_weights_give_moving_contacts_their_share_and_keep_the_sum():
+    state = SceneState(
+        pos=torch.zeros(4, 3),
+        vel=torch.zeros(4, 1, 3),
+        radius=torch.full((4,), 0.5),
+        dt=torch.tensor([0.1]),
+        effects=torch.ones(1, 5, dtype=torch.bool),
+    )
+    ballistic = torch.tensor([0.0, 0, -0.981])
+    state.target_vel = ballistic.repeat(4, 1)
+    state.target_vel[0] = torch.tensor([2.0, 0, 1.0])  # a bounce: a moving contact
+    state.target_angvel = torch.zeros(4, 3)
+    sim = engine_model()
+    weights = regime_weights(state, sim, None, 0.5, 0.05)
+    assert_close(weights, torch.tensor([2.0, 2 / 3, 2 / 3, 2 / 3]))
+    assert_close(weights.sum(), torch.tensor(4.0))
+    # already above its share, or nothing else counted: every counted sphere weighs 1
+    assert_close(regime_weights(state, sim, None, 0.2, 0.05), torch.ones(4))
+    counted = torch.tensor([True, False, False, False])
+    assert_close(regime_weights(state, sim, counted, 0.5, 0.05), torch.tensor([1.0, 0, 0, 0]))
+    # a sphere the truth brings to rest is no moving contact
+    state.target_vel[0] = 0.0
+    assert_close(regime_weights(state, sim, None, 0.5, 0.05), torch.ones(4))

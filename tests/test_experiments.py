@@ -19,7 +19,7 @@ from physgnn.training.layout import dotted_model, key_of_today
 
 CONF = Path(CONF_DIR)
 # Experiments of one run (not sweeps), with their optimiser-step budget.
-SINGLE = {"long": 22_500}
+SINGLE = {"long": 22_500, "engine_state": 2_250}
 EXPERIMENTS = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml") if p.stem not in SINGLE)
 RUNS = {
     "ablation_H": 15,
@@ -28,6 +28,7 @@ RUNS = {
     "ablation_lambda": 12,
     "ablation_components": 24,
     "ablation_contacts": 45,
+    "ablation_state": 48,
 }
 
 

@@ -41,7 +41,7 @@ EXECUTION = (
 )
 # Keys added since the study's records began, left out of the fingerprint while they hold the
 # value every earlier default had: the same model keeps its fingerprint.
-ADDED_AT_EARLIER_VALUE = {"model.inputs.engine_state": False}
+ADDED_AT_EARLIER_VALUE = {"model.inputs.engine_state": False, "model.contacts.plane_floor": False}
 
 
 class StudyError(PhysgnnError, ValueError):

@@ -26,6 +26,7 @@ from __future__ import annotations
 import torch
 
 from physgnn.graph.builder import ballistic_velocity
+from physgnn.models.floor import plane_floor
 from physgnn.models.outputs import PAIR, regression
 
 INERTIA_FACTOR = 0.4  # I = 2/5 m r² of a solid sphere
@@ -68,7 +69,8 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
     :class:`LearnedSimulator` ``sim`` (its statistics) from the network's ``node_out [N,
     sim.outputs.width]`` and ``pair_out [E'/2, sim.pair_outputs.width]`` (the graph's pairs
     first; padding after): the pair impulses (:func:`pair_changes`), gravity, and the node
-    decoder's own change for spheres ``on_plane [N]`` only; then the rest logit as it is. With
+    decoder's own change for spheres ``on_plane [N]`` only (with ``plane_floor``, after the
+    planes' floor: :mod:`physgnn.models.floor`); then the rest logit as it is. With
     the engine state the frame's mean motion likewise, from its own pair impulses and the
     engine's share of gravity (``sim.gravity_share``): over an isolated group,
     ``Σ m Δp = M·(dt·v̄ + s·g·dt²)`` for any weights."""
@@ -80,15 +82,32 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
     fall = ballistic_velocity(state) - state.vel[:, 0]  # g·dt where gravity is on
     outputs, pairs = sim.outputs, sim.pair_outputs
     motions = [("", 1.0)] + ([("mean_", sim.gravity_share)] if sim.engine_state else [])
-    parts = []
+    changes = []
     for prefix, share in motions:
         columns = slice(pairs.slice(prefix + "impulse").start, pairs.slice(prefix + "couple").stop)
         dvel, dang = pair_changes(state, graph.pp_index, pair_out[:half, columns], *scales, weight)
+        changes.append([dvel + share * fall, dang])
+    if sim.contacts.plane_floor:
+        floored(state, graph, changes)
+    parts = []
+    for (prefix, _), (dvel, dang) in zip(motions, changes, strict=True):
         own_vel = outputs.take(node_out, f"delta_{prefix}vel") * sim.delta_vel_std
         own_ang = outputs.take(node_out, f"delta_{prefix}angvel") * sim.delta_angvel_std
-        dvel = dvel + share * fall + own * own_vel
+        dvel = dvel + own * own_vel
         dang = dang + own * own_ang
         parts.append((dvel - sim.delta_vel_mean) / sim.delta_vel_std)
         parts.append((dang - sim.delta_angvel_mean) / sim.delta_angvel_std)
     rest = node_out[:, regression(outputs).width :]
     return torch.cat(parts + [rest], 1)
+
+
+def floored(state, graph, changes: list) -> None:
+    """``changes`` (``[[Δv, Δω]]`` of the end velocity, then of the mean move with the engine
+    state) after the planes' floor (:func:`~physgnn.models.floor.plane_floor`), in place."""
+    vel = state.vel[:, 0]
+    if len(changes) == 1:  # a finite-difference state: its velocity is its move
+        mean, _ = plane_floor(state, graph, vel + changes[0][0])
+        changes[0][0] = mean - vel
+        return
+    mean, end = plane_floor(state, graph, vel + changes[1][0], vel + changes[0][0])
+    changes[0][0], changes[1][0] = end - vel, mean - vel

@@ -69,7 +69,10 @@ class ContactHandling:
     (0: one pass); ``pair_impulses``: sphere–sphere interactions decoded as antisymmetric pair
     impulses; ``rest_decision``: a 7th output, the logit of "at rest next frame" (|v| and
     |ω|·r below ``rest_speed``, m/s); ``recent_contact``: the previous default's latch;
-    ``contact_memory``: the rules also link by the last frame's motion reversed."""
+    ``contact_memory``: the rules also link by the last frame's motion reversed;
+    ``plane_floor``: the planes answer after the pair impulses, each ps edge a one-sided floor,
+    then the node decoder's learned restitution and friction (with ``pair_impulses``;
+    :mod:`physgnn.models.floor`)."""
 
     NODE: ClassVar[str] = "model.contacts"
     gravity_prior: bool = True
@@ -79,6 +82,7 @@ class ContactHandling:
     rest_speed: float = 0.01
     recent_contact: bool = False
     contact_memory: bool = False
+    plane_floor: bool = False
 
     def __post_init__(self) -> None:
         _check_flags(self)

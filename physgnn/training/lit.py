@@ -53,7 +53,7 @@ from physgnn.physics.integrator import step
 from physgnn.training.contacts import contact_penalty, perturb_contacts
 from physgnn.training.epoch_means import EpochMeans
 from physgnn.training.finite import FiniteWatch, NonFiniteLossError  # noqa: F401 (its home)
-from physgnn.training.losses import energy_increase, masked_mse, rest_loss
+from physgnn.training.losses import energy_increase, masked_mse, regime_weights, rest_loss
 from physgnn.training.noise import add_noise, noise_seed, regime_scale  # noqa: F401 (re-exported)
 from physgnn.training.recipe import Compile, InputNoise, LossTerms, PushForward
 from physgnn.training.schedule import lr_scheduler
@@ -159,9 +159,13 @@ class LitSimulator(L.LightningModule):
         target = sim.normalized_target(state)
         pred = velocity_changes(outputs.out, sim.outputs)
         angular = angular_columns(sim.outputs)
-        mse = masked_mse(pred, target, sim.rotating(state), outputs.reach, angular)
-        energy = energy_increase(state, outputs.vel, outputs.mean_vel).mean()
         terms = self.loss_terms
+        counted = outputs.reach
+        if terms.event_share > 0:
+            share, speed = terms.event_share, terms.event_speed
+            counted = regime_weights(state, sim, counted, share, speed)
+        mse = masked_mse(pred, target, sim.rotating(state), counted, angular)
+        energy = energy_increase(state, outputs.vel, outputs.mean_vel).mean()
         weighted = terms.lambda_energy * energy
         tol = terms.contact_tol * sim.length_scale
         contact = contact_penalty(state, outputs.mean_vel, graph, tol, sim.delta_speed_scale)

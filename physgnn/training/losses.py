@@ -8,6 +8,7 @@ import torch
 import torch.nn.functional as F
 
 from physgnn.data.state import scene_of_sphere
+from physgnn.graph.builder import ballistic_velocity
 from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.energy import scene_energy, scene_weight
 from physgnn.physics.integrator import euler_step
@@ -37,14 +38,37 @@ def masked_mse(
     angular: list[slice] | None = None,
 ) -> torch.Tensor:
     """Mean squared error of ``[N, C]`` outputs, the ``angular`` column ranges (None: the last
-    three of six) only where ``rotating [N]``, and only spheres of ``counted [N]`` (bool,
-    default all; 0 when none is)."""
+    three of six) only where ``rotating [N]``, and only spheres of ``counted [N]`` (bool, or
+    float weights: :func:`regime_weights`; default all; 0 when none is)."""
     weight = torch.ones_like(pred)
     for columns in [slice(3, None)] if angular is None else angular:
         weight[:, columns] = rotating[:, None].to(pred.dtype)
     if counted is not None:
         weight = weight * counted[:, None].to(pred.dtype)
     return ((pred - target) ** 2 * weight).sum() / weight.sum().clamp_min(1.0)
+
+
+def regime_weights(state, simulator, counted, share: float, speed: float) -> torch.Tensor:
+    """``[N]`` float: the regression loss's weight of every sphere, so that moving contacts
+    carry at least ``share`` of it (module doc of :mod:`physgnn.training.lit`).
+
+    A moving contact: a sphere of ``counted [N]`` (bool; None: all) whose target end velocity
+    departs from ballistic flight, ``|v_{t+1} − (v_t + g·dt)| > speed`` (m/s), and which the
+    truth does not bring to rest (:meth:`~physgnn.models.learned.LearnedSimulator.rest_target`).
+    With ``n_e`` of them among ``n`` counted spheres and ``n_e/n < share``, each gets
+    ``share·n/n_e`` and every other counted sphere ``(1 − share)·n/(n − n_e)`` (the weights
+    still sum to ``n``); else every counted sphere weighs 1. Computed on the device: nothing
+    read back."""
+    dtype = state.pos.dtype
+    counted = torch.ones_like(state.radius, dtype=torch.bool) if counted is None else counted
+    departure = (state.target_vel - ballistic_velocity(state)).norm(dim=1)
+    event = counted & (departure > speed) & ~simulator.rest_target(state)
+    n, n_e = counted.to(dtype).sum(), event.to(dtype).sum()
+    n_o = n - n_e
+    boost = (n_e < share * n) & (n_e > 0) & (n_o > 0)
+    heavy = torch.where(boost, share * n / n_e.clamp_min(1), 1.0)
+    light = torch.where(boost, (1 - share) * n / n_o.clamp_min(1), 1.0)
+    return counted.to(dtype) * torch.where(event, heavy, light)
 
 
 def rest_loss(simulator: LearnedSimulator, state, pred: torch.Tensor, reach) -> torch.Tensor:

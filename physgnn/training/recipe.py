@@ -103,7 +103,11 @@ class LossTerms:
     (energy increase per Σmg), ``lambda_contact`` (the hinge on overlaps deeper than
     ``contact_tol``, d), ``lambda_rest`` (the rest decision's cross-entropy);
     ``truth_contacts``: the loss's graph is also built on the target velocities, so every
-    contact of the truth has its edges and its spheres in the loss."""
+    contact of the truth has its edges and its spheres in the loss; ``event_share``: the share
+    of the regression loss's weight at least given to moving contacts (spheres whose truth
+    departs from ballistic flight by more than ``event_speed`` m/s and does not come to rest:
+    1.2 % of the training sphere-frames; 0: every sphere the same weight,
+    :func:`~physgnn.training.losses.regime_weights`)."""
 
     NODE: ClassVar[str] = "lit.loss"
     lambda_energy: float = 0.0
@@ -111,11 +115,16 @@ class LossTerms:
     contact_tol: float = 0.02
     lambda_rest: float = 1.0
     truth_contacts: bool = True
+    event_share: float = 0.0
+    event_speed: float = 0.05
 
     def __post_init__(self) -> None:
         weights = ("lambda_energy", "lambda_contact", "lambda_rest")
         _check_at_least(self, weights, 0, "a loss weight; 0: off")
         _check_at_least(self, ("contact_tol",), 0, "sphere diameters")
+        _check_at_least(self, ("event_speed",), 0, "m/s")
+        if not 0 <= self.event_share < 1:
+            _refuse(self, "event_share", "a share in [0, 1)")
         if not isinstance(self.truth_contacts, bool):
             _refuse(self, "truth_contacts", "true or false")
 

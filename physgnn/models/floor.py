@@ -1,0 +1,63 @@
+"""The plane answers last (``model.contacts.plane_floor``): after the pair impulses, each ps
+edge is a one-sided floor, a plane of infinite mass, then the node decoder adds the learned
+restitution and friction.
+
+When the ground answers in parallel with the pairs, a landing stack's pair impulses pass the
+upper layers' momentum down in the same pass in which the bottom sphere's own plane change is
+decided, and the bottom sphere sinks (from a perfect state, 0.28 d in one frame). The floor
+takes the velocities after the pair impulses and gravity, and for a ps edge ``e`` (plane s,
+sphere i) with contact direction ``d_e`` (the plane's normal ``n_s`` where the centre faces the
+plane's inside, else from the closest point of its rim to the centre) and clearance
+``c_e = distance − r_i``:
+
+- the frame's move may not cross the plane: ``ū_i·d_e ≥ −max(c_e, 0)/dt`` (the deficit added
+  along ``d_e``);
+- where it would have (the edge's floor acted), the end velocity may not approach it:
+  ``v_i·d_e ≥ 0`` (the engine state, whose end velocity is apart from the move; a
+  finite-difference state's velocity is its move).
+
+Shapes: ``ps_index [2, F]`` (plane, sphere), ``ps_attr [F, PS.width]`` raw (the
+:data:`~physgnn.graph.edges.PS` blocks ``offset`` δ and ``height`` h = δ·n, clipped at the
+sphere's reach), velocities ``[N, 3]``. Corrections of several edges of one sphere add up.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from physgnn.graph.edges import PS
+
+RIM = 1e-4  # m: a closest point further than this from the foot of the normal is on the rim
+
+
+def contact_directions(graph, radius: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(d [F, 3], c [F])``: every ps edge's unit contact direction (plane → sphere) and
+    clearance (m)."""
+    offset, height = PS.take(graph.ps_attr, "offset"), PS.take(graph.ps_attr, "height")
+    normal = PS.take(graph.ps_attr, "normal")
+    tangential = offset - height * normal
+    length = offset.norm(dim=1, keepdim=True)
+    rim = tangential.norm(dim=1, keepdim=True) > RIM
+    direction = torch.where(rim, offset / length.clamp_min(1e-12), normal)
+    distance = torch.where(rim, length, height)[:, 0]
+    return direction, distance - radius[graph.ps_index[1]]
+
+
+def plane_floor(state, graph, mean: torch.Tensor, end: torch.Tensor | None = None):
+    """``(mean, end)`` after the floor of every ps edge (module doc): ``mean [N, 3]`` the
+    frame's move ū, ``end [N, 3]`` the end velocity (None: a finite-difference state, only the
+    move)."""
+    direction, clearance = contact_directions(graph, state.radius)
+    sphere = graph.ps_index[1]
+    weight = graph.ps_weight(clearance)
+    dt = state.scene_dt[sphere]
+    limit = -clearance.clamp_min(0) / dt
+    deficit = torch.relu(limit - (mean[sphere] * direction).sum(1))
+    if weight is not None:
+        deficit = deficit * weight
+    mean = mean.index_add(0, sphere, deficit[:, None] * direction)
+    if end is None:
+        return mean, None
+    acted = (deficit > 0).to(end.dtype)
+    approach = torch.relu(-(end[sphere] * direction).sum(1)) * acted
+    return mean, end.index_add(0, sphere, approach[:, None] * direction)
