@@ -19,12 +19,14 @@ from physgnn.data.pairs import PairDataset
 from physgnn.data.state import SceneState, TrajectoryFrames, has_engine_velocities
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.oracles import sphere_scene
+from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.models.contact_inputs import gravity_share
 from physgnn.models.learned import LearnedSimulator
 from physgnn.models.options import ModelInputs
 from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.physics import integrator
 from physgnn.physics import quaternion as Q
+from physgnn.rollout import rollout
 from physgnn.training.layout import model_of_today
 from physgnn.training.lit import LitSimulator, push_forward
 from physgnn.training.losses import regime_weights
@@ -161,7 +163,7 @@ def test_training_losses_and_push_forward_run_on_the_engine_state(head_on):
     pairs = PairDataset([head_on], 1, future=2, engine_state=True)
     batch = pairs.batch(torch.arange(4))
     losses = lit.losses(batch)
-    assert torch.isfinite(losses["loss"]) and float(losses["loss_mse"]) > 0
+    assert torch.isfinite(losses["loss"]) and float(losses["loss_mse"].detach()) > 0
     losses["loss"].backward()
     ahead = push_forward(batch, sim, 2)
     assert_close(ahead.target_vel, batch.future_vel[:, 2])
@@ -200,3 +202,18 @@ def test_regime_weights_give_moving_contacts_their_share_and_keep_the_sum():
     # a sphere the truth brings to rest is no moving contact
     state.target_vel[0] = 0.0
     assert_close(regime_weights(state, sim, None, 0.5, 0.05), torch.ones(4))
+
+
+def test_rollouts_of_the_engine_state_with_sleeping_and_the_constraint_stage(head_on):
+    """The wrappers pass the four-tensor answer on: a rollout with sleeping spheres and one with
+    the constraint stage run, finite, starting from the engine's velocities."""
+    sim = engine_model().eval()
+    sim.effects_trained.fill_(True)  # as if trained on every effect: no rollout warning
+    for wrapped, sleep in ((sim, True), (ConstrainedSimulator(sim, 2), False)):
+        (pred,) = rollout(wrapped, [head_on], n_frames=8, sleep=sleep)
+        assert pred.pos.shape == (8, 2, 3) and np.isfinite(np.asarray(pred.pos)).all()
+        assert_close(torch.as_tensor(pred.pos[:2]), torch.as_tensor(head_on.pos[:2]))
+    answer = ConstrainedSimulator(sim, 2)(
+        Batch.from_data_list([TrajectoryFrames(head_on, True).state(1, 1)])
+    )
+    assert len(answer) == 4
