@@ -314,8 +314,10 @@ class LearnedSimulator(nn.Module):
                 "state has no target_vel / target_angvel (last frame of a trajectory?)"
             )
         targets = [state.target_vel, state.target_angvel]
-        if self.engine_state:
-            targets += [state.target_mean_vel, state.target_mean_angvel]
+        if self.engine_state:  # a state without mean targets has finite differences: the same
+            mean = getattr(state, "target_mean_vel", None)
+            spin = getattr(state, "target_mean_angvel", None)
+            targets += [targets[0] if mean is None else mean, targets[1] if spin is None else spin]
         return torch.cat([self._normalised_change(state, t, k) for k, t in enumerate(targets)], 1)
 
     def _normalised_change(self, state, target: torch.Tensor, k: int) -> torch.Tensor:
@@ -334,8 +336,7 @@ class LearnedSimulator(nn.Module):
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Normalised output ``[N, outputs.width]`` → ``(v_{t+1} [N, 3], ω_{t+1} [N, 3])``, the
         first two of :meth:`motion`."""
-        vel, angvel, _, _ = self.motion(state, pred, reach, supported)
-        return vel, angvel
+        return self.motion(state, pred, reach, supported)[:2]
 
     def motion(self, state, pred: torch.Tensor, reach=None, supported=None) -> tuple:
         """Normalised output → ``(v_{t+1}, ω_{t+1}, ū, ω̄)`` ``[N, 3]`` each

@@ -44,8 +44,8 @@ PREVIOUS_MODEL = {
     "plane_materials": False,
     "contact_memory": False,
 }
-# Input keys that runs before the engine state lack, with the value their model had.
-BEFORE_ENGINE_STATE = {"engine_state": False}
+# Keys that runs before the engine state lack, per node, with the value their model had.
+BEFORE_ENGINE_STATE = {"inputs": {"engine_state": False}, "contacts": {"plane_floor": False}}
 LEARNED = "physgnn.models.learned.LearnedSimulator"
 # The nodes of today's layout, with the Hydra keys that build them.
 NODES = {
@@ -140,8 +140,9 @@ def model_of_today(model: DictConfig) -> DictConfig:
         flat = PREVIOUS_MODEL | flat
     nested = _into_nodes(flat, FLAT_KEYS, NODES)
     if nested.get("_target_") == LEARNED:  # runs before the engine state had the FD state
-        inputs = nested.setdefault("inputs", dict(NODES["inputs"]))
-        inputs.update({k: v for k, v in BEFORE_ENGINE_STATE.items() if k not in inputs})
+        for node, keys in BEFORE_ENGINE_STATE.items():
+            group = nested.setdefault(node, dict(NODES[node]))
+            group.update({k: v for k, v in keys.items() if k not in group})
     return OmegaConf.create(nested)
 
 

@@ -8,7 +8,7 @@ import torch
 import torch.nn.functional as F
 
 from physgnn.data.state import scene_of_sphere
-from physgnn.graph.builder import ballistic_velocity
+from physgnn.models.contact_inputs import ballistic_velocity
 from physgnn.models.learned import LearnedSimulator
 from physgnn.physics.energy import scene_energy, scene_weight
 from physgnn.physics.integrator import euler_step
