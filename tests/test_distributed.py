@@ -220,7 +220,7 @@ def test_ddp_processes_log_one_rollout_score_and_choose_one_checkpoint(
     # the score one process gets from that checkpoint's weights on both trajectories
     simulator, _, info = load_run(ddp_run["run_dir"])
     assert info["checkpoint"] == zero["best"]
-    both = RolloutCallback(n_val_trajectories=2, max_frames=None, ood=False)
+    both = RolloutCallback(n_val_trajectories=2, max_frames=None, horizon=10, ood=False)
     module = SimpleNamespace(simulator=simulator, log=lambda *a, **k: None)
     alone = both.log_rollouts(module, three_sphere_dataset)["val/rollout_score"]
     assert alone == pytest.approx(zero["best_score"], rel=1e-5) and alone < float("inf")

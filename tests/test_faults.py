@@ -395,7 +395,17 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
         (
             "~data.val_rollout",
             "data.val_rollout.trajectories is missing (data=tiny): add val_rollout: "
-            "{trajectories: 10, frames: null} to the preset, as conf/data/small.yaml has it",
+            "{trajectories: 10, frames: null, horizon: 20} to the preset, as "
+            "conf/data/small.yaml has it",
+        ),
+        (
+            "data.val_rollout.horizon=0",
+            "data.val_rollout.horizon must be a whole number >= 1, got 0",
+        ),
+        (  # found at the first rollout validation, after one epoch
+            "data.val_rollout.horizon=18",
+            "validation trajectory 'traj_00000' has 20 frames, the score needs H + horizon + 1 "
+            "= 21: lower callbacks.rollout.horizon=18 (the data preset's val_rollout.horizon)",
         ),
         (
             "callbacks.rollout.n_val_trajectories=0",

@@ -475,3 +475,25 @@ def test_the_contact_switches_are_compared_to_the_baseline_on_matched_seeds():
     assert row.startswith(f"| with LayerNorm | 0, 1, 2 | 4.17 (Δ -1.17, p = {p:.2g}) |")
     assert row.endswith("| 2 @ 2000 |") and "(baseline, 3 seeds: 2 @ 2000)" in text
     assert switches_section({"baseline": base}, configs) == ""
+
+
+def test_the_learning_curves_draw_mse20_and_whole_rollout_mse_only_for_earlier_records(
+    tmp_path, monkeypatch
+):
+    import physgnn.ablation.figures as figures
+
+    titles = []
+
+    def kept(fig, path):
+        titles.append([ax.get_title() for ax in fig.axes])
+        figures.plt.close(fig)
+        return path
+
+    monkeypatch.setattr(figures, "save_figure", kept)
+    point = {"step": 25, "mse": 9.0, "max_depth": 0.1, "energy_gain": 0.2}
+    today = [{"curve": [point | {"mse20": 2.0}]}]  # the rollouts stop at the horizon
+    earlier = [{"curve": [point]}]  # whole rollouts, no MSE20
+    figures.plot_study_curves(tmp_path / "a.png", "t", [("a", today), ("b", earlier)])
+    figures.plot_study_curves(tmp_path / "b.png", "t", [("b", earlier)])
+    assert titles[0][0] == "validation MSE20 (m²)"
+    assert titles[1][0] == "validation rollout MSE (m²)"

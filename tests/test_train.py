@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import shutil
 import subprocess
@@ -10,10 +11,14 @@ from pathlib import Path
 from signal import SIGTERM
 
 import lightning as L
+import numpy as np
 import pytest
 import torch
 from trainkit import SHORT, config, outputs_of, run_main
 
+from physgnn.data.dataset import read_split
+from physgnn.metrics import trajectory_metrics
+from physgnn.rollout import rollout
 from physgnn.training.build import build
 from physgnn.training.progress import RunProgress
 from physgnn.training.runs import checkpoint_of, load_run, read_run_json
@@ -98,6 +103,33 @@ def test_load_run_rebuilds_the_simulator(runs):
     for key, value in simulator.state_dict().items():
         assert torch.equal(value, saved[f"simulator.{key}"])
     assert bool(simulator.effects_trained.all())
+
+
+def logged_rollouts(run_dir: Path) -> list[dict]:
+    """The rows of a run's CSV log where the rollout callback logged, values as floats."""
+    with open(run_dir / "csv" / "version_0" / "metrics.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    return [{k: float(v) for k, v in r.items() if v} for r in rows if r["val/rollout_mse"]]
+
+
+def test_the_best_checkpoint_is_chosen_on_the_evals_mse_at_the_horizon(runs, tiny_dataset):
+    # tiny's horizon is 10 (its trajectories have 20 frames): val/mse10, the eval's mse<k>
+    cfg, run_dir = runs["a"]["cfg"], Path(runs["a"]["run_dir"])
+    assert cfg.callbacks.rollout.horizon == 10
+    assert cfg.callbacks.checkpoint.monitor == "val/rollout_score"
+    (logged,) = logged_rollouts(run_dir)  # one epoch, one rollout validation
+    simulator, _, info = load_run(run_dir)  # the best checkpoint: that epoch's weights
+    val = read_split(Path(tiny_dataset) / "val.h5")
+    # independently: the eval's rollout (whole trajectory) and the eval's metric at frame H + 10
+    mine = [trajectory_metrics(rollout(simulator, [t])[0], t, horizon=10)["mse10"] for t in val]
+    torch.testing.assert_close(logged["val/mse10"], float(np.mean(mine)), rtol=1e-5, atol=0.0)
+    diameter = float(np.mean(np.concatenate([2 * t.radius for t in val])))
+    physics = 10 * logged["val/max_depth"] + 10 * logged["val/tunnelled"] + logged["val/rest_drift"]
+    score = logged["val/mse10"] / diameter**2 + physics
+    torch.testing.assert_close(logged["val/rollout_score"], score, rtol=1e-5, atol=0.0)
+    saved = torch.load(info["checkpoint"], map_location="cpu", weights_only=False)["callbacks"]
+    (state,) = [v for k, v in saved.items() if "'monitor': 'val/rollout_score'" in k]
+    assert float(state["current_score"]) == pytest.approx(logged["val/rollout_score"])
 
 
 def test_of_several_best_checkpoints_the_best_scored_is_measured(tmp_path):

@@ -99,19 +99,27 @@ def plot_study_fps(path: Path, labels: list[str], stats: list[Stat], note: str) 
     )
 
 
+# The validation rollouts stop at the score's horizon: MSE20 is the error panel; records of
+# earlier code (whole rollouts, no MSE20) draw their whole-rollout MSE instead.
 CURVE_PANELS = (
-    ("mse", "validation rollout MSE (m²)"),
+    ("mse20", "validation MSE20 (m²)"),
     ("max_depth", "max depth (d)"),
     ("energy_gain", "energy gain"),
 )
+WHOLE_MSE_PANEL = ("mse", "validation rollout MSE (m²)")
 
 
 def plot_study_curves(path: Path, title: str, curves: list[tuple[str, list[dict]]]) -> Path:
     """One panel per :data:`CURVE_PANELS` metric against the optimiser step, one line per
     setting (``curves``: ``(label, records)``): the mean over its seeds of the validation
-    rollouts logged during training (each record's ``curve``), at the steps all seeds share."""
-    fig, axes = plt.subplots(1, len(CURVE_PANELS), figsize=(3.3 * len(CURVE_PANELS), 3))
-    for ax, (metric, label) in zip(axes, CURVE_PANELS, strict=True):
+    rollouts logged during training (each record's ``curve``), at the steps all seeds share;
+    the whole-rollout MSE in the first panel where no record has MSE20 (earlier code)."""
+    points = [p for _, records in curves for r in records for p in r.get("curve") or []]
+    panels = CURVE_PANELS
+    if all(p.get("mse20") is None for p in points):
+        panels = (WHOLE_MSE_PANEL, *CURVE_PANELS[1:])
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.3 * len(panels), 3))
+    for ax, (metric, label) in zip(axes, panels, strict=True):
         for name, records in curves:
             steps, means = mean_curve(records, metric)
             if steps:
@@ -120,7 +128,8 @@ def plot_study_curves(path: Path, title: str, curves: list[tuple[str, list[dict]
         ax.set_title(label, fontsize=8)
         ax.tick_params(labelsize=7)
         # the untrained first evaluation is orders of magnitude above the rest
-        ax.set_yscale("log") if metric == "mse" else ax.set_yscale("symlog", linthresh=0.01)
+        log = metric in ("mse", "mse20")
+        ax.set_yscale("log") if log else ax.set_yscale("symlog", linthresh=0.01)
     axes[0].legend(fontsize=6)
     fig.suptitle(title, fontsize=9)
     return save_figure(fig, path)

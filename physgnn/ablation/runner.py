@@ -80,7 +80,11 @@ def _finite(value):
 
 LOGGED = ("train/loss", "train/loss_mse", "train/loss_energy", "train/energy_share", "val/loss")
 # Validation rollout metrics logged every callbacks.rollout.every_n_epochs: the learning curve.
+# The rollouts stop at the score's horizon (physgnn/training/callbacks.py): "mse" is over frames
+# 0..H+20, "mse20" the score's error term; records of earlier code have whole-rollout values
+# and no "mse20".
 CURVE = {
+    "mse20": "val/mse20",
     "mse": "val/rollout_mse",
     "max_depth": "val/max_depth",
     "tunnelled": "val/tunnelled",
@@ -115,8 +119,9 @@ def logged(run_dir: Path) -> dict:
 
 
 def learning_curve(run_dir: Path) -> list[dict]:
-    """``[{"step", "mse", "max_depth", "tunnelled", "energy_gain", "score"}]``: the validation
-    rollouts of every evaluation during training (:data:`CURVE`; a metric not logged is None)."""
+    """``[{"step", "mse20", "mse", "max_depth", "tunnelled", "energy_gain", "score"}]``: the
+    validation rollouts of every evaluation during training (:data:`CURVE`; a metric not logged
+    is None)."""
     return [
         {"step": int(row["step"]) + 1} | {k: row.get(name) for k, name in CURVE.items()}
         for row in _log_rows(run_dir)
@@ -126,10 +131,11 @@ def learning_curve(run_dir: Path) -> list[dict]:
 
 def measured_checkpoint(run_dir: Path) -> dict:
     """The checkpoint the study measures (best, else last: :func:`checkpoint_of`) with its
-    epoch, step, validation loss and rollout score from the run's log."""
+    epoch, step, validation loss, rollout score and the score's MSE20 from the run's log (a
+    record without ``val_mse20`` is of earlier code, its score over whole rollouts)."""
     path = checkpoint_of(run_dir)
     found = _BEST.search(path.stem)
-    out = {"file": path.name, "step": None, "val_loss": None, "val_score": None}
+    out = {"file": path.name, "step": None, "val_loss": None, "val_score": None, "val_mse20": None}
     if not found:
         return out
     epoch = int(found.group(1))
@@ -139,6 +145,7 @@ def measured_checkpoint(run_dir: Path) -> dict:
                 "step": int(row["step"]) + 1,
                 "val_loss": row["val/loss"],
                 "val_score": row.get("val/rollout_score"),
+                "val_mse20": row.get("val/mse20"),
             }
     return out
 

@@ -90,13 +90,17 @@ def strategy_of(trainer_cfg: DictConfig):
 
 def check_val_rollout(cfg: DictConfig) -> None:
     """The validation rollouts' size, named by the key that sets it (``data.val_rollout`` of
-    the preset, or ``callbacks.rollout``): whole numbers, at least one trajectory, and frames
-    null (whole trajectories) or enough for one predicted frame (``model.H`` + 2)."""
+    the preset, or ``callbacks.rollout``): whole numbers, at least one trajectory, the score's
+    horizon at least 1 frame, and frames (of the OOD rollouts) null (whole trajectories) or
+    enough for one predicted frame (``model.H`` + 2)."""
     node = OmegaConf.select(cfg, "callbacks.rollout")
     if node is None:
         return
-    least = {"n_val_trajectories": 1, "max_frames": int(cfg.model.H) + 2}
-    for key, origin in (("n_val_trajectories", "trajectories"), ("max_frames", "frames")):
+    least = {"n_val_trajectories": 1, "max_frames": int(cfg.model.H) + 2, "horizon": 1}
+    keys = (("n_val_trajectories", "trajectories"), ("max_frames", "frames"), ("horizon",) * 2)
+    for key, origin in keys:
+        if key not in node:  # a callbacks config of its own without it: the default
+            continue
         from_data = OmegaConf.is_interpolation(node, key)
         name = f"data.val_rollout.{origin}" if from_data else f"callbacks.rollout.{key}"
         try:
@@ -104,7 +108,7 @@ def check_val_rollout(cfg: DictConfig) -> None:
         except InterpolationResolutionError:
             raise ConfigError(
                 f"{name} is missing (data={cfg.data.name}): add val_rollout: {{trajectories: "
-                "10, frames: null} to the preset, as conf/data/small.yaml has it"
+                "10, frames: null, horizon: 20} to the preset, as conf/data/small.yaml has it"
             ) from None
         if key == "max_frames" and value is None:
             continue

@@ -33,6 +33,7 @@ STATUSES = ("running", "finished", "truncated", "interrupted", "diverged", "fail
 # What the rollout callback logs (physgnn/training/callbacks.py)
 ROLLOUT_METRICS = (
     "val/rollout_score",
+    "val/mse20",
     "val/rollout_mse",
     "val/chamfer",
     "val/energy_gain",
@@ -154,7 +155,8 @@ def check_monitors(callbacks_cfg: DictConfig | None) -> None:
     )
     for name, c in callbacks.items():
         watched = str((c or {}).get("monitor") or "")
-        if (watched in ROLLOUT_METRICS or watched.startswith("ood/")) and not rollout:
+        ours = watched in ROLLOUT_METRICS or watched.startswith(("ood/", "val/mse"))
+        if ours and not rollout:
             raise ConfigError(
                 f"callbacks.{name}.monitor={watched} is logged by the rollout callback only: "
                 f"keep callbacks.rollout, or set callbacks.{name}.monitor=val/loss"
