@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from torch_geometric.data import Batch
 
-from physgnn.data.state import SceneState, TrajectoryFrames, layout_of
+from physgnn.data.state import SceneState, TrajectoryFrames, has_engine_velocities, layout_of
 from physgnn.errors import PhysgnnError
 from physgnn.models.profiling import StepTimer
 from physgnn.models.protocol import hooks_of, motion_of
@@ -95,6 +95,7 @@ def rollout(
     for traj, length in zip(trajectories, lengths, strict=True):
         _check_start(traj, length, h)
     _warn_unseen_effects(hooks.effects_trained, trajectories)
+    _warn_finite_differences(hooks.engine_state, trajectories)
     settings = dict(
         h=h,
         bounds=bounds if bounds is not None else RolloutBounds(),
@@ -154,6 +155,18 @@ def _warn_unseen_effects(trained, trajectories: list[Trajectory]) -> None:
     ]
     if unseen:
         message = f"rollout asks for effect(s) {unseen} that the model never saw in training"
+        warnings.warn(message, UserWarning, stacklevel=3)
+
+
+def _warn_finite_differences(engine_state: bool, trajectories: list[Trajectory]) -> None:
+    """One warning line when a model of the engine state starts from trajectories without an
+    engine's velocities (positions only: their finite differences stand in)."""
+    plain = [t.name for t in trajectories if not has_engine_velocities(t)]
+    if engine_state and plain:
+        message = (
+            f"{len(plain)} trajectory(ies) ({plain[0]}, ...) hold no engine velocities: the "
+            "engine-state model starts from their finite differences (docs/MODEL.md)"
+        )
         warnings.warn(message, UserWarning, stacklevel=3)
 
 

@@ -217,3 +217,12 @@ def test_rollouts_of_the_engine_state_with_sleeping_and_the_constraint_stage(hea
         Batch.from_data_list([TrajectoryFrames(head_on, True).state(1, 1)])
     )
     assert len(answer) == 4
+
+
+def test_an_engine_state_rollout_of_positions_only_says_so_in_one_warning(head_on):
+    imported = copy.copy(head_on)
+    imported.attrs = {k: v for k, v in head_on.attrs.items() if k != "engine"}
+    sim = engine_model().eval()
+    sim.effects_trained.fill_(True)
+    with pytest.warns(UserWarning, match="hold no engine velocities"):
+        rollout(sim, [imported], n_frames=4)
