@@ -19,7 +19,7 @@ from physgnn.errors import ConfigError
 from physgnn.evaluation import evaluate as ev
 from physgnn.evaluation import onestep
 from physgnn.evaluation.runs import RunInfo
-from physgnn.groundtruth.engine import simulate
+from physgnn.groundtruth.engine import one_frame_from, simulate
 from physgnn.metrics.regimes import ALL, REGIMES, regime_rows, tally
 from physgnn.physics.kinematics import finite_difference_velocities
 from physgnn.physics.trajectory import Trajectory
@@ -167,6 +167,17 @@ def test_pybullet_at_the_truths_own_substeps_reproduces_it():
     assert np.abs(pred - traj.pos[ts + 1]).max() < 1e-5
     coarse = onestep.engine_positions(traj, ts, 1)
     assert np.abs(coarse - traj.pos[ts + 1]).max() > 1e-3
+
+
+def test_a_restart_wakes_a_body_that_fell_asleep_at_rest():
+    """30 starts at rest on the ground (3 s: Bullet puts a body to sleep after 2 s), then one
+    thrown up at 5 m/s: it leaves the ground as a fresh engine's would."""
+    scene = spheres([[0.0, 0.0, R]], n_frames=2)
+    rest = (scene.pos, scene.quat, np.zeros((1, 3)), np.zeros((1, 3)))
+    thrown = (scene.pos, scene.quat, np.array([[0.0, 0.0, 5.0]]), np.zeros((1, 3)))
+    pos = one_frame_from(scene, [rest] * 30 + [thrown], {"substeps": 40})
+    assert np.abs(pos[:30, 0, 2] - R).max() < 1e-3
+    assert pos[30, 0, 2] == pytest.approx(R + 5.0 * DT - G * DT * DT * 41 / 80, abs=1e-4)
 
 
 def test_frames_evenly_spaced_and_settings_checked():
