@@ -24,7 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.data.dataset import write_split
 from physgnn.errors import ConfigError, check_flag
-from physgnn.evaluation import rerun_log, same_work
+from physgnn.evaluation import onestep, rerun_log, same_work
 from physgnn.evaluation.bounce import bounce_rows
 from physgnn.evaluation.freefall import freefall_rows
 from physgnn.evaluation.invariance import invariance_rows
@@ -51,6 +51,7 @@ from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.files import claim_folder, staged_outputs
 from physgnn.metrics import check_tolerance
 from physgnn.report import bounce, figures, freefall, invariance, stability, table
+from physgnn.report import onestep as onestep_report
 from physgnn.report.document import write_report
 
 # What an eval writes into its report_dir (replaced whole by the next eval).
@@ -59,6 +60,7 @@ FLAGS = ("overwrite", "videos", "save_rollouts", "sleeping_compare", "stability"
 REPORT_OUTPUTS = (
     "report.md",
     "metrics.csv",
+    "onestep.csv",
     "stability.csv",
     "freefall.csv",
     "bounce.csv",
@@ -104,6 +106,7 @@ def check_eval_values(cfg: DictConfig) -> None:
     for key in FLAGS:
         check_flag(key, cfg.get(key))
     same_work.check_settings(cfg.get("pybullet"))
+    onestep.check_settings(cfg.get("onestep"))
 
 
 def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
@@ -133,6 +136,7 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
     if film is not None and cfg.sleeping_compare and settings["sleep"] is False:
         out.rows += sleeping_rows(film, data[film.dataset]["ood"], cfg.tol, sleep_settings(cfg))
     table.write_csv(report_dir / "metrics.csv", out.rows)
+    onestep_report.write_csv(report_dir / "onestep.csv", onestep_rows(cfg, runs, data))
     if stab is not None:
         stability.write_csv(report_dir / "stability.csv", stab + hard_rows(runs, cfg))
     else:
@@ -162,6 +166,18 @@ def engine_rows(cfg: DictConfig, runs: list[RunInfo], data: dict, batched: bool)
     substeps, processes = settings
     jobs = same_work.engine_jobs(runs, len(data) > 1)
     return same_work.engine_rows(jobs, data, substeps, processes if batched else 1, cfg.tol)
+
+
+def onestep_rows(cfg: DictConfig, runs: list[RunInfo], data: dict) -> list[dict]:
+    """The one-step error by regime of every learned run and of pybullet at
+    ``cfg.pybullet.substeps`` (none without a ``pybullet`` config) on ``cfg.onestep.splits``
+    (:mod:`physgnn.evaluation.onestep`); none with ``onestep: null``."""
+    settings = onestep.check_settings(cfg.get("onestep"))
+    if settings is None:
+        return []
+    engine = same_work.check_settings(cfg.get("pybullet"))
+    substeps = engine[0] if engine is not None else []
+    return onestep.onestep_rows(runs, data, settings, substeps, len(data) > 1)
 
 
 def _freefall(runs: list[RunInfo], cfg: DictConfig, settings: dict) -> list[dict]:

@@ -208,14 +208,20 @@ def _run(scene: Scene, s: EngineSettings, cid: int, on_frame=None) -> tuple[np.n
     quat0 = [p.getBasePositionAndOrientation(b, physicsClientId=cid)[1] for b in ids]
     frames = [_read(ids, cid)]
     for _ in range(scene.n_frames - 1):
-        for _ in range(s.substeps):
-            p.stepSimulation(physicsClientId=cid)
-            if not scene.effects.rotation:
-                _lock_rotation(ids, _read(ids, cid)[0], quat0, cid)
+        _advance(scene, s, ids, quat0, cid)
         frames.append(_read(ids, cid))
         if on_frame is not None:
             on_frame(len(frames))
     return tuple(np.stack(a) for a in zip(*frames, strict=True))
+
+
+def _advance(scene: Scene, s: EngineSettings, ids: list[int], quat0: list, cid: int) -> None:
+    """One frame: ``s.substeps`` engine steps (orientations held at ``quat0`` without
+    rotation)."""
+    for _ in range(s.substeps):
+        p.stepSimulation(physicsClientId=cid)
+        if not scene.effects.rotation:
+            _lock_rotation(ids, _read(ids, cid)[0], quat0, cid)
 
 
 def as_stored(scene: Scene, engine_cfg: Mapping | EngineSettings | None = None) -> Scene:
@@ -288,3 +294,49 @@ def simulate(
             "engine_settings": dataclasses.asdict(s),
         },
     )
+
+
+def one_frame_from(
+    scene: Scene, starts, engine_cfg: Mapping | EngineSettings | None = None
+) -> np.ndarray:
+    """pybullet one frame on from each of ``starts``: ``[len(starts), N, 3]`` positions.
+
+    ``scene`` gives the bodies (its spheres, planes, materials, dt, effects, gravity); each
+    start is ``(pos [N, 3], quat [N, 4] (w, x, y, z), vel [N, 3], angvel [N, 3])``. The bodies
+    are made once, in one client: each start resets their positions, orientations and
+    velocities and wakes them (a body asleep keeps still whatever velocity it is given), as a
+    fresh engine would start; Bullet's contact cache carries over from the previous start's
+    frame, as it does within one run. From the frames of a run at its own settings, the next
+    frames again (to float32 rounding and that cache).
+    """
+    s = EngineSettings.from_cfg(engine_cfg)
+    scene.validate()
+    cid = p.connect(p.DIRECT)
+    try:
+        _configure(scene, s, cid)
+        planes = _add_planes(scene, s, cid)
+        ids = _add_spheres(scene, s, cid)
+        _filter_contacts(scene, ids, planes, cid)
+        out = []
+        for pos, quat, vel, angvel in starts:
+            quat0 = _restart(ids, pos, quat, vel, angvel if scene.effects.rotation else None, cid)
+            _advance(scene, s, ids, quat0, cid)
+            out.append(_read(ids, cid)[0])
+    finally:
+        p.disconnect(cid)
+    return np.stack(out) if out else np.zeros((0, scene.n_spheres, 3))
+
+
+def _restart(ids: list[int], pos, quat, vel, angvel, cid: int) -> list:
+    """Set every body's state (``angvel`` None: zero) and wake it; returns the orientations
+    as pybullet's (x, y, z, w) lists."""
+    quat_xyzw = Q.to_xyzw(torch.as_tensor(np.asarray(quat, np.float64))).tolist()
+    spin = np.zeros((len(ids), 3)) if angvel is None else np.asarray(angvel, np.float64)
+    for k, body in enumerate(ids):
+        p.resetBasePositionAndOrientation(
+            body, np.asarray(pos[k], np.float64).tolist(), quat_xyzw[k], physicsClientId=cid
+        )
+        v = np.asarray(vel[k], np.float64).tolist()
+        p.resetBaseVelocity(body, v, spin[k].tolist(), physicsClientId=cid)
+        p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_WAKE_UP, physicsClientId=cid)
+    return quat_xyzw

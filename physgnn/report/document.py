@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from physgnn.files import write_text
-from physgnn.report import bounce, freefall, invariance, pareto, same_work, stability
+from physgnn.report import bounce, freefall, invariance, onestep, pareto, same_work, stability
 from physgnn.report.sections import (
     baselines_table,
     components_section,
@@ -58,6 +58,12 @@ def invariance_section(root: Path) -> str:
     return invariance.section(invariance.read_csv(path) if path.exists() else [])
 
 
+def onestep_section(root: Path) -> str:
+    """The one-step error by regime from ``root/onestep.csv`` (written by the eval)."""
+    path = root / "onestep.csv"
+    return onestep.section(onestep.read_csv(path) if path.exists() else [])
+
+
 def bounce_section(root: Path) -> str:
     """The bounce table from ``root/bounce.csv`` (written by the eval)."""
     path = root / "bounce.csv"
@@ -91,6 +97,8 @@ def write_report(
         *sweep_sections(rows, fig_dir, root),
         f"## OOD (c) `{SLEEP_SCENE}` with sleeping off and on",
         sleeping_section(rows),
+        "## One-step error by regime",
+        onestep_section(root),
         "## Stability on hard scenes",
         stability_section(root),
         "## Free fall against ½gt²",
