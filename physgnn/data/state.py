@@ -111,7 +111,8 @@ def _float32(a) -> torch.Tensor:
 
 def has_engine_velocities(traj: Trajectory) -> bool:
     """Whether ``traj`` holds an engine's end-of-frame velocities (its ``engine`` attribute, which
-    generation writes): data with positions only (the GNS and LagrangeBench imports,
+    generation writes, or ``analytic`` for the exact ballistic seeds of the eval): data with
+    positions only (the GNS and LagrangeBench imports,
     :meth:`Trajectory.from_arrays`) has finite differences there."""
     return bool(traj.attrs.get("engine"))
 

@@ -77,7 +77,10 @@ def _truth_ratio(e: float, height: float, radius: float, dt: float) -> float:
 def _first_apex(pred, radius: float, dt: float) -> float:
     """Height of the sphere's bottom at the apex after its first bounce (NaN: none)."""
     z = np.asarray(pred.pos[:, 0, 2], np.float64) - radius
-    vz = np.asarray(pred.vel[:, 0, 2], np.float64)
+    # the frames' own finite differences, whatever the model's state: in flight they fall by
+    # g·dt a frame, the invariant of semi-implicit Euler at step dt (an engine state's end
+    # velocities follow the engine's substeps instead)
+    vz = np.concatenate([[float(pred.vel[0, 0, 2])], np.diff(z) / dt])
     if not ((vz[:-1] <= 0) & (vz[1:] > 0)).any():  # never moved up again: no bounce
         return float("nan")
     apex = apex_heights(z, vz, dt)

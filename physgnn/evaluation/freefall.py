@@ -23,12 +23,17 @@ from physgnn.rollout import rollout
 DENSITY = 1000.0  # kg/m³, that of the training scenes
 
 
+ANALYTIC = "analytic"  # the truth's engine attribute: exact positions and velocities
+
+
 def ballistic(
     name, pos0, vel0, radius, mass, material, frames: int, dt: float, fall: bool = True
 ) -> Trajectory:
     """Spheres flying freely from ``pos0 [N, 3]`` with ``vel0 [N, 3]``: exact positions and
     velocities of frames ``0..frames−1`` over the ground alone, one ``material`` row [4];
-    ``fall=False``: uniform motion (spheres the ground holds: at rest, or sliding on it)."""
+    ``fall=False``: uniform motion (spheres the ground holds: at rest, or sliding on it). Its
+    velocities are the instantaneous ones at each frame (``engine`` attribute
+    :data:`ANALYTIC`), what an engine-state model starts from."""
     t = np.arange(frames)[:, None, None] * dt
     drop = np.array([0.0, 0.0, -0.5 * G if fall else 0.0])
     pos = pos0[None] + vel0[None] * t + drop * t**2
@@ -50,6 +55,7 @@ def ballistic(
         materials=np.asarray(material, np.float64)[None],
         dt=dt,
         effects=Effects(),
+        attrs={"engine": ANALYTIC},
     )
 
 
