@@ -46,17 +46,14 @@ def tiny_dataset(tmp_path_factory) -> Path:
     return generate(cfg)
 
 
-@pytest.fixture(scope="session")
-def tiny_run(tiny_dataset, tmp_path_factory) -> Path:
-    """A real run on the ``tiny`` preset (M = 1, 16 hidden units, one epoch of two batches):
-    its checkpoints and ``.hydra/config.yaml``, as ``python -m physgnn.train`` leaves them.
-    Read-only."""
+def _tiny_training(tiny_dataset, run_dir: Path, *extra: str) -> Path:
+    """A real run on the ``tiny`` preset (M = 1, 16 hidden units, one epoch of two batches)
+    with the ``extra`` overrides, in ``run_dir``."""
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
     from physgnn.training.train import train
 
-    run_dir = tmp_path_factory.mktemp("tiny_run")
     overrides = [
         "data=tiny",
         f"data.dir={tiny_dataset}",
@@ -68,6 +65,7 @@ def tiny_run(tiny_dataset, tmp_path_factory) -> Path:
         "datamodule.pairs_per_epoch=8",
         "trainer.enable_progress_bar=false",
         "trainer.enable_model_summary=false",
+        *extra,
     ]
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose("train", overrides=overrides)
@@ -75,6 +73,21 @@ def tiny_run(tiny_dataset, tmp_path_factory) -> Path:
     # train() keeps the config where load_run looks, also without Hydra's output folder
     assert OmegaConf.load(run_dir / ".hydra" / "config.yaml").model.network.M == 1
     return run_dir
+
+
+@pytest.fixture(scope="session")
+def tiny_run(tiny_dataset, tmp_path_factory) -> Path:
+    """A real run of the default model on the ``tiny`` preset: its checkpoints and
+    ``.hydra/config.yaml``, as ``python -m physgnn.train`` leaves them. Read-only."""
+    return _tiny_training(tiny_dataset, tmp_path_factory.mktemp("tiny_run"))
+
+
+@pytest.fixture(scope="session")
+def tiny_fd_run(tiny_dataset, tmp_path_factory) -> Path:
+    """:func:`tiny_run` of the default before the engine state (finite-difference velocities,
+    the planes answering with the pairs): what runs of an earlier layout hold. Read-only."""
+    extra = ("model.inputs.engine_state=false", "model.contacts.plane_floor=false")
+    return _tiny_training(tiny_dataset, tmp_path_factory.mktemp("tiny_fd_run"), *extra)
 
 
 @pytest.fixture(scope="session")

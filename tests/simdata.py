@@ -47,16 +47,20 @@ REPORT_MODEL = {
     "contact_passes": 0,
     "pair_impulses": False,
     "plane_materials": False,
+    "engine_state": False,
+    "plane_floor": False,
 }
+# The model keys of learned(): the flat layout's.
+MODEL_KEYS = FLAT_KEYS
 
 
 def learned(stats: dict = STATS, **keys) -> LearnedSimulator:
     """A LearnedSimulator from its model keys in the flat layout (``H=1, M=2, connectivity="vi",
-    contact_passes=0``; ``physgnn.training.layout.FLAT_KEYS``): the network's, the graph
+    contact_passes=0``; :data:`MODEL_KEYS`): the network's, the graph
     builder's and the groups' keys are handed to them, the others to the simulator."""
     nodes: dict[str, dict] = {"network": {}, "graph": {}, "inputs": {}, "contacts": {}}
-    for key in [k for k in keys if k in FLAT_KEYS]:
-        node, name = FLAT_KEYS[key]
+    for key in [k for k in keys if k in MODEL_KEYS]:
+        node, name = MODEL_KEYS[key]
         nodes[node][name] = keys.pop(key)
     return LearnedSimulator(
         stats,

@@ -94,9 +94,12 @@ def test_gravity_prior_free_flight_is_exact_whatever_the_mass():
     for mass in (0.01, 1.0, 1000.0):
         state = scene([[0, 0, 20], [5, 0, 30]], [[1, 2, -3], [0, 0, 4]], [0.5, 0.7], [mass] * 2)
         state = ballistic(state)
-        vel, angvel = sim(state)
-        assert_close(vel, state.vel[:, 0] + torch.tensor([0.0, 0.0, -9.81 * DT]))
+        vel, angvel, mean_vel, mean_angvel = sim(state)  # the engine state's four answers
+        fall = torch.tensor([0.0, 0.0, -9.81 * DT])
+        assert_close(vel, state.vel[:, 0] + fall)
+        assert_close(mean_vel, state.vel[:, 0] + 0.5 * fall)  # no substeps known: the parabola
         assert_close(angvel, state.angvel[:, 0])
+        assert_close(mean_angvel, state.angvel[:, 0])
 
 
 def test_gravity_prior_leaves_contacts_to_the_network():
@@ -111,7 +114,7 @@ def test_gravity_prior_leaves_contacts_to_the_network():
     state = ballistic(state)  # at the top of a flight
     pred, graph = sim.normalized_prediction(state)
     assert sim.in_reach(state, graph).tolist() == [True, False, True]
-    vel, _ = sim(state)
+    vel = sim(state)[0]
     network, _ = LearnedSimulator.to_physical(make(gravity_prior=False), state, pred)
     assert_close(vel[[0, 2]], network[[0, 2]])
     assert_close(vel[1], torch.tensor([0.0, 0.0, -9.81 * DT]))
@@ -210,6 +213,6 @@ def test_without_the_latch_a_sphere_that_bounced_in_the_last_frame_flies_ballist
     sim = make(gravity_prior=True)  # the default: no latch
     state = scene([[0, 0, 1.1]], [[0, 0, 2.0]], [0.5])
     state.vel[0, 1:] = torch.tensor([0.0, 0.0, -13.0])  # the frame before held an impact
-    vel, angvel = sim(state)
+    vel, angvel = sim(state)[:2]
     assert torch.equal(vel, ballistic_velocity(state))
     assert torch.equal(angvel, state.angvel[:, 0])

@@ -135,11 +135,14 @@ def test_rollout_asking_for_an_unseen_effect_warns_once_in_one_line():
     sim = make()
     sim.effects_trained[EFFECT_NAMES.index("rotation")] = False
     trajs = [trajectory(3, frames=6, seed=s) for s in range(3)]
+    for traj in trajs:  # exact velocities: no warning of positions only
+        traj.attrs["engine"] = "analytic"
     with pytest.warns(UserWarning) as record:
         rollout(sim, trajs, batch_size=1)
     messages = [str(w.message) for w in record if "never" in str(w.message)]
     assert len(messages) == 1 and "\n" not in messages[0] and "rotation" in messages[0]
     no_rotation = [trajectory(3, frames=6, seed=0, effects=Effects(rotation=False))]
+    no_rotation[0].attrs["engine"] = "analytic"
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         rollout(sim, no_rotation)  # asks only for what the model saw: silent

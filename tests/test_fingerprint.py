@@ -54,6 +54,10 @@ CONFIG = [
     "model.network.aggregation=sum",
     "model.contacts.rest_decision=false",
     "model.contacts.rest_speed=0.01",
+    # the engine state and what it came with (default since), off as when pinned
+    "model.inputs.engine_state=false",
+    "model.contacts.plane_floor=false",
+    "lit.loss.event_share=0.0",
     # the recipe: noise, push-forward (from step 2 of 4), contact terms, Adam, schedule
     "lit.noise.std=0.03",
     "lit.pushforward.steps=2",

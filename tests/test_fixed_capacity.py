@@ -95,18 +95,24 @@ def simulators(stats, **overrides):
     return out
 
 
-def test_predictions_and_losses_equal_the_counted_graphs(tiny_train):
+FD_STATE = {"inputs": {"engine_state": False}, "contacts": {"plane_floor": False}}
+
+
+@pytest.mark.parametrize("overrides", [{}, FD_STATE], ids=["default", "fd_state"])
+def test_predictions_and_losses_equal_the_counted_graphs(tiny_train, overrides):
     trajectories, stats = tiny_train
-    counted, fixed = simulators(stats)
+    counted, fixed = simulators(stats, **overrides)
     recipe = compose_config("bench").gpu_readiness.lit  # the training recipe, the bench's deltas
     lit = [instantiate(recipe, simulator=s) for s in (counted, fixed)]
     batch = training_batch(trajectories, counted.H)
     with torch.no_grad():
-        (v0, w0, g0), (v1, w1, g1) = counted.predict(batch), fixed.predict(batch)
+        (m0, g0), (m1, g1) = counted.predict_motion(batch), fixed.predict_motion(batch)
         assert g1.masked and g1.num_pairs > g0.num_pairs
-        assert_close(v1, v0) and assert_close(w1, w0)
+        for a, b in zip(m1, m0, strict=True):
+            assert_close(a, b)
         losses0, losses1 = lit[0].losses(batch), lit[1].losses(batch)
-    assert losses0["loss_contact"] > 0  # the penalty is exercised
+    if overrides:  # the floor keeps the default's moves out of the planes
+        assert losses0["loss_contact"] > 0  # the penalty is exercised
     for key, value in losses0.items():
         assert_close(losses1[key], value, msg=key)
 

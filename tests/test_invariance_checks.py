@@ -48,8 +48,9 @@ def test_an_untrained_default_keeps_the_block_and_every_row_is_there():
     assert kinds.count("resting_grid") == 2 and kinds.count("sliding_row") == 1
     assert kinds.count("bounce") == len(inv.BOUNCE_MATERIALS) * len(inv.BOUNCE_MASSES)
     block = rows[0]
-    # no pp edge between spheres moving as one, no plane in reach: the gravity prior, exact
-    assert block["passed"] and block["value"] < 1e-3 and block["value2"] < 1e-4
+    # no pp edge between spheres moving as one, no plane in reach: the gravity prior, exact to
+    # float32 rounding of positions up to 30 m apart
+    assert block["passed"] and block["value"] < 1e-3 and block["value2"] < 5e-4
     text = section.section(rows)
     passed = sum(r["passed"] for r in rows)
     assert f"`untrained` {passed}/{len(rows)}" in text and "flying_block" in text

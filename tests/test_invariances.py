@@ -309,10 +309,11 @@ def test_a_positive_rest_logit_in_reach_stops_the_sphere_a_negative_one_does_not
     sim = make()
     state = resting_pair_and_a_faller()
     reach = torch.tensor([True, True, False])
-    pred = torch.randn(3, 7, generator=torch.Generator().manual_seed(0))
-    pred[:, 6] = torch.tensor([2.0, -2.0, 2.0])
+    rest = sim.outputs.slice("rest").start  # the last column
+    pred = torch.randn(3, rest + 1, generator=torch.Generator().manual_seed(0))
+    pred[:, rest] = torch.tensor([2.0, -2.0, 2.0])
     vel, angvel = sim.to_physical(state, pred, reach)
-    never = torch.cat([pred[:, :6], torch.full((3, 1), -10.0)], 1)  # no sphere at rest
+    never = torch.cat([pred[:, :rest], torch.full((3, 1), -10.0)], 1)  # no sphere at rest
     network_vel, network_angvel = sim.to_physical(state, never, reach)
     assert torch.equal(vel[0], torch.zeros(3)) and torch.equal(angvel[0], torch.zeros(3))
     assert torch.equal(vel[1], network_vel[1]) and torch.equal(angvel[1], network_angvel[1])
@@ -327,25 +328,26 @@ def test_the_decoders_rest_logit_decides_end_to_end():
     sim = make()
     state = resting_pair_and_a_faller()
     decoder = sim.network.decoder.lin2
+    rest = sim.outputs.slice("rest").start
     with torch.no_grad():
-        decoder.weight[6].zero_()
-        decoder.bias[6] = 50.0  # "at rest" for every sphere
+        decoder.weight[rest].zero_()
+        decoder.bias[rest] = 50.0  # "at rest" for every sphere
         vel, angvel, graph = sim.predict(state)
         assert sim.in_reach(state, graph).tolist() == [True, True, False]
         assert torch.equal(vel[:2], torch.zeros(2, 3)) and torch.equal(
             angvel[:2], torch.zeros(2, 3)
         )
         assert_close(vel[2], torch.tensor([0.0, 0.0, -G * 0.1]))
-        decoder.bias[6] = -50.0
+        decoder.bias[rest] = -50.0
         vel, angvel, _ = sim.predict(state)
         plain = make(rest_decision=False)
         plain.load_state_dict(
             {
-                k: v[:6] if k.startswith("network.decoder.lin2") else v
+                k: v[:rest] if k.startswith("network.decoder.lin2") else v
                 for k, v in sim.state_dict().items()
             }
         )
-        vel_plain, angvel_plain = plain(state)
+        vel_plain, angvel_plain = plain(state)[:2]
         assert_close(vel, vel_plain) and assert_close(angvel, angvel_plain)
         assert float(vel[:2].abs().max()) > 0
 

@@ -82,17 +82,18 @@ def flatten(config: Path, nodes=tuple(NODES)) -> None:
 
 
 @pytest.fixture
-def flat_run(tiny_run, tmp_path) -> Path:
-    """A copy of the session's tiny run (M = 1) with its model config flat."""
-    run = Path(shutil.copytree(tiny_run, tmp_path / "run"))
+def flat_run(tiny_fd_run, tmp_path) -> Path:
+    """A copy of the session's tiny run of the finite-difference state (M = 1; earlier layouts
+    predate the engine state) with its model config flat."""
+    run = Path(shutil.copytree(tiny_fd_run, tmp_path / "run"))
     flatten(run / ".hydra" / "config.yaml")
     return run
 
 
 def test_a_run_of_the_layout_before_the_groups_loads_as_today_and_predicts_alike(
-    tiny_run, tmp_path
+    tiny_fd_run, tmp_path
 ):
-    run = Path(shutil.copytree(tiny_run, tmp_path / "groups"))
+    run = Path(shutil.copytree(tiny_fd_run, tmp_path / "groups"))
     config = run / ".hydra" / "config.yaml"
     flatten(config, ("inputs", "contacts"))
     saved = OmegaConf.load(config).model
@@ -101,7 +102,7 @@ def test_a_run_of_the_layout_before_the_groups_loads_as_today_and_predicts_alike
         config.read_text().replace("contact_passes: 2", "contact_passes: 1")
     )
     then, then_cfg, _ = load_run(run)
-    now, now_cfg, _ = load_run(tiny_run)
+    now, now_cfg, _ = load_run(tiny_fd_run)
     assert then_cfg.model.contacts.contact_passes == then.contact_passes == 1
     then_cfg.model.contacts.contact_passes = 2
     assert then_cfg.model == now_cfg.model
@@ -111,10 +112,10 @@ def test_a_run_of_the_layout_before_the_groups_loads_as_today_and_predicts_alike
         assert torch.equal(then(state)[0], now(state)[0])
 
 
-def test_a_run_of_the_flat_layout_loads_as_today_and_predicts_alike(tiny_run, flat_run):
+def test_a_run_of_the_flat_layout_loads_as_today_and_predicts_alike(tiny_fd_run, flat_run):
     assert "network" not in OmegaConf.load(flat_run / ".hydra" / "config.yaml").model
     then, then_cfg, _ = load_run(flat_run)
-    now, now_cfg, _ = load_run(tiny_run)
+    now, now_cfg, _ = load_run(tiny_fd_run)
     assert then_cfg.model == now_cfg.model and then_cfg.model.network.M == 1
     state = batch([trajectory(3, seed=5)], t=2, H=now.H)
     with torch.no_grad():
@@ -206,8 +207,9 @@ def test_keys_translate_both_ways_and_the_default_keeps_its_fingerprint():
     before.model = flat_model(cfg.model)
     assert "network" not in before.model
     assert current_fingerprint() == defaults_fingerprint(before)
-    # nor how it runs, nor how its schedule is spelt: the same default as its study records
-    assert current_fingerprint() == "2ae034a7d1"
+    # nor how it runs, nor how its schedule is spelt: the engine-state default (the study's
+    # records are of the defaults before it, 2ae034a7d1 and earlier)
+    assert current_fingerprint() == "4c8ff143bb"
 
 
 def test_a_run_of_the_flat_recipe_loads_with_todays_groups(tiny_run, tmp_path):

@@ -129,7 +129,7 @@ def test_push_forward_rolls_the_model_and_targets_the_true_frame():
     from physgnn.physics.integrator import step
     from physgnn.training.lit import push_forward
 
-    lit = make_lit()
+    lit = make_lit(dict(engine_state=False))  # the engine state's: tests/test_engine_state.py
     frames = TrajectoryFrames(trajectory(3, frames=8, seed=5))
     state = Batch.from_data_list([frames.state(3, 2, future=2)])
     out = push_forward(state, lit.simulator, 2)
@@ -356,7 +356,7 @@ def test_default_losses_add_the_rest_term_over_the_spheres_in_reach():
     assert reach.tolist() == [True, True, False]
     assert sim.rest_target(state).tolist() == [True, True, False]
     # binary cross-entropy of the rest logit against "at rest", over the spheres in reach
-    logit = pred[:2, 6]
+    logit = sim.outputs.take(pred, "rest")[:2, 0]
     expected_rest = torch.nn.functional.softplus(-logit).mean()
     assert_close(rest_loss(sim, state, pred, reach), expected_rest)
     assert_close(losses["loss_rest"], expected_rest)
@@ -366,7 +366,7 @@ def test_rest_loss_is_zero_without_a_rest_decision():
     state = resting_pair_and_a_faller()
     sim = make_lit(dict(rest_decision=False)).simulator
     pred, graph = sim.normalized_prediction(state)
-    assert pred.shape == (3, 6)
+    assert pred.shape == (3, 12)  # Δv, Δω of the end velocities and of the mean motion
     assert float(rest_loss(sim, state, pred, sim.in_reach(state, graph)).detach()) == 0.0
     losses = make_lit(dict(rest_decision=False)).losses(state)
     assert float(losses["loss_rest"].detach()) == 0.0 and float(losses["loss_mse"].detach()) > 0

@@ -9,7 +9,7 @@ import pytest
 import torch
 from hydra.utils import get_class, instantiate
 from omegaconf import OmegaConf
-from simdata import REPORT_MODEL, STATS, batch, learned, trajectory
+from simdata import MODEL_KEYS, REPORT_MODEL, STATS, batch, learned, trajectory
 from torch.testing import assert_close
 
 from physgnn import CONF_DIR
@@ -19,7 +19,7 @@ from physgnn.models.options import ContactHandling, ModelInputs
 from physgnn.models.profiling import StepTimer
 from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.physics.scene import Effects
-from physgnn.training.layout import FLAT_KEYS, dotted_model
+from physgnn.training.layout import dotted_model
 
 MODEL_CONF = Path(CONF_DIR) / "model"
 
@@ -64,7 +64,7 @@ def test_constructor_defaults_are_the_default_model_and_report_model_is_the_repo
     own.pop("defaults")
     default = OmegaConf.load(MODEL_CONF / "baseline.yaml")
     composed = dotted_model(OmegaConf.merge(default, own))
-    report_keys = {".".join(FLAT_KEYS.get(k, (k,))): v for k, v in REPORT_MODEL.items()}
+    report_keys = {".".join(MODEL_KEYS.get(k, (k,))): v for k, v in REPORT_MODEL.items()}
     assert dotted_model(default) | report_keys == composed
 
 
@@ -89,7 +89,9 @@ def test_default_and_report_widths():
     # friction; the report's: the first 10
     assert (default.network.ps_in, old.network.ps_in) == (15, 10)
     outputs = [m.network.decoder.lin2.out_features for m in (default, old)]
-    assert outputs == [7, 6]  # Δv, Δω (and the rest logit)
+    # Δv, Δω of the end velocities, of the frame's mean motion (engine state), the rest logit
+    assert outputs == [13, 6]
+    assert default.network.pair_decoder.mlp.out_dim == 12 and old.network.pair_decoder is None
     assert [m.network.aggregation for m in (default, old)] == ["mean", "sum"]
     assert [m.graph_builder.connectivity for m in (default, old)] == ["approach", "vi"]
 
@@ -98,8 +100,8 @@ def test_forward_shapes_and_timings():
     sim, timer = make(), StepTimer()  # timing is opt-in, outside the simulator
     state = batch([trajectory(3, seed=0), trajectory(5, seed=1)])
     with timer.watch(sim):
-        vel, angvel = timer.predict(sim, state)
-    assert vel.shape == (8, 3) and angvel.shape == (8, 3)
+        vel, angvel, mean_vel, mean_angvel = timer.predict(sim, state)  # the engine state's
+    assert vel.shape == mean_vel.shape == (8, 3) and angvel.shape == mean_angvel.shape
     assert torch.isfinite(vel).all() and torch.isfinite(angvel).all()
     assert timer.timings["graph"] > 0 and timer.timings["network"] > 0
     timer.reset()
@@ -156,13 +158,15 @@ def test_target_round_trip_gives_ground_truth():
 
 def test_target_round_trip_of_the_default_model_in_reach_and_not_at_rest():
     sim = make()
-    state = batch([trajectory(4, seed=2)])
+    state = batch([trajectory(4, seed=2)])  # positions only: the mean targets are the ends
     target = sim.normalized_target(state)
-    assert target.shape == (4, 6)
+    assert target.shape == (4, 12)
     pred = torch.cat([target, torch.full((4, 1), -1.0)], 1)  # rest logit < 0: not at rest
-    vel, angvel = sim.to_physical(state, pred, torch.ones(4, dtype=torch.bool))
-    assert_close(vel, state.target_vel)
-    assert_close(angvel, state.target_angvel)
+    vel, angvel, mean_vel, mean_angvel = sim.motion(state, pred, torch.ones(4, dtype=torch.bool))
+    for got in (vel, mean_vel):
+        assert_close(got, state.target_vel)
+    for got in (angvel, mean_angvel):
+        assert_close(got, state.target_angvel)
     with pytest.raises(ValueError, match="needs the spheres in reach"):
         sim.to_physical(state, pred)
 

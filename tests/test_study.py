@@ -122,9 +122,11 @@ def test_the_five_sweeps_are_18_configurations_the_baseline_shared():
     gns = [k for k in keys if "use_surfaces=False" in k]
     assert gns == [
         "model.contacts.contact_passes=0 model.contacts.gravity_prior=False "
-        "model.contacts.pair_impulses=False model.contacts.rest_decision=False "
+        "model.contacts.pair_impulses=False model.contacts.plane_floor=False "
+        "model.contacts.rest_decision=False "
         "model.graph.connectivity=vi model.inputs.boundary_features=True "
-        "model.inputs.contact_features=False model.inputs.mass_ratio=False "
+        "model.inputs.contact_features=False model.inputs.engine_state=False "
+        "model.inputs.mass_ratio=False "
         "model.inputs.material_features=False model.inputs.plane_materials=False "
         "model.inputs.relative_pairs=False model.network.aggregation=sum "
         "model.network.third_law=False model.network.use_surfaces=False"

@@ -42,8 +42,8 @@ EXECUTION = (
 # Keys added since the study's records began, left out of the fingerprint while they hold the
 # value every earlier default had: the same model keeps its fingerprint.
 ADDED_AT_EARLIER_VALUE = {
-    "model.inputs.engine_state": False,
-    "model.contacts.plane_floor": False,
+    "model.engine_state": False,
+    "model.plane_floor": False,
     "lit.loss.event_share": 0.0,
     "lit.loss.event_speed": 0.05,
 }

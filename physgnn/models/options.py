@@ -53,7 +53,7 @@ class ModelInputs:
     relative_pairs: bool = True
     mass_ratio: bool = True
     plane_materials: bool = True
-    engine_state: bool = False
+    engine_state: bool = True
 
     def __post_init__(self) -> None:
         _check_flags(self)
@@ -82,7 +82,7 @@ class ContactHandling:
     rest_speed: float = 0.01
     recent_contact: bool = False
     contact_memory: bool = False
-    plane_floor: bool = False
+    plane_floor: bool = True
 
     def __post_init__(self) -> None:
         _check_flags(self)

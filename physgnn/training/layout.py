@@ -43,6 +43,8 @@ PREVIOUS_MODEL = {
     "recent_contact": True,
     "plane_materials": False,
     "contact_memory": False,
+    "engine_state": False,
+    "plane_floor": False,
 }
 # Keys that runs before the engine state lack, per node, with the value their model had.
 BEFORE_ENGINE_STATE = {"inputs": {"engine_state": False}, "contacts": {"plane_floor": False}}
@@ -87,6 +89,8 @@ FLAT_KEYS = {
     "rest_speed": ("contacts", "rest_speed"),
     "recent_contact": ("contacts", "recent_contact"),
     "contact_memory": ("contacts", "contact_memory"),
+    "engine_state": ("inputs", "engine_state"),
+    "plane_floor": ("contacts", "plane_floor"),
 }
 
 
