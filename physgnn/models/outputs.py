@@ -26,6 +26,7 @@ take them by name (:class:`~physgnn.graph.edges.Layout`).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import torch
@@ -40,13 +41,6 @@ NODE_ENGINE = Layout((*VELOCITY_CHANGES, *MEAN_CHANGES))
 NODE_ENGINE_REST = Layout((*VELOCITY_CHANGES, *MEAN_CHANGES, ("rest", 1)))
 PAIR = Layout((("impulse", 3), ("couple", 3)))
 PAIR_ENGINE = Layout((("impulse", 3), ("couple", 3), ("mean_impulse", 3), ("mean_couple", 3)))
-# The velocity a block changes: v (end of frame), ω, the frame's mean ū = Δp/dt, ω̄ = θ/dt.
-CHANGED = {
-    "delta_vel": "vel",
-    "delta_angvel": "angvel",
-    "delta_mean_vel": "mean_vel",
-    "delta_mean_angvel": "mean_angvel",
-}
 
 
 def node_outputs(rest_decision: bool, engine_state: bool = False) -> Layout:
@@ -63,6 +57,7 @@ def pair_outputs(engine_state: bool = False) -> Layout:
     return PAIR_ENGINE if engine_state else PAIR
 
 
+@functools.cache
 def regression(layout: Layout) -> Layout:
     """The blocks of ``layout`` that the regression loss compares with a target (every block
     but the rest logit)."""
@@ -75,11 +70,12 @@ def velocity_changes(out: torch.Tensor, layout: Layout = NODE) -> torch.Tensor:
     return out[:, : regression(layout).width]
 
 
-def angular_columns(layout: Layout) -> list[slice]:
+@functools.cache
+def angular_columns(layout: Layout) -> tuple[slice, ...]:
     """The column ranges of angular changes in ``regression(layout)`` (left out of the loss
     for spheres of a scene without rotation); host slices, nothing copied to a device."""
     regressed = regression(layout)
-    return [regressed.slice(name) for name in regressed.names if name.endswith("angvel")]
+    return tuple(regressed.slice(name) for name in regressed.names if name.endswith("angvel"))
 
 
 @dataclass(frozen=True)

@@ -85,8 +85,8 @@ class SleepingSimulator:
             return self.simulator(state)
         awake = ~self.asleep
         # sleeping spheres answer zeros: 2 tensors, or 4 for a simulator of the engine state
-        self._engine = bool(getattr(self.simulator, "engine_state", False))
-        answer = [state.pos.new_zeros(n, 3) for _ in range(4 if self._engine else 2)]
+        engine = bool(getattr(self.simulator, "engine_state", False))
+        answer = [state.pos.new_zeros(n, 3) for _ in range(4 if engine else 2)]
         if bool(awake.any()):
             sub = subset_state(state, awake)
             fresh = woken[awake]  # just woken: their history is the rest they were frozen in

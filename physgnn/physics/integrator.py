@@ -23,14 +23,7 @@ def euler_step(
     ``[N]`` bool) leaves the orientation of the other spheres bit-identical.
     Returns ``(pos_next [N, 3], quat_next [N, 4])``.
     """
-    dt_col = dt.unsqueeze(-1) if torch.is_tensor(dt) else dt
-    pos_next = pos + dt_col * vel_next
-    if rotate is False:
-        return pos_next, quat
-    quat_next = Q.integrate(quat, angvel_next, dt_col)
-    if rotate is not True:
-        quat_next = torch.where(rotate.unsqueeze(-1), quat_next, quat)
-    return pos_next, quat_next
+    return _advance(pos, quat, vel_next, dt, rotate, lambda h: Q.integrate(quat, angvel_next, h))
 
 
 def move(
@@ -47,11 +40,18 @@ def move(
 
     Shapes as :func:`euler_step`; ``rotate`` leaves the other spheres' orientation
     bit-identical."""
+    turn = lambda h: Q.normalize(Q.multiply(Q.exp(h * mean_angvel), quat))  # noqa: E731
+    return _advance(pos, quat, mean_vel, dt, rotate, turn)
+
+
+def _advance(pos, quat, vel, dt, rotate, turn) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(pos + dt·vel, turn(dt))``, ``dt`` a column for ``turn``; the orientation of spheres
+    that ``rotate`` (bool or ``[N]`` bool) leaves out stays bit-identical."""
     dt_col = dt.unsqueeze(-1) if torch.is_tensor(dt) else dt
-    pos_next = pos + dt_col * mean_vel
+    pos_next = pos + dt_col * vel
     if rotate is False:
         return pos_next, quat
-    quat_next = Q.normalize(Q.multiply(Q.exp(dt_col * mean_angvel), quat))
+    quat_next = turn(dt_col)
     if rotate is not True:
         quat_next = torch.where(rotate.unsqueeze(-1), quat_next, quat)
     return pos_next, quat_next

@@ -43,8 +43,6 @@ PREVIOUS_MODEL = {
     "recent_contact": True,
     "plane_materials": False,
     "contact_memory": False,
-    "engine_state": False,
-    "plane_floor": False,
 }
 # Keys that runs before the engine state lack, per node, with the value their model had.
 BEFORE_ENGINE_STATE = {"inputs": {"engine_state": False}, "contacts": {"plane_floor": False}}

@@ -35,7 +35,7 @@ def masked_mse(
     target: torch.Tensor,
     rotating: torch.Tensor,
     counted: torch.Tensor | None = None,
-    angular: list[slice] | None = None,
+    angular: tuple[slice, ...] | None = None,
 ) -> torch.Tensor:
     """Mean squared error of ``[N, C]`` outputs, the ``angular`` column ranges (None: the last
     three of six) only where ``rotating [N]``, and only spheres of ``counted [N]`` (bool, or
