@@ -14,7 +14,11 @@ plane's inside, else from the closest point of its rim to the centre) and cleara
   along ``d_e``);
 - where it would have (the edge's floor acted), the end velocity may not approach it:
   ``v_i·d_e ≥ 0`` (the engine state, whose end velocity is apart from the move; a
-  finite-difference state's velocity is its move).
+  finite-difference state's velocity is its move);
+- with ``bounce`` (``model.contacts.plane_newton``, the engine state), a sphere that arrives in
+  free flight then leaves by Newton's law of restitution, in closed form (:func:`free_bounce`):
+  the floor's inelastic answer plus the rebound ``e_c·w`` it would have had, so that the
+  network's own change is only what the engine does otherwise.
 
 Shapes: ``ps_index [2, F]`` (plane, sphere), ``ps_attr [F, PS.width]`` raw (the
 :data:`~physgnn.graph.edges.PS` blocks ``offset`` δ and ``height`` h = δ·n, clipped at the
@@ -25,6 +29,7 @@ from __future__ import annotations
 
 import torch
 
+from physgnn.graph.builder import ballistic_velocity
 from physgnn.graph.edges import PS
 
 RIM = 1e-4  # m: a closest point further than this from the foot of the normal is on the rim
@@ -43,10 +48,12 @@ def contact_directions(graph, radius: torch.Tensor) -> tuple[torch.Tensor, torch
     return direction, distance - radius[graph.ps_index[1]]
 
 
-def plane_floor(state, graph, mean: torch.Tensor, end: torch.Tensor | None = None):
+def plane_floor(
+    state, graph, mean: torch.Tensor, end: torch.Tensor | None = None, bounce: bool = False
+):
     """``(mean, end)`` after the floor of every ps edge (module doc): ``mean [N, 3]`` the
     frame's move ū, ``end [N, 3]`` the end velocity (None: a finite-difference state, only the
-    move)."""
+    move); ``bounce``: where the floor acted, add :func:`free_bounce`'s rebound."""
     direction, clearance = contact_directions(graph, state.radius)
     sphere = graph.ps_index[1]
     weight = graph.ps_weight(clearance)
@@ -60,4 +67,39 @@ def plane_floor(state, graph, mean: torch.Tensor, end: torch.Tensor | None = Non
         return mean, None
     acted = (deficit > 0).to(end.dtype)
     approach = torch.relu(-(end[sphere] * direction).sum(1)) * acted
+    if bounce:
+        lift, speed = free_bounce(state, graph, direction, clearance)
+        mean = mean.index_add(0, sphere, (acted * lift / dt)[:, None] * direction)
+        approach = approach + acted * speed
     return mean, end.index_add(0, sphere, approach[:, None] * direction)
+
+
+def free_bounce(state, graph, direction, clearance) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(lift [F], speed [F])``: for every ps edge, where its sphere ends a frame that it
+    starts in free flight and in which it meets the plane and rebounds by Newton's law, above
+    the plane (m) and along ``d_e`` (m/s); zeros where it does not rise clear by the frame's end.
+
+    Along ``d_e`` the sphere starts at clearance ``c = max(c_e, 0)`` with speed
+    ``u = v_t·d_e`` (its engine velocity, before any pair impulse: a push passed down a
+    resting stack is a force, not an arrival) under gravity's ``a = g·d_e``. It meets the
+    plane at ``τ = 2c / (w − u)`` with speed ``w = √(u² − 2ac)``, leaves with ``e_c·w``
+    (``e_c = e_i·e_s``, the engine's combination of the sphere's and the plane's
+    restitution) and after the rest of the frame ``ρ = dt − τ`` is at
+    ``e_c·w·ρ + a·ρ²/2`` with speed ``e_c·w + a·ρ``. A rebound that would land again within
+    the frame counts as none (the floor's inelastic answer)."""
+    plane, sphere = graph.ps_index
+    dt = state.scene_dt[sphere]
+    start = state.vel[:, 0] if state.vel.dim() == 3 else state.vel
+    u = (start[sphere] * direction).sum(1)
+    fall = (ballistic_velocity(state) - start)[sphere]  # g·dt where gravity is on
+    a = (fall * direction).sum(1) / dt
+    c = clearance.clamp_min(0)
+    w = torch.sqrt(torch.relu(u.square() - 2 * a * c))
+    meets = (w - u) > 1e-9
+    tau = torch.where(meets, 2 * c / (w - u).clamp_min(1e-9), dt)
+    rest = torch.relu(dt - tau)
+    restitution = state.material_params[sphere, 0] * state.plane_materials[plane, 0]
+    rebound = restitution * w
+    lift = rebound * rest + 0.5 * a * rest.square()
+    clear = (meets & (lift > 0)).to(lift.dtype)
+    return lift * clear, (rebound + a * rest) * clear

@@ -88,26 +88,31 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
         dvel, dang = pair_changes(state, graph.pp_index, pair_out[:half, columns], *scales, weight)
         changes.append([dvel + share * fall, dang])
     if sim.contacts.plane_floor:
-        floored(state, graph, changes)
+        floored(state, graph, changes, sim.contacts.plane_newton)
+    newton = sim.contacts.plane_floor and sim.contacts.plane_newton
     parts = []
     for (prefix, _), (dvel, dang) in zip(motions, changes, strict=True):
         own_vel = outputs.take(node_out, f"delta_{prefix}vel") * sim.delta_vel_std
         own_ang = outputs.take(node_out, f"delta_{prefix}angvel") * sim.delta_angvel_std
         dvel = dvel + own * own_vel
         dang = dang + own * own_ang
+        if newton and prefix == motions[-1][0]:  # the move: it may not cross a plane either
+            vel = state.vel[:, 0]
+            dvel = plane_floor(state, graph, vel + dvel)[0] - vel
         parts.append((dvel - sim.delta_vel_mean) / sim.delta_vel_std)
         parts.append((dang - sim.delta_angvel_mean) / sim.delta_angvel_std)
     rest = node_out[:, regression(outputs).width :]
     return torch.cat(parts + [rest], 1)
 
 
-def floored(state, graph, changes: list) -> None:
+def floored(state, graph, changes: list, bounce: bool = False) -> None:
     """``changes`` (``[[Δv, Δω]]`` of the end velocity, then of the mean move with the engine
-    state) after the planes' floor (:func:`~physgnn.models.floor.plane_floor`), in place."""
+    state) after the planes' floor (:func:`~physgnn.models.floor.plane_floor`; ``bounce``: with
+    the closed-form rebound of a sphere arriving in free flight), in place."""
     vel = state.vel[:, 0]
     if len(changes) == 1:  # a finite-difference state: its velocity is its move
         mean, _ = plane_floor(state, graph, vel + changes[0][0])
         changes[0][0] = mean - vel
         return
-    mean, end = plane_floor(state, graph, vel + changes[1][0], vel + changes[0][0])
+    mean, end = plane_floor(state, graph, vel + changes[1][0], vel + changes[0][0], bounce)
     changes[0][0], changes[1][0] = end - vel, mean - vel

@@ -72,7 +72,11 @@ class ContactHandling:
     ``contact_memory``: the rules also link by the last frame's motion reversed;
     ``plane_floor``: the planes answer after the pair impulses, each ps edge a one-sided floor,
     then the node decoder's learned restitution and friction (with ``pair_impulses``;
-    :mod:`physgnn.models.floor`)."""
+    :mod:`physgnn.models.floor`); ``plane_newton``: with the floor, the planes by Newton's
+    law: a sphere arriving in free flight rebounds with its contact's restitution in closed
+    form, the network's change on top (the engine state;
+    :func:`physgnn.models.floor.free_bounce`), and after that change the move still may not
+    cross a plane."""
 
     NODE: ClassVar[str] = "model.contacts"
     gravity_prior: bool = True
@@ -83,6 +87,7 @@ class ContactHandling:
     recent_contact: bool = False
     contact_memory: bool = False
     plane_floor: bool = True
+    plane_newton: bool = False
 
     def __post_init__(self) -> None:
         _check_flags(self)

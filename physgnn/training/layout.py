@@ -89,6 +89,7 @@ FLAT_KEYS = {
     "contact_memory": ("contacts", "contact_memory"),
     "engine_state": ("inputs", "engine_state"),
     "plane_floor": ("contacts", "plane_floor"),
+    "plane_newton": ("contacts", "plane_newton"),
 }
 
 
