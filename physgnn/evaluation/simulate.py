@@ -52,6 +52,7 @@ from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.scenefile import load_scene, scene_file, scene_to_dict
 from physgnn.metrics import check_tolerance
 from physgnn.metrics.checks import frames as checked_frames
+from physgnn.metrics.names import scene_columns
 from physgnn.models.capture import compile_simulator, compiled_graphs
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.scene import Scene
@@ -61,7 +62,6 @@ from physgnn.training.runs import load_run, resolve_run
 
 # What a simulate writes into its out (replaced whole by the next one).
 SIMULATE_OUTPUTS = ("simulate.h5", "metrics.json", "video.gif", "video.mp4", "video_frame.png")
-METRIC_KEYS = ("mse", "mse20", "chamfer", "energy_gain", "rotation_error", "diverged_at")
 
 
 class SimulateError(PhysgnnError, ValueError):
@@ -216,11 +216,7 @@ def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dic
     checked_frames(truth.pos, "truth pos")  # named as the truth's, before a copy of it is measured
     mine = pred if pred is not None else truth.with_finite_velocities()
     m = metrics.trajectory_metrics(mine, truth, tol=tol, horizon=20)
-    keys = (
-        (*METRIC_KEYS, *metrics.PENETRATION_KEYS)
-        if pred is not None
-        else ("energy_gain", *metrics.PENETRATION_KEYS)
-    )
+    keys = scene_columns(prediction=pred is not None)
     out = {k: m.get(k) for k in keys}
     if pred is not None and pred.diverged_at is not None:
         out = dict.fromkeys(keys) | {"diverged_at": pred.diverged_at}

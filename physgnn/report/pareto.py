@@ -16,19 +16,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from physgnn.metrics.names import PARETO, label  # noqa: E402
 from physgnn.report.figures import save_figure  # noqa: E402
 from physgnn.report.same_work import Point, front, points  # noqa: E402
 from physgnn.report.table import SPLITS  # noqa: E402
-
-PARETO_METRICS = ("mse20", "chamfer", "energy_gain", "depth_sphere", "depth_ground")
-METRIC_NAMES = {
-    "mse": "position MSE over all frames (m²)",
-    "mse20": "position MSE over the first 20 predicted frames (m²)",
-    "chamfer": "Chamfer distance (m², squared, per frame)",
-    "energy_gain": "normalised cumulative energy gain",
-    "depth_sphere": "penetration: mean depth sphere–sphere / diameter",
-    "depth_ground": "penetration: mean depth sphere–ground / diameter",
-}
 
 
 def pybullet_points(bench: dict, extra: dict, metric: str) -> list[Point]:
@@ -104,7 +95,7 @@ def plot_pareto(path: str | Path, metric: str, panels: dict[str, list[Point]], t
     """One PNG: a panel per split (``panels[split] = points``), frontier drawn in black."""
     fig, axes = plt.subplots(1, len(panels), squeeze=False, figsize=(6 * len(panels), 4.6))
     for ax, (split, pts) in zip(axes[0], panels.items(), strict=True):
-        _draw(ax, pts, f"{split}: {metric} vs cost", METRIC_NAMES.get(metric, metric))
+        _draw(ax, pts, f"{split}: {metric} vs cost", label(metric))
     fig.suptitle(title, fontsize=8)
     return save_figure(fig, path)
 
@@ -116,7 +107,7 @@ SAME_WORK = (
 
 
 def pareto_figures(
-    rows: list[dict], fig_dir: str | Path, metrics=PARETO_METRICS, splits=SPLITS
+    rows: list[dict], fig_dir: str | Path, metrics=PARETO, splits=SPLITS
 ) -> list[Path]:
     """Write ``fig_dir/pareto_<metric>.png`` for each metric (metrics.csv rows: the learned
     runs and pybullet's rows on their work); returns the paths written."""

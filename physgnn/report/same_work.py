@@ -11,12 +11,12 @@ import math
 from collections import defaultdict
 from dataclasses import dataclass
 
+from physgnn.metrics.names import PARETO
 from physgnn.report.format import fmt, md_table
 from physgnn.report.table import ENGINE, SPLITS, diverged_note, group_rows, select, stat
 
 # The accuracy a simulator is judged on in the table (the matched-accuracy metric)
 FRONT_METRIC = "mse20"
-TABLE_METRICS = ("mse20", "chamfer", "energy_gain", "depth_sphere", "depth_ground")
 
 
 @dataclass(frozen=True)
@@ -95,7 +95,7 @@ def split_table(rows: list[dict], split: str) -> str:
     for name, sel in groups:
         if not sel:
             continue
-        means = [stat(sel, m) for m in (*TABLE_METRICS, "fps")]
+        means = [stat(sel, m) for m in (*PARETO, "fps")]
         fps = means[-1][0] if means[-1] else None
         cells = [fmt(s[0] if s else None) for s in means]
         ms = fmt(1000.0 / fps) if fps else "–"
@@ -103,7 +103,7 @@ def split_table(rows: list[dict], split: str) -> str:
         body.append([name, *cells, ms, "✓" if name in on_front else "", note or ""])
     header = [
         "simulator",
-        *TABLE_METRICS,
+        *PARETO,
         "frames/s",
         "ms/frame",
         f"on the {FRONT_METRIC} front",

@@ -14,29 +14,19 @@ from collections import defaultdict
 from pathlib import Path
 
 from physgnn.files import read_rows, write_rows
-from physgnn.metrics import PENETRATION_KEYS
+from physgnn.metrics.names import TABLE
 from physgnn.report.format import fmt_stat
 
-# metrics.csv: identification columns, the metrics, then the divergence step and the speed
-# (``substeps``: pybullet's, on its rows ``pybullet-<k>``; empty on the others).
-METRICS = [
-    "mse",
-    "mse20",
-    "chamfer",
-    "energy_gain",
-    *PENETRATION_KEYS,
-    "rotation_error",
-    "drift_before_hit",
-    "fps",
-]
+# metrics.csv: identification columns, then the metrics (:data:`physgnn.metrics.names.TABLE`:
+# the divergence step and the speed last; ``substeps``: pybullet's, on its rows
+# ``pybullet-<k>``; empty on the others).
 COLUMNS = [
     *("run", "experiment", "overrides", "seed", "split", "trajectory", "n_spheres", "n_frames"),
     "substeps",
-    *METRICS[:-1],
-    "diverged_at",
-    "fps",
+    *TABLE,
 ]
 INTS = ["n_spheres", "n_frames", "diverged_at", "seed", "substeps"]
+FLOATS = [name for name in TABLE if name not in INTS]
 REFERENCES = ("ground_truth", "static", "gravity_only")
 # The experiment of pybullet's rows on the learned runs' own work (physgnn.evaluation.same_work)
 ENGINE = "pybullet"
@@ -78,7 +68,7 @@ def write_csv(path: str | Path, rows: list[dict]) -> Path:
 
 def read_csv(path: str | Path) -> list[dict]:
     """Rows of a metrics.csv with numbers parsed (empty cell → None)."""
-    return read_rows(path, METRICS, INTS)
+    return read_rows(path, FLOATS, INTS)
 
 
 def config_label(overrides: str) -> str:
