@@ -77,7 +77,7 @@ def main() -> None:
             source = TrajectoryFrames(traj)
             for t in range(sim.H, traj.n_frames - 1, args.every):
                 state = Batch.from_data_list([source.state(t, sim.H, future=1)])
-                grown, bound, first, last = passes(sim, state, sim.contact_passes)
+                grown, bound, first, last = passes(sim, state, sim.contacts.contact_passes)
                 counts[grown] += 1
                 at_bound += bound
                 first_total, last_total, frames = first_total + first, last_total + last, frames + 1
@@ -85,7 +85,7 @@ def main() -> None:
     print(f"{frames} scene-frames of {args.split} (every {args.every}th frame)")
     print(f"a rebuild added edges in {added} ({100 * added / max(frames, 1):.1f} %)")
     print("rebuilds that added edges: " + ", ".join(f"{k}: {counts[k]}" for k in sorted(counts)))
-    print(f"still growing at the bound ({sim.contact_passes} rebuilds): {at_bound}")
+    print(f"still growing at the bound ({sim.contacts.contact_passes} rebuilds): {at_bound}")
     print(f"edges: {last_total} after the rebuilds against {first_total} at the first build "
           f"(+{100 * (last_total / max(first_total, 1) - 1):.2f} %)")  # fmt: skip
 

@@ -117,7 +117,7 @@ def test_default_features_are_unchanged(model):
     state = batch([trajectory(3, seed=1), trajectory(2, seed=2)])
     switches = REPORT_MODEL if model == "report" else {}
     plain = learned(H=2, M=1, hidden=16, **switches)
-    assert not plain.use_boundary
+    assert not plain.inputs.boundary_features
     x = plain.node_features(state)
     assert x.shape == (5, 6 * 3 + 2 if model == "report" else 6 * 3 + 1 + 4)
     with_boundary = learned(H=2, M=1, hidden=16, boundary_features=True, **switches)
@@ -154,7 +154,7 @@ def test_config_keys_are_accepted(model):
     inputs = cfg.model.inputs
     assert inputs.boundary_features == (model == "gns") and inputs.boundary_radius == R
     sim = instantiate(cfg.model, stats=STATS)
-    assert sim.use_boundary == (model == "gns") and sim.boundary_radius == R
+    assert sim.inputs.boundary_features == (model == "gns") and sim.inputs.boundary_radius == R
 
 
 def test_run_with_boundary_features_loads_back(tmp_path):
@@ -167,6 +167,6 @@ def test_run_with_boundary_features_loads_back(tmp_path):
     weights = {f"simulator.{k}": v for k, v in sim.state_dict().items()}
     torch.save({"state_dict": weights}, tmp_path / "checkpoints" / "last.ckpt")
     loaded, _, _ = load_run(tmp_path)
-    assert loaded.use_boundary and loaded.boundary_radius == 1.5
+    assert loaded.inputs.boundary_features and loaded.inputs.boundary_radius == 1.5
     state = batch([trajectory(3, seed=5)], t=2, H=1)
     assert torch.equal(loaded(state)[0], sim(state)[0])

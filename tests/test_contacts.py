@@ -37,7 +37,7 @@ def test_relative_pair_inputs_by_hand():
     0 → 1): gap, normal and tangential relative speed, the 3 relative velocities, both radii,
     the mass ratio, the pair's restitution and friction products."""
     sim = make(length_scale=2.0)
-    assert sim.relative_pairs and sim.mass_ratio
+    assert sim.inputs.relative_pairs and sim.inputs.mass_ratio
     # sphere 1 passes sphere 0 sideways at 4 m/s (y) while closing at 3 m/s (x)
     state = scene(
         [[0, 0, 5], [1.7, 0, 5]],

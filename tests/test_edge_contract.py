@@ -103,7 +103,7 @@ def test_builder_and_model_write_the_contracts_blocks_for_every_option(H):
             own = radius[graph.ps_index[1]][:, None]
             clearance = (PS.take(graph.ps_attr, "height") - own) / scale
             assert_close(ps_layout.take(ps, "clearance"), clearance, rtol=0, atol=0)
-        if sim.plane_materials:
+        if options["plane_materials"] and options["material_features"]:
             coefficients = state.material_params[graph.ps_index[1], :2]  # planes of 1 and 1
             assert_close(ps_layout.take(ps, "material"), coefficients, rtol=0, atol=0)
 

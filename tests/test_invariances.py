@@ -362,7 +362,7 @@ def test_rest_target_labels():
     state.target_angvel = torch.tensor(
         [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0.03, 0, 0], [0, 0.01, 0], [0, 0, 0.01]]
     )
-    assert sim.rest_speed == 0.01
+    assert sim.contacts.rest_speed == 0.01
     assert sim.rest_target(state).tolist() == [True, True, False, False, True, True]
 
 

@@ -6,6 +6,7 @@ registry keys in today's spelling."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -103,11 +104,11 @@ def test_a_run_of_the_layout_before_the_groups_loads_as_today_and_predicts_alike
     )
     then, then_cfg, _ = load_run(run)
     now, now_cfg, _ = load_run(tiny_fd_run)
-    assert then_cfg.model.contacts.contact_passes == then.contact_passes == 1
+    assert then_cfg.model.contacts.contact_passes == then.contacts.contact_passes == 1
     then_cfg.model.contacts.contact_passes = 2
     assert then_cfg.model == now_cfg.model
     state = batch([trajectory(3, seed=5)], t=2, H=now.H)
-    now.contact_passes = 1
+    now.contacts = dataclasses.replace(now.contacts, contact_passes=1)
     with torch.no_grad():
         assert torch.equal(then(state)[0], now(state)[0])
 
@@ -166,7 +167,12 @@ def test_the_previously_shipped_weights_hold_a_flat_config_and_load_in_todays_la
     assert cfg.model.network.M == simulator.M == 5 and cfg.model.graph.backend == "auto"
     assert cfg.model.inputs.mass_ratio and cfg.model.contacts.rest_speed == 0.01
     # trained before the contact changes: one pass, no pair impulses, the latch
-    assert (simulator.contact_passes, simulator.pair_impulses, simulator.latch) == (0, False, True)
+    contacts = simulator.contacts
+    assert (contacts.contact_passes, contacts.pair_impulses, contacts.recent_contact) == (
+        0,
+        False,
+        True,
+    )
     assert simulator.graph_builder.connectivity == cfg.model.graph.connectivity == "approach"
 
 

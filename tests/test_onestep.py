@@ -21,6 +21,7 @@ from physgnn.evaluation import onestep
 from physgnn.evaluation.runs import RunInfo
 from physgnn.groundtruth.engine import one_frame_from, simulate
 from physgnn.metrics.regimes import ALL, REGIMES, regime_rows, tally
+from physgnn.models.options import ModelInputs
 from physgnn.physics.kinematics import finite_difference_velocities
 from physgnn.physics.trajectory import Trajectory
 from physgnn.report import onestep as onestep_report
@@ -115,7 +116,7 @@ class Oracle(torch.nn.Module):
 
     def __init__(self, traj: Trajectory, engine_state: bool):
         super().__init__()
-        self.engine_state = engine_state
+        self.inputs = ModelInputs(engine_state=engine_state)
         self.pos = torch.as_tensor(traj.pos)
         self.mean, self.mean_w = finite_difference_velocities(
             self.pos, torch.as_tensor(traj.quat), torch.as_tensor(traj.vel[0]),
@@ -128,13 +129,13 @@ class Oracle(torch.nn.Module):
         n = self.pos.shape[1]
         pos = state.pos.reshape(-1, n, 3)
         ts = [int((self.pos == p).all(-1).all(-1).nonzero()[0]) for p in pos]
-        seen = self.end if self.engine_state else self.mean
+        seen = self.end if self.inputs.engine_state else self.mean
         assert torch.equal(state.vel[:, 0], seen[ts].reshape(-1, 3))
         assert state.vel.shape[1] == self.H + 1
         nxt = [t + 1 for t in ts]
         answer = [self.end[nxt], self.end_w[nxt], self.mean[nxt], self.mean_w[nxt]]
         answer = [a.reshape(-1, 3) for a in answer]
-        return tuple(answer) if self.engine_state else tuple(answer[2:])
+        return tuple(answer) if self.inputs.engine_state else tuple(answer[2:])
 
 
 @pytest.mark.parametrize("engine_state", [False, True])

@@ -30,7 +30,7 @@ def test_network_widths_follow_the_contract(model):
     graph = sim.graph_builder(state)
     out = sim.network_prediction(state, graph)
     assert out.shape == (12, sim.outputs.width)
-    assert sim.outputs is node_outputs(sim.rest_decision, sim.engine_state)
+    assert sim.outputs is node_outputs(sim.contacts.rest_decision, sim.inputs.engine_state)
 
 
 @pytest.mark.parametrize("model", [{}, REPORT_MODEL], ids=["default", "report"])
@@ -49,7 +49,7 @@ def test_rollout_head_and_training_loss_read_the_same_step(model):
     step = original(state, graph)
     assert_close(step.vel, vel)
     assert_close(step.angvel, angvel)
-    if sim.gravity_prior:
+    if sim.contacts.gravity_prior:
         assert step.reach is not None and step.reach.dtype == torch.bool
     else:
         assert step.reach is None

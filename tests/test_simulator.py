@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+import re
 from pathlib import Path
 
 import pytest
@@ -94,6 +95,21 @@ def test_default_and_report_widths():
     assert default.network.pair_decoder.mlp.out_dim == 12 and old.network.pair_decoder is None
     assert [m.network.aggregation for m in (default, old)] == ["mean", "sum"]
     assert [m.graph_builder.connectivity for m in (default, old)] == ["approach", "vi"]
+
+
+def test_the_docstrings_node_input_count_is_the_default_models():
+    """LearnedSimulator's docstring gives the default inputs' node count as ``6·(H+1) + c`` and
+    its value at the default H: both are the widths of the models built, blocks and network."""
+    doc = " ".join(LearnedSimulator.__doc__.split())
+    constant = int(re.search(r"``6·\(H\+1\) \+ (\d+)`` numbers with the default inputs", doc)[1])
+    count, H = map(int, re.search(r"(\d+) for the default model, H = (\d+)", doc).groups())
+    default = instantiate(OmegaConf.load(MODEL_CONF / "baseline.yaml"), stats=STATS)
+    state = batch([trajectory(3, seed=0)], H=H)
+    widths = default.node_in, default.network.node_in, default.node_features(state).shape[1]
+    assert default.H == H and widths == (count, count, count)
+    for h in range(4):
+        assert make(H=h).node_in == 6 * (h + 1) + constant
+    assert default.node_layout.names == ("vel", "angvel", "radius", "material")
 
 
 def test_forward_shapes_and_timings():

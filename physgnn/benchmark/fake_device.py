@@ -38,7 +38,7 @@ from physgnn.benchmark.syncs import DispatchCounter
 from physgnn.data.dataset import read_split
 from physgnn.data.pairs import PairDataset
 from physgnn.data.state import TrajectoryFrames
-from physgnn.rollout import _Batch, _one_step, _start_state
+from physgnn.rollout.batch import SceneBatch, one_step, start_state
 
 NAME = "fakegpu"
 _READS = ("tolist", "__bool__", "item")
@@ -147,9 +147,9 @@ def rollout_frame(
     simulator.eval()
     frames = [TrajectoryFrames(t) for t in read_split(data / "test.h5")[:scenes]]
     bound = torch.full((len(frames),), 100.0, dtype=torch.float64)  # m/s: none diverges
-    state = _Batch([_start_state(f, simulator.H) for f in frames], bound, "cpu", torch.float32)
+    state = SceneBatch([start_state(f, simulator.H) for f in frames], bound, "cpu", torch.float32)
     with torch.no_grad(), replayed_reads(None) as reads:
-        _one_step(simulator, state, 1e3, None, None)
+        one_step(simulator, state, 1e3, None, None)
     mode = FakeTensorMode(allow_non_fake_inputs=False)
 
     def convert(t: torch.Tensor) -> FakeTensor:
@@ -166,7 +166,7 @@ def rollout_frame(
     if isinstance(state.rotate, torch.Tensor):
         state.rotate = convert(state.rotate)
     with mode, torch.no_grad(), replayed_reads(reads), DispatchCounter() as counter:
-        _one_step(simulator, state, 1e3, None, None)
+        one_step(simulator, state, 1e3, None, None)
     assert state.pos.device == device
     return {"reads": len(reads), "copies": counter.copies, "other_syncs": counter.syncs}
 

@@ -20,6 +20,7 @@ from torch import nn
 
 from physgnn.data.state import host_sizes, scene_of_sphere
 from physgnn.graph.candidates import scene_counts, scene_plane_pairs
+from physgnn.models.protocol import engine_state_of
 from physgnn.physics.constraints import project_contacts
 from physgnn.physics.scene import EFFECT_NAMES
 
@@ -62,15 +63,11 @@ class ConstrainedSimulator(nn.Module):
     def rotating(self, state) -> torch.Tensor:
         return self.simulator.rotating(state)
 
-    @property
-    def engine_state(self) -> bool:
-        return bool(getattr(self.simulator, "engine_state", False))
-
     def forward(self, state) -> tuple[torch.Tensor, ...]:
         """The learned step's answer after the constraint stage: the move (the frame's mean
         velocity ū; the velocity itself for a finite-difference state) corrected, and the
         engine state's end velocity changed by the same correction."""
-        if not self.engine_state:
+        if not engine_state_of(self.simulator):
             vel, angvel, graph = self.simulator.predict(state)
             return self.correct(state, vel, graph), angvel
         (vel, angvel, mean_vel, mean_angvel), graph = self.simulator.predict_motion(state)

@@ -81,7 +81,7 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
     own = on_plane[:, None].to(node_out.dtype)
     fall = ballistic_velocity(state) - state.vel[:, 0]  # g·dt where gravity is on
     outputs, pairs = sim.outputs, sim.pair_outputs
-    motions = [("", 1.0)] + ([("mean_", sim.gravity_share)] if sim.engine_state else [])
+    motions = [("", 1.0)] + ([("mean_", sim.gravity_share)] if sim.inputs.engine_state else [])
     changes = []
     for prefix, share in motions:
         columns = slice(pairs.slice(prefix + "impulse").start, pairs.slice(prefix + "couple").stop)

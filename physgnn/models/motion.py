@@ -38,23 +38,23 @@ def physical_motion(sim, state, pred: torch.Tensor, reach=None, supported=None) 
     vel = vel_t + out.take(pred, "delta_vel") * sim.delta_vel_std + sim.delta_vel_mean
     spin = out.take(pred, "delta_angvel") * sim.delta_angvel_std
     moves = [vel, angvel_t + spin + sim.delta_angvel_mean]
-    if sim.engine_state:
+    if sim.inputs.engine_state:
         mean = out.take(pred, "delta_mean_vel") * sim.delta_vel_std
         spin = out.take(pred, "delta_mean_angvel") * sim.delta_angvel_std
         moves += [vel_t + mean + sim.delta_vel_mean, angvel_t + spin + sim.delta_angvel_mean]
-    if sim.gravity_prior:
+    if sim.contacts.gravity_prior:
         if reach is None:
             raise ValueError("gravity_prior needs the spheres in reach of a contact")
         vel_free, angvel_free = contact_inputs.free_flight(state)
         free = [vel_free, angvel_free]
-        if sim.engine_state:
+        if sim.inputs.engine_state:
             free += [vel_t + sim.gravity_share * (vel_free - vel_t), angvel_free]
         moves = [torch.where(reach[:, None], m, f) for m, f in zip(moves, free, strict=True)]
-    if sim.rest_decision:
+    if sim.contacts.rest_decision:
         rest_now = rest.at_rest(
             out.take(pred, "rest")[:, 0], reach if supported is None else supported
         )
         moves = [torch.where(rest_now[:, None], torch.zeros_like(m), m) for m in moves]
     rotating = sim.rotating(state)[:, None]
     moves[1::2] = [torch.where(rotating, m, angvel_t) for m in moves[1::2]]
-    return tuple(moves) if sim.engine_state else (*moves, *moves)
+    return tuple(moves) if sim.inputs.engine_state else (*moves, *moves)

@@ -6,7 +6,7 @@ No column of an output is numbered by hand anywhere else: writers join blocks by
 take them by name (:class:`~physgnn.graph.edges.Layout`).
 
 - Node outputs ``[N, node_outputs(rest, engine).width]``, normalised with the training
-  statistics (:mod:`physgnn.models.learned` explains the target): ``delta_vel`` (3)
+  statistics (the target choice below): ``delta_vel`` (3)
   ``(Δv − μ_Δv)/σ_Δv`` and ``delta_angvel`` (3) ``(Δω − μ_Δω)/σ_Δω``, the change of the
   velocities from ``v_t`` to the next state's ``v_{t+1}``; with the engine state
   (``engine_state``: the state is the engine's end-of-frame velocity, not the frame's mean) also
@@ -22,6 +22,15 @@ take them by name (:class:`~physgnn.graph.edges.Layout`).
   (:mod:`physgnn.models.impulses`); with the engine state (:data:`PAIR_ENGINE`, ``[E/2, 12]``)
   also ``mean_impulse`` and ``mean_couple``, the same rule for the frame's mean motion, so that
   an isolated group's centre of mass moves exactly as a ballistic point.
+
+**Target choice.** The network predicts the normalised *change* of the velocities,
+``((v_{t+1} − v_t) − μ_Δv) / σ_Δv`` and ``((ω_{t+1} − ω_t) − μ_Δω) / σ_Δω`` (``delta_vel`` /
+``delta_angvel`` statistics of the training split), as GNS does with accelerations. For a given
+input state ``v_t`` is known, so this is an affine map of the report's target ``v_{t+1}``: the
+same function is learned, but the regression target has unit scale whatever the speed, and
+"nothing changes" is the output ``−μ/σ`` rather than a copy of the input. With input noise the
+target ``v_{t+1}`` stays the clean one while ``v_t`` is the noisy input, so the network also
+learns to undo the noise. The regression targets: :func:`normalised_targets`.
 """
 
 from __future__ import annotations
@@ -98,3 +107,26 @@ class StepOutputs:
     mean_vel: torch.Tensor
     mean_angvel: torch.Tensor
     reach: torch.Tensor | None
+
+
+def normalised_targets(sim, state) -> torch.Tensor:
+    """``[N, regression(sim.outputs).width]``: the normalised change from the state's (possibly
+    noisy) ``v_t, ω_t`` to its targets ``v_{t+1}, ω_{t+1}`` and, with the engine state, to the
+    frame's mean motion ``ū, ω̄`` (``target_mean_vel``, ``target_mean_angvel``; a state without
+    them has finite differences, whose mean motion is its velocity) (module doc)."""
+    if getattr(state, "target_vel", None) is None:
+        raise ValueError("state has no target_vel / target_angvel (last frame of a trajectory?)")
+    targets = [state.target_vel, state.target_angvel]
+    if sim.inputs.engine_state:
+        mean = getattr(state, "target_mean_vel", None)
+        spin = getattr(state, "target_mean_angvel", None)
+        targets += [targets[0] if mean is None else mean, targets[1] if spin is None else spin]
+    return torch.cat([_normalised_change(sim, state, t, k) for k, t in enumerate(targets)], 1)
+
+
+def _normalised_change(sim, state, target: torch.Tensor, k: int) -> torch.Tensor:
+    """``(target − x_t − μ)/σ``: a linear (k even) or angular (k odd) velocity target as the
+    normalised change from the state's latest velocity."""
+    if k % 2 == 0:
+        return (target - state.vel[:, 0] - sim.delta_vel_mean) / sim.delta_vel_std
+    return (target - state.angvel[:, 0] - sim.delta_angvel_mean) / sim.delta_angvel_std

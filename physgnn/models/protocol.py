@@ -9,8 +9,10 @@ answers four tensors, ``(v_{t+1}, ω_{t+1}, ū, ω̄)``: the next state's end-of
 then the frame's mean motion that moves the spheres (:func:`motion_of` reads either). Optional
 hooks, read once by :func:`hooks_of` (an absent hook means its default):
 
-- ``engine_state`` (bool, of the innermost simulator): the states it takes carry the engine's
-  end-of-frame velocities (:class:`~physgnn.data.state.TrajectoryFrames`);
+- ``inputs.engine_state`` (bool, of the innermost simulator's ``inputs``, as
+  :class:`~physgnn.models.options.ModelInputs` names it): the states it takes carry the
+  engine's end-of-frame velocities (:class:`~physgnn.data.state.TrajectoryFrames`;
+  :func:`engine_state_of`);
 - ``effects_trained [5]`` bool: effects seen in training (a rollout warns about the others);
 - ``parameters()``: the rollout runs on the device of the first parameter (else the CPU);
 - ``hold(pos, quat, pos_next, quat_next)``: keeps spheres in place after integration;
@@ -59,8 +61,15 @@ def hooks_of(simulator) -> Hooks:
         device=first.device if first is not None else torch.device("cpu"),
         hold=getattr(simulator, "hold", None),
         select=getattr(simulator, "select", None),
-        engine_state=bool(getattr(innermost(simulator), "engine_state", False)),
+        engine_state=engine_state_of(simulator),
     )
+
+
+def engine_state_of(simulator) -> bool:
+    """The ``inputs.engine_state`` hook of the innermost simulator (False when absent): its
+    answer is four tensors (:func:`motion_of`), its states the engine's velocities."""
+    inputs = getattr(innermost(simulator), "inputs", None)
+    return bool(getattr(inputs, "engine_state", False))
 
 
 def motion_of(out: tuple) -> tuple[tuple[torch.Tensor, torch.Tensor], tuple | None]:

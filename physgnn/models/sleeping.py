@@ -35,6 +35,7 @@ import torch
 from physgnn.data.state import scene_of_sphere, subset_state
 from physgnn.graph.builder import GraphBuilder
 from physgnn.graph.neighbors import BallIndex, extent_span, radius_pairs
+from physgnn.models.protocol import engine_state_of
 
 
 class SleepingSimulator:
@@ -85,7 +86,7 @@ class SleepingSimulator:
             return self.simulator(state)
         awake = ~self.asleep
         # sleeping spheres answer zeros: 2 tensors, or 4 for a simulator of the engine state
-        engine = bool(getattr(self.simulator, "engine_state", False))
+        engine = engine_state_of(self.simulator)
         answer = [state.pos.new_zeros(n, 3) for _ in range(4 if engine else 2)]
         if bool(awake.any()):
             sub = subset_state(state, awake)

@@ -158,7 +158,7 @@ def build(cfg: DictConfig, extra_callbacks=()):
     set_matmul_precision(cfg.get("matmul_precision", "highest"))
     datamodule = instantiate(cfg.datamodule)
     simulator = instantiate(cfg.model, stats=datamodule.stats())
-    datamodule.engine_state = simulator.engine_state  # the pairs carry the model's state
+    datamodule.engine_state = simulator.inputs.engine_state  # the pairs carry the model's state
     simulator.effects_trained.copy_(datamodule.effects_trained())
     lit = instantiate(cfg.lit, simulator=simulator, optimizer=_optimizer(cfg))
     return datamodule, lit, build_trainer(cfg, extra_callbacks)

@@ -10,7 +10,7 @@ Loss of a batch of state pairs:
 - Velocity noise is scaled to each sphere's regime (:func:`physgnn.training.noise.regime_scale`,
   ``noise.rest_scale``): a resting sphere gets a small share of it, so rest stays resolvable.
 
-- MSE over the 6 normalised outputs of every sphere (:mod:`physgnn.models.learned` explains the
+- MSE over the 6 normalised outputs of every sphere (:mod:`physgnn.models.outputs` explains the
   target); the 3 angular outputs of spheres whose scene has rotation off are left out, and
   with the simulator's gravity prior so is every sphere out of reach of a contact (its next
   velocity is ballistic, not the network's). The loss's graph is also built on the target

@@ -75,7 +75,7 @@ def rest_loss(simulator: LearnedSimulator, state, pred: torch.Tensor, reach) -> 
     """Binary cross-entropy of the rest logit (the ``rest`` block of ``pred``) against
     :meth:`~physgnn.models.learned.LearnedSimulator.rest_target`, over the spheres in ``reach``
     (all when None); 0 without a rest decision."""
-    if not simulator.rest_decision:
+    if not simulator.contacts.rest_decision:
         return pred.new_zeros(())
     label = simulator.rest_target(state).to(pred.dtype)
     logit = simulator.outputs.take(pred, "rest")[:, 0]
