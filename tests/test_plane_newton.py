@@ -10,6 +10,8 @@ import pytest
 import torch
 from simdata import STATS
 
+from physgnn.data.state import TrajectoryFrames
+from physgnn.graph.builder import GraphBuilder
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.oracles import sphere_scene
 from physgnn.models.learned import LearnedSimulator
@@ -18,6 +20,7 @@ from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.rollout import rollout
 
 ENGINE = STATS | {"substeps": 10}
+G = 9.81
 
 
 def sinking_model(newton: bool, seed: int = 0) -> LearnedSimulator:
@@ -62,3 +65,33 @@ def test_with_any_weights_no_move_crosses_the_ground(landing):
         kept = rollout(sinking_model(newton=True), [landing])[0]
     assert lowest_clearance(crossed) < -0.05  # the network's own change sinks spheres
     assert lowest_clearance(kept) >= -1e-4  # the move may not cross the plane
+
+
+def test_the_decoders_own_change_starts_at_zero_and_acts_only_where_a_plane_stops_the_move():
+    sim = sinking_model(newton=True)
+    fresh = LearnedSimulator(
+        ENGINE,
+        H=1,
+        network=partial(EncodeProcessDecode, M=1, hidden=8),
+        inputs=ModelInputs(engine_state=True),
+        contacts=ContactHandling(plane_newton=True),
+    )
+    last = [m for m in fresh.network.decoder.modules() if isinstance(m, torch.nn.Linear)][-1]
+    for name in ("delta_vel", "delta_angvel", "delta_mean_vel", "delta_mean_angvel"):
+        assert not last.weight[fresh.outputs.slice(name)].any()
+        assert not last.bias[fresh.outputs.slice(name)].any()
+    # one sphere leaving the ground at 3 m/s (0.35 m up at frame 1), one resting on it: the
+    # decoder asks both for 15 m/s down; only the resting one, which the ground stops, gets it
+    # (then floored)
+    truth = simulate(
+        sphere_scene([[0.0, 0, 0.6], [4.0, 0, 0.5]], vel=[[0, 0, 3.0], [0, 0, 0]]), {"substeps": 10}
+    )
+    state = TrajectoryFrames(truth, engine_state=True).state(1, 1)
+    graph = GraphBuilder()(state, (state.vel[:, 0],))
+    with torch.no_grad():
+        out = sim.network_prediction(state, graph, on_plane=torch.ones(2, dtype=torch.bool))
+    columns = sim.outputs.slice("delta_mean_vel")
+    change = out[:, columns] * sim.delta_vel_std + sim.delta_vel_mean  # ū − v_t, m/s
+    fall = -G * float(state.dt[0]) * float(sim.gravity_share)
+    assert abs(float(change[0, 2]) - fall) < 1e-3  # its flight, ballistic
+    assert abs(float(change[1, 2])) < 1e-3  # resting: stopped by the ground, not sunk

@@ -54,14 +54,9 @@ def plane_floor(
     """``(mean, end)`` after the floor of every ps edge (module doc): ``mean [N, 3]`` the
     frame's move ū, ``end [N, 3]`` the end velocity (None: a finite-difference state, only the
     move); ``bounce``: where the floor acted, add :func:`free_bounce`'s rebound."""
-    direction, clearance = contact_directions(graph, state.radius)
+    direction, clearance, deficit = _deficits(state, graph, mean)
     sphere = graph.ps_index[1]
-    weight = graph.ps_weight(clearance)
     dt = state.scene_dt[sphere]
-    limit = -clearance.clamp_min(0) / dt
-    deficit = torch.relu(limit - (mean[sphere] * direction).sum(1))
-    if weight is not None:
-        deficit = deficit * weight
     mean = mean.index_add(0, sphere, deficit[:, None] * direction)
     if end is None:
         return mean, None
@@ -72,6 +67,25 @@ def plane_floor(
         mean = mean.index_add(0, sphere, (acted * lift / dt)[:, None] * direction)
         approach = approach + acted * speed
     return mean, end.index_add(0, sphere, approach[:, None] * direction)
+
+
+def pressed(state, graph, mean: torch.Tensor) -> torch.Tensor:
+    """``[N]`` bool: the spheres whose move ``mean [N, 3]`` some plane's floor stops (the
+    spheres a plane touches in the frame: resting, rolling, landing)."""
+    deficit = _deficits(state, graph, mean)[2]
+    acted = (deficit > 0).to(mean.dtype)
+    return mean.new_zeros(mean.shape[0]).index_add_(0, graph.ps_index[1], acted) > 0
+
+
+def _deficits(state, graph, mean):
+    """``(d [F, 3], c [F], deficit [F])``: each ps edge's contact direction and clearance and
+    the speed along ``d`` that the floor adds to ``mean`` (0 where the move does not cross)."""
+    direction, clearance = contact_directions(graph, state.radius)
+    sphere = graph.ps_index[1]
+    limit = -clearance.clamp_min(0) / state.scene_dt[sphere]
+    deficit = torch.relu(limit - (mean[sphere] * direction).sum(1))
+    weight = graph.ps_weight(clearance)
+    return direction, clearance, deficit if weight is None else deficit * weight
 
 
 def free_bounce(state, graph, direction, clearance) -> tuple[torch.Tensor, torch.Tensor]:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import torch
 
 from physgnn.graph.builder import ballistic_velocity
-from physgnn.models.floor import plane_floor
+from physgnn.models.floor import plane_floor, pressed
 from physgnn.models.outputs import PAIR, regression
 
 INERTIA_FACTOR = 0.4  # I = 2/5 m r² of a solid sphere
@@ -87,9 +87,12 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
         columns = slice(pairs.slice(prefix + "impulse").start, pairs.slice(prefix + "couple").stop)
         dvel, dang = pair_changes(state, graph.pp_index, pair_out[:half, columns], *scales, weight)
         changes.append([dvel + share * fall, dang])
+    newton = sim.contacts.plane_floor and sim.contacts.plane_newton
+    if newton:  # the node decoder's own change only where a plane touches the sphere
+        vel = state.vel[:, 0]
+        own = own * pressed(state, graph, vel + changes[-1][0])[:, None].to(own.dtype)
     if sim.contacts.plane_floor:
         floored(state, graph, changes, sim.contacts.plane_newton)
-    newton = sim.contacts.plane_floor and sim.contacts.plane_newton
     parts = []
     for (prefix, _), (dvel, dang) in zip(motions, changes, strict=True):
         own_vel = outputs.take(node_out, f"delta_{prefix}vel") * sim.delta_vel_std
@@ -103,6 +106,20 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
         parts.append((dang - sim.delta_angvel_mean) / sim.delta_angvel_std)
     rest = node_out[:, regression(outputs).width :]
     return torch.cat(parts + [rest], 1)
+
+
+def start_from_the_law(sim) -> None:
+    """With ``plane_newton``: the node decoder's own changes start at zero (the rows of its
+    last layer that give them), so that training starts from the planes' closed form and
+    learns only what it misses; the pair outputs keep their random start."""
+    last = [m for m in sim.network.decoder.modules() if isinstance(m, torch.nn.Linear)][-1]
+    motions = ("", "mean_") if sim.inputs.engine_state else ("",)
+    with torch.no_grad():
+        for prefix in motions:
+            for name in (f"delta_{prefix}vel", f"delta_{prefix}angvel"):
+                rows = sim.outputs.slice(name)
+                last.weight[rows] = 0.0
+                last.bias[rows] = 0.0
 
 
 def floored(state, graph, changes: list, bounce: bool = False) -> None:

@@ -90,6 +90,8 @@ class LearnedSimulator(nn.Module):
             self.register_buffer("gravity_share", torch.tensor(share))
         self.graph_builder = GraphBuilder() if graph is None else graph
         self.network = self._network(EncodeProcessDecode if network is None else network)
+        if contacts.plane_floor and contacts.plane_newton:
+            impulses.start_from_the_law(self)
 
     def _network(self, network: Callable[..., EncodeProcessDecode]) -> EncodeProcessDecode:
         """``network`` called with the :class:`~physgnn.nn.epd.Widths` of the simulator's

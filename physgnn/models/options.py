@@ -74,7 +74,7 @@ class ContactHandling:
     then the node decoder's learned restitution and friction (with ``pair_impulses``;
     :mod:`physgnn.models.floor`); ``plane_newton``: with the floor, the planes by Newton's
     law: a sphere arriving in free flight rebounds with its contact's restitution in closed
-    form, the network's change on top (the engine state;
+    form, the network's change on top where a plane stops the sphere (the engine state;
     :func:`physgnn.models.floor.free_bounce`), and after that change the move still may not
     cross a plane."""
 
