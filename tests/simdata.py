@@ -49,6 +49,7 @@ REPORT_MODEL = {
     "plane_materials": False,
     "engine_state": False,
     "plane_floor": False,
+    "plane_newton": False,
 }
 # The model keys of learned(): the flat layout's.
 MODEL_KEYS = FLAT_KEYS

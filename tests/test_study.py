@@ -123,7 +123,7 @@ def test_the_five_sweeps_are_18_configurations_the_baseline_shared():
     assert gns == [
         "model.contacts.contact_passes=0 model.contacts.gravity_prior=False "
         "model.contacts.pair_impulses=False model.contacts.plane_floor=False "
-        "model.contacts.rest_decision=False "
+        "model.contacts.plane_newton=False model.contacts.rest_decision=False "
         "model.graph.connectivity=vi model.inputs.boundary_features=True "
         "model.inputs.contact_features=False model.inputs.engine_state=False "
         "model.inputs.mass_ratio=False "

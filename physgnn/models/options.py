@@ -87,7 +87,7 @@ class ContactHandling:
     recent_contact: bool = False
     contact_memory: bool = False
     plane_floor: bool = True
-    plane_newton: bool = False
+    plane_newton: bool = True
 
     def __post_init__(self) -> None:
         _check_flags(self)

@@ -44,8 +44,12 @@ PREVIOUS_MODEL = {
     "plane_materials": False,
     "contact_memory": False,
 }
-# Keys that runs before the engine state lack, per node, with the value their model had.
-BEFORE_ENGINE_STATE = {"inputs": {"engine_state": False}, "contacts": {"plane_floor": False}}
+# Keys that runs before the engine state or the planes by Newton's law lack, per node, with the
+# value their model had.
+BEFORE_ENGINE_STATE = {
+    "inputs": {"engine_state": False},
+    "contacts": {"plane_floor": False, "plane_newton": False},
+}
 LEARNED = "physgnn.models.learned.LearnedSimulator"
 # The nodes of today's layout, with the Hydra keys that build them.
 NODES = {
