@@ -30,7 +30,8 @@ import numpy as np
 from physgnn import __version__
 from physgnn.data.dataset import DatasetError, read_split, write_split
 from physgnn.errors import PhysgnnError
-from physgnn.files import OUTPUT_MARKER, process_alive, write_json
+from physgnn.files import OUTPUT_MARKER, write_json
+from physgnn.locks import process_alive
 from physgnn.physics.trajectory import FRAME_KEYS, Trajectory
 
 HDF5_FILE = "trajectories.h5"
