@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig
 
-from physgnn.data import exports, interchange, vtk
+from physgnn.data import exports, hdf5_export, interchange, vtk
 from physgnn.errors import PhysgnnError, check_whole
 from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.simulate import scene_metrics
@@ -50,7 +50,7 @@ from physgnn.training.runs import load_run
 
 FORMATS = ("vtk", "gns", "lagrangebench", "hdf5")
 trajectory_from_arrays = Trajectory.from_arrays
-load_trajectories = exports.load_trajectories
+load_trajectories = hdf5_export.load_trajectories
 
 
 class OutOfDistributionWarning(UserWarning):
@@ -229,4 +229,4 @@ def export(trajs: Trajectory | list[Trajectory], folder: str | Path, format: str
         return interchange.write_gns(folder, splits)
     if format == "lagrangebench":
         return interchange.write_lagrangebench(folder, splits)
-    return exports.write_hdf5(folder, trajs)
+    return hdf5_export.write_hdf5(folder, trajs)

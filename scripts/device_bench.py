@@ -56,7 +56,7 @@ def sizes() -> tuple[int, ...]:
 def prepare(folder: Path) -> None:
     from physgnn.benchmark import scenes
     from physgnn.benchmark.crossover import landed_window
-    from physgnn.data.dataset import compute_stats
+    from physgnn.data.stats import compute_stats
 
     cfg = bench_config()
     torch.set_num_threads(1)

@@ -23,7 +23,7 @@ from torch_geometric.data import Batch
 
 from physgnn.data.dataset import read_split
 from physgnn.data.state import TrajectoryFrames
-from physgnn.graph.builder import ballistic_velocity
+from physgnn.graph.rules import ballistic_velocity
 from physgnn.models.learned import LearnedSimulator
 
 

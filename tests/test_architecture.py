@@ -28,7 +28,7 @@ COMMANDS = {
     "ship",
 }
 
-# part -> the parts it may import (besides itself). "base" is physgnn/__init__, errors, files.
+# part -> the parts it may import besides itself. "base" is physgnn/__init__, errors, files, locks.
 ALLOWED = {
     "base": set(),
     "cli": {"base"},
@@ -106,9 +106,9 @@ FORBIDDEN = {
     "rollout": ("lightning", "hydra", "omegaconf"),
     "report": ("lightning", "hydra", "torch"),
 }
-# A module holds one meaning: the learned simulator (graph, passes, network, impulses and units
-# joined in one class) needs ~370 lines; 300 pushed code into `# fmt: skip` lines.
-MAX_MODULE_LINES = 400
+# A module holds one meaning (docs/ARCHITECTURE.md, rule 6): one past 300 lines holds several
+# and is split by meaning, never squeezed under the cap with `# fmt: skip` lines.
+MAX_MODULE_LINES = 400  # 300 once simulate.py and checks.py are split
 MAX_FUNCTION_LINES = 50
 # arguments of a function or constructor (self and cls not counted): past this, a group of them
 # belongs together in a small typed node (models/options.py, training/recipe.py, RolloutBounds)
@@ -122,7 +122,7 @@ def module_name(path: Path) -> str:
 
 def part_of(module: str) -> str:
     rest = module.split(".")[1:]
-    if not rest or rest[0] in ("errors", "files"):
+    if not rest or rest[0] in ("errors", "files", "locks"):
         return "base"
     if rest[0] in COMMANDS and len(rest) == 1:
         return "commands"

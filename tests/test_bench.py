@@ -23,7 +23,7 @@ from physgnn.benchmark.profile import step_flops
 from physgnn.benchmark.run import BenchError, bench, quick_config
 from physgnn.benchmark.targets import targets
 from physgnn.benchmark.training_tables import gpu_section as gpu_tables
-from physgnn.data.dataset import compute_stats
+from physgnn.data.stats import compute_stats
 from physgnn.groundtruth.engine import simulate
 from physgnn.models.profiling import StepTimer
 from physgnn.nn.epd import EncodeProcessDecode, Widths

@@ -1,5 +1,5 @@
 """Contacts found within the frame, pair impulses that conserve, and free flight after a contact
-(physgnn/graph/builder.py "Contacts within the frame", physgnn/models/impulses.py,
+(physgnn/graph/rebuild.py "Contacts within the frame", physgnn/models/impulses.py,
 physgnn/models/reach.py): brute force and conservation laws as oracles."""
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ from torch_geometric.data import Batch
 
 from physgnn import CONF_DIR
 from physgnn.data.state import TrajectoryFrames
-from physgnn.graph.builder import GraphBuilder, ballistic_velocity
+from physgnn.graph.builder import GraphBuilder
+from physgnn.graph.rules import ballistic_velocity
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.models.impulses import sphere_inertia

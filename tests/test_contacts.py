@@ -10,7 +10,7 @@ from handmade import DT, ballistic, make, scene
 from simdata import REPORT_MODEL, learned
 from torch.testing import assert_close
 
-from physgnn.graph.builder import ballistic_velocity
+from physgnn.graph.rules import ballistic_velocity
 from physgnn.models.learned import LearnedSimulator
 from physgnn.nn.mlp import MLP
 from physgnn.physics.geometry import edge_plane_depth, plane_depth

@@ -7,7 +7,8 @@ import torch
 from simdata import trajectory
 from torch.testing import assert_close
 
-from physgnn.data.dataset import DatasetError, compute_stats, write_split, write_stats
+from physgnn.data.dataset import DatasetError, write_split
+from physgnn.data.stats import compute_stats, write_stats
 from physgnn.physics.scene import EFFECT_NAMES, Effects
 from physgnn.training.datamodule import PairDataset, StatePairDataModule
 

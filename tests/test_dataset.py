@@ -1,4 +1,5 @@
-"""HDF5 schema, atomic writes, checked reads and statistics (physgnn.data.dataset)."""
+"""HDF5 schema, atomic writes, checked reads (physgnn.data.dataset) and statistics
+(physgnn.data.stats)."""
 
 from __future__ import annotations
 
@@ -10,16 +11,8 @@ import pytest
 from handmade import linear_traj
 
 from physgnn import __version__
-from physgnn.data.dataset import (
-    CHUNK_FRAMES,
-    SCHEMA_VERSION,
-    DatasetError,
-    compute_stats,
-    read_split,
-    read_stats,
-    write_split,
-    write_stats,
-)
+from physgnn.data.dataset import CHUNK_FRAMES, SCHEMA_VERSION, DatasetError, read_split, write_split
+from physgnn.data.stats import compute_stats, read_stats, write_stats
 
 
 def test_round_trip_schema_and_attributes(tmp_path):

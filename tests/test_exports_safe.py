@@ -21,7 +21,7 @@ from simdata import trajectory
 from torch.testing import assert_close
 
 import physgnn.api as pg
-from physgnn.data import exports, interchange, vtk
+from physgnn.data import exports, hdf5_export, interchange, vtk
 from physgnn.data.dataset import DatasetError
 from physgnn.data.exports import ExportError
 from physgnn.physics.scene import SceneError
@@ -322,7 +322,7 @@ def test_a_full_disk_is_one_line_naming_the_folder_and_the_fix(tmp_path, monkeyp
         "vtk": (meshio.vtu, "write", fills_up_at(3, meshio.vtu.write)),
         "gns": (np, "savez_compressed", fills_up_at(1, np.savez_compressed)),
         "lagrangebench": (h5py.Group, "create_dataset", h5py_fills_up(tmp_path)),
-        "hdf5": (exports, "write_split", fills_up_at(1, exports.write_split)),
+        "hdf5": (hdf5_export, "write_split", fills_up_at(1, hdf5_export.write_split)),
     }[fmt]
     monkeypatch.setattr(*writer)
     with pytest.raises(ExportError) as err:

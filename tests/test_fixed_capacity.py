@@ -17,7 +17,8 @@ from physgnn import CONF_DIR
 from physgnn.benchmark.gpu_readiness import training_step_counts
 from physgnn.benchmark.syncs import counting
 from physgnn.cli import compose_config
-from physgnn.graph.builder import CONNECTIVITIES, GraphBuilder
+from physgnn.graph.builder import GraphBuilder
+from physgnn.graph.rules import CONNECTIVITIES
 from physgnn.nn.padding import bucket
 from physgnn.training.contacts import perturb_contacts
 

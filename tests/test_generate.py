@@ -14,13 +14,8 @@ from conftest import compose_generate
 import physgnn.generate as generate_command
 import physgnn.groundtruth.generate as gen
 from physgnn.api import scene_of
-from physgnn.data.dataset import (
-    DATASET_MARKER,
-    SCHEMA_VERSION,
-    compute_stats,
-    read_split,
-    read_stats,
-)
+from physgnn.data.dataset import DATASET_MARKER, SCHEMA_VERSION, read_split
+from physgnn.data.stats import compute_stats, read_stats
 from physgnn.errors import Interrupted
 from physgnn.groundtruth.engine import simulate
 from physgnn.physics.scene import SceneError

@@ -17,9 +17,9 @@ from processes import start, wait_for
 
 import physgnn.generate as generate_command
 import physgnn.train as train_command
-from physgnn import files
+from physgnn import locks
 from physgnn.evaluation.runs import EvalError, find_runs
-from physgnn.files import InUseError, exclusive
+from physgnn.locks import InUseError, exclusive
 from physgnn.training.claim import claim_run_dir, release
 
 
@@ -90,7 +90,7 @@ def test_a_fresh_lock_of_another_host_names_its_holder_age_and_the_way_to_free_i
 
 
 def test_a_lost_nodes_lock_is_taken_over_by_a_requeued_training(tmp_path, capsys):
-    """A lock of another host untouched past files.LOCK_STALE_S: its node is gone."""
+    """A lock of another host untouched past locks.LOCK_STALE_S: its node is gone."""
     run_dir = tmp_path / "X"
     lock = tmp_path / "X.lock"
     write_lock(lock, 12345, host="otherhost")
@@ -109,7 +109,7 @@ def test_a_lost_nodes_lock_is_taken_over_by_a_requeued_training(tmp_path, capsys
 
 
 def test_the_holder_touches_its_lock_while_it_runs(tmp_path, monkeypatch):
-    monkeypatch.setattr(files, "LOCK_HEARTBEAT_S", 0.02)
+    monkeypatch.setattr(locks, "LOCK_HEARTBEAT_S", 0.02)
     lock = tmp_path / "data.lock"
     with exclusive(lock, "data.dir X", "wait"):
         then = time.time() - 3600

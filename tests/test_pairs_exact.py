@@ -17,9 +17,10 @@ from simdata import learned, trajectory
 from torch.testing import assert_close
 from torch_geometric.loader import DataLoader as PygLoader
 
-from physgnn.data.dataset import compute_stats, read_split, write_split, write_stats
+from physgnn.data.dataset import read_split, write_split
 from physgnn.data.pairs import EpochSampler, PairDataset
 from physgnn.data.state import TrajectoryFrames
+from physgnn.data.stats import compute_stats, write_stats
 from physgnn.physics.scene import Effects
 from physgnn.training.datamodule import StatePairDataModule
 from physgnn.training.lit import LitSimulator

@@ -20,7 +20,8 @@ from physgnn import simulate as simulate_command
 from physgnn import train as train_command
 from physgnn.errors import ConfigError, PhysgnnError
 from physgnn.evaluation import simulate as simulate_module
-from physgnn.files import OUTPUT_MARKER, InUseError, staged_outputs
+from physgnn.files import OUTPUT_MARKER, staged_outputs
+from physgnn.locks import InUseError
 from physgnn.training.export import export_run
 from physgnn.training.runs import PRETRAINED_DIR, read_run_json
 from physgnn.training.train import train

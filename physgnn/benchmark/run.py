@@ -34,7 +34,7 @@ from physgnn.benchmark.interleaved import interleaved_rows
 from physgnn.benchmark.learned import batched_rows, build_simulators, learned_rows
 from physgnn.benchmark.markdown import ACCURACY_FIGURE, write_markdown
 from physgnn.benchmark.pybullet import accuracy_sweep, pybullet_rows, pybullet_runs
-from physgnn.data.dataset import compute_stats
+from physgnn.data.stats import compute_stats
 from physgnn.errors import ConfigError
 from physgnn.files import write_json, write_text
 from physgnn.report.pareto import bench_figure

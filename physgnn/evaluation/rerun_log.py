@@ -24,7 +24,7 @@ import torch
 
 from physgnn import metrics
 from physgnn.errors import PhysgnnError
-from physgnn.groundtruth.engine import plane_box_pose
+from physgnn.groundtruth.bodies import plane_box_pose
 from physgnn.physics import quaternion as Q
 from physgnn.physics.scene import GROUND
 from physgnn.physics.trajectory import Trajectory

@@ -2,7 +2,7 @@
 
 The scene is rebuilt from visual shapes only (nothing collides, nothing is simulated): spheres
 of their true radius, one colour per sphere, the ground as a large flat box and each bounded
-plane as its box (:func:`physgnn.groundtruth.engine.plane_box_pose`). Each frame places the
+plane as its box (:func:`physgnn.groundtruth.bodies.plane_box_pose`). Each frame places the
 spheres and takes one picture from a fixed camera aimed at the box where the ground truth's
 spheres spend their time (:func:`camera_box`), as close as that box fits the picture; walls
 that would stand between the camera and the spheres are left out. It lives in ``evaluation/``
@@ -22,7 +22,7 @@ import torch
 from PIL import Image, ImageDraw
 
 from physgnn.files import atomic_path
-from physgnn.groundtruth.engine import p, plane_box_pose
+from physgnn.groundtruth.bodies import p, plane_box_pose
 from physgnn.physics import quaternion as Q
 from physgnn.physics.scene import GROUND, WALL
 from physgnn.physics.trajectory import Trajectory

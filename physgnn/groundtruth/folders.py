@@ -10,14 +10,8 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
-from physgnn.data.dataset import (
-    DATASET_MARKER,
-    compute_stats,
-    is_dataset,
-    write_marker,
-    write_split,
-    write_stats,
-)
+from physgnn.data.dataset import DATASET_MARKER, is_dataset, write_marker, write_split
+from physgnn.data.stats import compute_stats, write_stats
 from physgnn.errors import Interrupted, interrupt_signal, signal_name
 from physgnn.files import write_json
 from physgnn.groundtruth.jobs import SPLITS, Job

@@ -37,10 +37,10 @@ from physgnn.data.dataset import (
     write_marker,
 )
 from physgnn.errors import ConfigError, PhysgnnError
-from physgnn.files import exclusive
 from physgnn.groundtruth.engine import engine_version
 from physgnn.groundtruth.folders import build_folder, clear, in_the_way
 from physgnn.groundtruth.jobs import Job, progress_bar
+from physgnn.locks import exclusive
 from physgnn.physics.trajectory import Trajectory
 
 MANIFEST = "shard.json"

@@ -32,8 +32,8 @@ from __future__ import annotations
 
 import torch
 
-from physgnn.graph.builder import ballistic_velocity
 from physgnn.graph.edges import PP, PP_CONTACT, PS, PS_CONTACT, PS_MATERIAL, pair_layout
+from physgnn.graph.rules import ballistic_velocity
 
 # Scale of the material parameters (restitution, lateral, rolling, spinning friction) as node
 # inputs: rolling and spinning coefficients are ~0.01, the others ~0.5.
@@ -120,7 +120,7 @@ def material_features(state) -> torch.Tensor:
 
 def free_flight(state) -> tuple[torch.Tensor, torch.Tensor]:
     """``(v_t + g·dt, ω_t)`` ``[N, 3]`` each: the ballistic next velocities (g only in scenes
-    with gravity; :func:`~physgnn.graph.builder.ballistic_velocity`)."""
+    with gravity; :func:`~physgnn.graph.rules.ballistic_velocity`)."""
     return ballistic_velocity(state), state.angvel[:, 0]
 
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import torch
 
-from physgnn.graph.builder import ballistic_velocity
+from physgnn.graph.rules import ballistic_velocity
 from physgnn.graph.edges import PS
 
 RIM = 1e-4  # m: a closest point further than this from the foot of the normal is on the rim

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import torch
 
-from physgnn.graph.builder import ballistic_velocity
+from physgnn.graph.rules import ballistic_velocity
 from physgnn.models.floor import plane_floor, pressed
 from physgnn.models.outputs import PAIR, regression
 

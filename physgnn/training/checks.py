@@ -17,7 +17,7 @@ from lightning.pytorch.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
-from physgnn.files import process_alive
+from physgnn.locks import process_alive
 from physgnn.training.datamodule import dataset_identity
 from physgnn.training.layout import check_renamed, dotted_model, key_of_today, model_of_today
 from physgnn.training.ranges import check_range

@@ -25,10 +25,9 @@ from physgnn.data.dataset import (
     dataset_preset,
     generate_hint,
     read_split,
-    read_stats,
-    split_substeps,
 )
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
+from physgnn.data.stats import read_stats, split_substeps
 
 # The files of a dataset that training reads
 TRAINING_FILES = ("stats.json", "train.h5", "val.h5")

@@ -17,7 +17,8 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import PhysgnnError, one_line
-from physgnn.files import process_alive, write_json
+from physgnn.files import write_json
+from physgnn.locks import process_alive
 from physgnn.models.learned import LearnedSimulator
 from physgnn.training.layout import lit_of_today, model_of_today
 
