@@ -28,7 +28,8 @@ COMMANDS = {
     "ship",
 }
 
-# part -> the parts it may import (besides itself). "base" is physgnn/__init__, errors, files.
+# part -> the parts it may import (besides itself). "base" is physgnn/__init__, errors, files,
+# ranges.
 ALLOWED = {
     "base": set(),
     "cli": {"base"},
@@ -122,7 +123,7 @@ def module_name(path: Path) -> str:
 
 def part_of(module: str) -> str:
     rest = module.split(".")[1:]
-    if not rest or rest[0] in ("errors", "files"):
+    if not rest or rest[0] in ("errors", "files", "ranges"):
         return "base"
     if rest[0] in COMMANDS and len(rest) == 1:
         return "commands"

@@ -10,7 +10,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from physgnn.errors import ConfigError
-from physgnn.training.checks import check_run_dir
+from physgnn.training.resume_checks import check_run_dir
 from physgnn.training.datamodule import dataset_identity
 
 

@@ -19,7 +19,6 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.errors import check_seed
 from physgnn.files import exclusive
 from physgnn.groundtruth.engine import as_stored
 from physgnn.groundtruth.families import build_scene
@@ -37,6 +36,7 @@ from physgnn.groundtruth.shards import (
     shards_root,
     write_shard,
 )
+from physgnn.ranges import check_seed
 
 __all__ = ["FILES", "SPLITS", "after_sweep", "generate", "plan", "trajectory_seed", "written"]
 
