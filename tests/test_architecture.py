@@ -29,7 +29,7 @@ COMMANDS = {
 }
 
 # part -> the parts it may import (besides itself). "base" is physgnn/__init__, errors, files,
-# ranges.
+# ranges, overrides.
 ALLOWED = {
     "base": set(),
     "cli": {"base"},
@@ -123,7 +123,7 @@ def module_name(path: Path) -> str:
 
 def part_of(module: str) -> str:
     rest = module.split(".")[1:]
-    if not rest or rest[0] in ("errors", "files", "ranges"):
+    if not rest or rest[0] in ("errors", "files", "ranges", "overrides"):
         return "base"
     if rest[0] in COMMANDS and len(rest) == 1:
         return "commands"

@@ -384,7 +384,7 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
         ("datamodule.batch_size=1.5", "datamodule.batch_size must be a whole number, got 1.5"),
         (
             "lit.scheduler.decay_per_epoch=-1",
-            "lit.scheduler.decay_per_epoch must be a number in (0, 1000) (lr x decay_per_epoch^epochs",
+            "lit.scheduler.decay_per_epoch must be a number in (0, 1000) (lr x decay_per_epoch^",
         ),
         (
             "trainer.max_epochs=0",

@@ -61,8 +61,8 @@ def one_line_exit(monkeypatch, capsys, module, *args) -> str:
         ),
         (
             "lit.noise.rest_scale=nan",
-            "lit.noise.rest_scale must be a number in (0, 1] (a factor; 1: full noise at rest), got nan "
-            "(the default: lit.noise.rest_scale=0.05)",
+            "lit.noise.rest_scale must be a number in (0, 1] (a factor; 1: full noise at rest), "
+            "got nan (the default: lit.noise.rest_scale=0.05)",
         ),
         (
             "trainer.max_epochs=1.5",

@@ -15,6 +15,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
 from physgnn.files import process_alive
+from physgnn.overrides import given, key_of
 from physgnn.training.datamodule import dataset_identity
 from physgnn.training.layout import check_renamed, dotted_model, key_of_today, model_of_today
 from physgnn.training.runs import RUN_JSON, load_checkpoint, read_run_json, run_status
@@ -85,7 +86,7 @@ def resumed_here(run_dir: Path) -> bool:
 def _changeable(override: str) -> bool:
     """Whether ``override`` must be the same on a resume: all but the folder named, the run's
     name in the loggers (a study's job started before it had one) and Hydra's own settings."""
-    key = override.lstrip("+~").partition("=")[0]
+    key = key_of(override)
     return key not in ("run_dir", "ckpt_path", "run_name") and not key.startswith("hydra")
 
 
@@ -136,9 +137,9 @@ def check_resume_argv(argv: list[str]) -> None:
     command line, before Hydra rewrites the run's ``.hydra`` folder: ``run_dir=X`` naming an
     interrupted run."""
     check_renamed(argv)
-    given = dict(arg.lstrip("+").split("=", 1) for arg in argv if "=" in arg)
-    if given.get("run_dir"):
-        check_resume_overrides(Path(given["run_dir"]), [a for a in argv if "=" in a])
+    run_dir = given(argv).get("run_dir")
+    if run_dir is not None and run_dir.value:
+        check_resume_overrides(Path(str(run_dir.value)), [a for a in argv if "=" in a])
 
 
 def resume_from(cfg: DictConfig, run_dir: Path) -> str | None:
