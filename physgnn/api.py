@@ -35,9 +35,10 @@ import numpy as np
 from omegaconf import DictConfig
 
 from physgnn.data import exports, hdf5_export, interchange, vtk
-from physgnn.errors import PhysgnnError, check_whole
+from physgnn.errors import PhysgnnError
 from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.simulate import scene_metrics
+from physgnn.evaluation.simulate_options import CONSTRAINTS, FRAMES
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.groundtruth import scene_values, scenefile
 from physgnn.groundtruth.engine import simulate as engine_simulate
@@ -45,6 +46,7 @@ from physgnn.metrics import check_tolerance
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.physics.scene import Scene, SceneError
 from physgnn.physics.trajectory import Trajectory, scene_at
+from physgnn.ranges import whole
 from physgnn.rollout import rollout
 from physgnn.training.runs import load_run
 
@@ -111,7 +113,7 @@ def scene_from_arrays(
     quat ``[N, 4]``, and mass, materials, planes, effects as in
     :meth:`Trajectory.from_arrays`. Its values are checked as a scene file's are (placement,
     materials' coefficients, orientations: :func:`physgnn.groundtruth.scene_values.arrays`)."""
-    frames = check_whole("frames", frames, 2, "the first frame is the start", ArgumentError)
+    frames = FRAMES.check("frames", frames, error=ArgumentError)
     _positions(pos)
     start = {k: [v] if k == "quat" else v for k, v in fields.items()}
     velocities = tuple(None if v is None else [v] for v in (vel, angvel))
@@ -142,10 +144,8 @@ def simulate(scene: Scene, frames: int | None = None) -> Trajectory:
     """pybullet's trajectory of ``scene`` (``frames`` instead of its own length)."""
     _of_type("scene", scene, Scene, "a Scene: load_scene('throw'), scene_from_arrays(...)")
     if frames is not None:
-        what = "the first frame is the start; e.g. frames=100"
-        scene = dataclasses.replace(
-            scene, n_frames=check_whole("frames", frames, 2, what, ArgumentError)
-        )
+        frames = FRAMES.check("frames", frames, error=ArgumentError)
+        scene = dataclasses.replace(scene, n_frames=frames)
     return engine_simulate(scene)
 
 
@@ -156,8 +156,7 @@ def roll_out(model: Model, truth: Trajectory, constraints: int = 0) -> Trajector
     ``truth`` starts outside the model's training ranges."""
     _of_type("model", model, Model, "a Model: load_model('pretrained') or load_model(run_dir)")
     _of_type("truth", truth, Trajectory, "a Trajectory: simulate(scene) gives a scene's truth")
-    what = "iterations of the constraint stage; 0: the learned model alone"
-    constraints = check_whole("constraints", constraints, 0, what, ArgumentError)
+    constraints = CONSTRAINTS.check("constraints", constraints, error=ArgumentError)
     found = outside(scene_of(truth), model.cfg)
     if found:
         warnings.warn(warning_text(truth.name, found), OutOfDistributionWarning, stacklevel=2)
@@ -186,7 +185,8 @@ def animate(
     one): ``stem.gif``, ``stem.mp4`` and ``stem_frame.png``; returns their paths by kind."""
     _of_type("truth", truth, Trajectory, "a Trajectory: simulate(scene) gives a scene's truth")
     _of_type("pred", pred, (Trajectory, type(None)), "a Trajectory (roll_out's) or None")
-    max_frames = check_whole("max_frames", max_frames, 2, "frames of the film", ArgumentError)
+    film = whole(2, what="frames of the film", example=80)
+    max_frames = film.check("max_frames", max_frames, error=ArgumentError)
     if pred is not None and pred.n_spheres != truth.n_spheres:
         raise ArgumentError(
             f"pred has {pred.n_spheres} spheres, truth {truth.n_spheres}: animate a prediction "

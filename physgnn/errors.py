@@ -13,8 +13,6 @@ raise ``KeyboardInterrupt`` like Ctrl-C, so ``finally`` blocks clean up after bo
 from __future__ import annotations
 
 import errno
-import math
-import numbers
 import signal
 import threading
 from collections.abc import Iterator
@@ -57,45 +55,6 @@ def disk_problem(err: BaseException) -> bool:
 
 class ConfigError(PhysgnnError, ValueError):
     """A config value that cannot be used (missing, of the wrong kind or out of range)."""
-
-
-MAX_SEED = 2**32 - 1
-
-
-def check_seed(seed, key: str = "seed", where: str = "conf/train.yaml: seed") -> None:
-    """``seed`` (the config's ``key``, set in ``where``) is a whole number that numpy, torch
-    and Python all take: 0 to 2³² − 1."""
-    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed <= MAX_SEED:
-        raise ConfigError(
-            f"{key} must be a whole number from 0 to {MAX_SEED}, got {seed!r} ({where}; e.g. "
-            f"{key}=0)"
-        )
-
-
-def check_whole(key: str, value, least: int, what: str, error: type = ConfigError) -> int:
-    """``value`` of the argument ``key`` is a whole number >= ``least`` (``what``: its meaning
-    and an example), else one line naming ``key`` (2.5 too: never truncated; 10.0, as JSON
-    and YAML write 1e1, is 10). The one check of a count for the commands and the API alike."""
-    number = isinstance(value, numbers.Real) and not isinstance(value, bool)
-    whole = number and math.isfinite(value) and float(value).is_integer()
-    if not whole or value < least:
-        raise error(f"{key} must be a whole number >= {least} ({what}), got {value!r}")
-    return int(value)
-
-
-def check_number(key: str, value, least: float, what: str, error: type = ConfigError) -> float:
-    """``value`` of ``key`` is a finite number >= ``least`` (NaN never is), else one line."""
-    number = isinstance(value, numbers.Real) and not isinstance(value, bool)
-    if not number or not math.isfinite(value) or value < least:
-        raise error(f"{key} must be a number >= {least:g} ({what}), got {value!r}")
-    return float(value)
-
-
-def check_flag(key: str, value, error: type = ConfigError) -> bool:
-    """``value`` of ``key`` is true or false (``maybe``, ``'no'`` or 1 is not), else one line."""
-    if not isinstance(value, bool):
-        raise error(f"{key} must be true or false, got {value!r}")
-    return value
 
 
 class Interrupted(PhysgnnError):

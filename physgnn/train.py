@@ -10,7 +10,7 @@ from physgnn.training.layout import check_renamed
 
 # A flat recipe key of an earlier physgnn names today's before the config composes; a resume
 # with other overrides is refused before Hydra rewrites the run's .hydra folder.
-CHECKS = (check_renamed, "physgnn.training.checks:check_resume_argv")
+CHECKS = (check_renamed, "physgnn.training.resume_checks:check_resume_argv")
 main = command("train", "physgnn.training.train:val_loss", before=CHECKS)
 
 if __name__ == "__main__":

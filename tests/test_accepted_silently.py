@@ -105,8 +105,8 @@ def test_an_added_key_nothing_reads_is_refused(
         ("tol=nan", "tol must be a number >= 0"),
         (
             "frames=abc",
-            "frames must be a whole number >= 2 (the first frame is the start; e.g. "
-            "frames=100), got 'abc'",
+            "frames must be a whole number >= 2 or null (the first frame is the start), got "
+            "'abc' (e.g. frames=100)",
         ),
         ("frames=1", "frames must be a whole number >= 2"),
         ("video=yes", "video must be true or false, got 'yes'"),

@@ -59,7 +59,8 @@ def test_roll_out_refuses_constraints_simulate_refuses(model, truth, constraints
 def test_simulate_and_scene_from_arrays_refuse_frames_that_are_not_a_count(frames):
     scene = pg.scene_from_arrays(POS, 0.5, frames=3)
     with pytest.raises(
-        pg.ArgumentError, match=f"^frames must be a whole number >= 2 .*got {frames!r}$"
+        pg.ArgumentError,
+        match=rf"^frames must be a whole number >= 2 .*got {frames!r} \(e.g. frames=100\)$",
     ):
         pg.simulate(scene, frames=frames)
     with pytest.raises(pg.ArgumentError, match="^frames must be a whole number >= 2"):

@@ -28,7 +28,8 @@ COMMANDS = {
     "ship",
 }
 
-# part -> the parts it may import besides itself. "base" is physgnn/__init__, errors, files, locks.
+# part -> the parts it may import (besides itself). "base" is physgnn/__init__, errors, files,
+# locks, ranges, overrides.
 ALLOWED = {
     "base": set(),
     "cli": {"base"},
@@ -108,7 +109,7 @@ FORBIDDEN = {
 }
 # A module holds one meaning (docs/ARCHITECTURE.md, rule 6): one past 300 lines holds several
 # and is split by meaning, never squeezed under the cap with `# fmt: skip` lines.
-MAX_MODULE_LINES = 400  # 300 once simulate.py and checks.py are split
+MAX_MODULE_LINES = 300
 MAX_FUNCTION_LINES = 50
 # arguments of a function or constructor (self and cls not counted): past this, a group of them
 # belongs together in a small typed node (models/options.py, training/recipe.py, RolloutBounds)
@@ -122,7 +123,7 @@ def module_name(path: Path) -> str:
 
 def part_of(module: str) -> str:
     rest = module.split(".")[1:]
-    if not rest or rest[0] in ("errors", "files", "locks"):
+    if not rest or rest[0] in ("errors", "files", "locks", "ranges", "overrides"):
         return "base"
     if rest[0] in COMMANDS and len(rest) == 1:
         return "commands"

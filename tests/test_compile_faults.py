@@ -13,7 +13,7 @@ from fakeruns import Falling
 from omegaconf import OmegaConf
 from simdata import trajectory
 
-import physgnn.evaluation.simulate as S
+import physgnn.evaluation.simulate_learned as S
 
 
 @pytest.fixture

@@ -384,9 +384,13 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
         ("datamodule.batch_size=1.5", "datamodule.batch_size must be a whole number, got 1.5"),
         (
             "lit.scheduler.decay_per_epoch=-1",
-            "lit.scheduler.decay_per_epoch must be a number > 0 (lr x decay_per_epoch^epochs at",
+            "lit.scheduler.decay_per_epoch must be a number in (0, 1000) (lr x decay_per_epoch^",
         ),
-        ("trainer.max_epochs=0", "trainer.max_epochs=0 trains nothing: give at least 1"),
+        (
+            "trainer.max_epochs=0",
+            "trainer.max_epochs must be a whole number >= 1 or -1 or null (-1 or null: no limit), "
+            "got 0 (e.g. trainer.max_epochs=10)",
+        ),
         ("lit.optimizer.lr=-1", "lit.optimizer.lr must be a number > 0, got -1 (conf/lit/"),
         ("seed=-5", "seed must be a whole number from 0 to 4294967295, got -5 (conf/train.yaml"),
         (

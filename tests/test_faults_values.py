@@ -37,7 +37,7 @@ SPHERE = "spheres:\n  - {radius: 0.5, position: [0, 0, 1]%s}\n"
         (
             "frames: 2.5\n" + SPHERE % "",
             "frames must be a whole number >= 2 (frames to simulate, "
-            "the first is the start), got 2.5",
+            "the first is the start), got 2.5 (e.g. frames: 100)",
         ),
         (
             "effects: {gravity: 'no'}\n" + SPHERE % "",
@@ -78,7 +78,7 @@ def test_effects_read_from_a_file_take_numpy_booleans():
 def test_an_eval_switch_that_is_not_true_or_false_is_refused(tmp_path, key):
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose("eval", overrides=[f"paths.outputs={tmp_path}", f"{key}=maybe"])
-    message = f"{key} must be true or false, got 'maybe'"
+    message = f"{key} must be true or false, got 'maybe' (e.g. {key}=true)"
     with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
         evaluate(cfg)
     assert not (tmp_path / "report").exists()

@@ -21,7 +21,6 @@ from physgnn.ablation.jobs import current_fingerprint, defaults_fingerprint
 from physgnn.ablation.registry import append_record, read_registry
 from physgnn.cli import compose_config
 from physgnn.errors import ConfigError
-from physgnn.training.checks import check_resume_argv, check_resume_overrides
 from physgnn.training.layout import (
     EARLIER_MODEL,
     FLAT_KEYS,
@@ -34,6 +33,7 @@ from physgnn.training.layout import (
 )
 from physgnn.training.lit import LitSimulator
 from physgnn.training.recipe import Compile, InputNoise, LossTerms, PushForward
+from physgnn.training.resume_checks import check_resume_argv, check_resume_overrides
 from physgnn.training.runs import RunError, load_run
 from physgnn.training.schedule import RunLengthDecay
 

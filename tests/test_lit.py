@@ -314,10 +314,12 @@ def test_each_ddp_process_draws_its_own_noise_and_all_the_same_unroll():
 def test_contact_settings_out_of_range_are_refused():
     with pytest.raises(ConfigError, match=r"^lit.loss.lambda_contact must be a number >= 0"):
         LossTerms(lambda_contact=-1.0)
-    prob = r"^lit.noise.contact_prob must be a probability in \[0, 1\] .*\(the default: "
+    prob = r"^lit.noise.contact_prob must be a number in \[0, 1\] \(a probability.*\(the default: "
     with pytest.raises(ConfigError, match=prob + r"lit.noise.contact_prob=0.3\)$"):
         InputNoise(contact_prob=1.5)
-    with pytest.raises(ConfigError, match=r"^lit.noise.rest_scale must be a factor in \(0, 1\]"):
+    with pytest.raises(
+        ConfigError, match=r"^lit.noise.rest_scale must be a number in \(0, 1\] \(a factor"
+    ):
         InputNoise(rest_scale=float("nan"))
     with pytest.raises(ConfigError, match=r"^lit.compile.mode must be one of default, "):
         Compile(mode="fastest")

@@ -19,7 +19,7 @@ from physgnn.cli import job_dirname
 from physgnn.cli import outputs as cli_outputs
 from physgnn.cli.outputs import check_outputs_env
 from physgnn.errors import ConfigError
-from physgnn.training.checks import check_checkpoint
+from physgnn.training.resume_checks import check_checkpoint
 from physgnn.training.runs import RunError, load_run
 
 
@@ -41,15 +41,18 @@ def one_line_exit(monkeypatch, capsys, module, *args) -> str:
     [
         (
             "datamodule.batch_size=0",
-            "datamodule.batch_size must be a whole number >= 1 (pairs per step), got 0",
+            "datamodule.batch_size must be a whole number >= 1 (pairs per step), got 0 (e.g. "
+            "datamodule.batch_size=1)",
         ),
         (
             "model.network.M=0",
-            "model.network.M must be a whole number >= 1 (message-passing steps), got 0",
+            "model.network.M must be a whole number >= 1 (message-passing steps), got 0 (e.g. "
+            "model.network.M=1)",
         ),
         (
             "model.network.hidden=0",
-            "model.network.hidden must be a whole number >= 1 (units per layer), got 0",
+            "model.network.hidden must be a whole number >= 1 (units per layer), got 0 (e.g. "
+            "model.network.hidden=1)",
         ),
         (
             "lit.noise.std=-1",
@@ -58,12 +61,13 @@ def one_line_exit(monkeypatch, capsys, module, *args) -> str:
         ),
         (
             "lit.noise.rest_scale=nan",
-            "lit.noise.rest_scale must be a factor in (0, 1] (1: full noise at rest), got nan "
-            "(the default: lit.noise.rest_scale=0.05)",
+            "lit.noise.rest_scale must be a number in (0, 1] (a factor; 1: full noise at rest), "
+            "got nan (the default: lit.noise.rest_scale=0.05)",
         ),
         (
             "trainer.max_epochs=1.5",
-            "trainer.max_epochs must be a whole number (>= 1; -1: no limit), got 1.5",
+            "trainer.max_epochs must be a whole number >= 1 or -1 or null (-1 or null: no limit), "
+            "got 1.5 (e.g. trainer.max_epochs=10)",
         ),
     ],
 )

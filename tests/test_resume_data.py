@@ -10,8 +10,8 @@ import pytest
 from omegaconf import OmegaConf
 
 from physgnn.errors import ConfigError
-from physgnn.training.checks import check_run_dir
 from physgnn.training.datamodule import dataset_identity
+from physgnn.training.resume_checks import check_run_dir
 
 
 def dataset(folder: Path, seed: int) -> Path:

@@ -81,7 +81,7 @@ def test_a_run_without_end_is_one_line():
     decay = functools.partial(RunLengthDecay, decay_per_epoch=0.01, epochs=1)
     with pytest.raises(ConfigError, match="set trainer.max_epochs or trainer.max_steps"):
         rates(decay, SimpleNamespace(max_epochs=-1, max_steps=-1))
-    with pytest.raises(ConfigError, match="decay_per_epoch must be a number > 0"):
+    with pytest.raises(ConfigError, match=r"decay_per_epoch must be a number in \(0, 1000\)"):
         rates(functools.partial(RunLengthDecay, decay_per_epoch=0.0), trainer_of(compose_train([])))
     with pytest.raises(ConfigError, match=r"^lit.scheduler.epochs must be a whole number >= 1"):
         rates(functools.partial(RunLengthDecay, epochs=0), trainer_of(compose_train([])))

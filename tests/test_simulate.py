@@ -17,6 +17,7 @@ import physgnn.evaluation.simulate as S
 from physgnn import CONF_DIR, metrics
 from physgnn.cli import compose_config
 from physgnn.data.dataset import read_split
+from physgnn.evaluation import simulate_learned
 from physgnn.groundtruth.scenefile import scene_from_dict
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.rollout import rollout
@@ -55,7 +56,10 @@ def test_learned_rollout_from_the_same_start(scene_file, tmp_path, monkeypatch):
     monkeypatch.setattr(
         S,
         "learned",
-        lambda run, truth, steps, cache: (S.rollout_prediction(sim, truth), {"run": run}),
+        lambda run, truth, steps, cache: (
+            simulate_learned.rollout_prediction(sim, truth),
+            {"run": run},
+        ),
     )
     out = tmp_path / "out"
     args = [f"scene_file={scene_file}", f"out={out}", "run=R", "video=false"]
@@ -158,7 +162,8 @@ def test_missing_run_folder(scene_file, tmp_path, capsys):
 
 def test_constraints_wrap_the_learned_simulator_and_are_recorded(scene_file, tmp_path, monkeypatch):
     sim = learned(H=1, M=1, hidden=8, gravity_prior=True).eval()
-    monkeypatch.setattr(S, "load_run", lambda run_dir: (sim, None, {"checkpoint": "ck"}))
+    fake = (sim, None, {"checkpoint": "ck"})
+    monkeypatch.setattr(simulate_learned, "load_run", lambda run_dir: fake)
     out = tmp_path / "out"
     argv = [f"scene_file={scene_file}", f"out={out}", f"run={tmp_path}", "constraints=4"]
     result = S.run(compose_config("simulate", [*argv, "video=false"]))

@@ -21,6 +21,7 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn import CONF_DIR
 from physgnn.cli import compose_config
 from physgnn.errors import PhysgnnError
+from physgnn.overrides import parse_overrides
 from physgnn.training.layout import flat_layout
 
 BASELINE = "baseline"
@@ -130,7 +131,7 @@ def study_configs(sweeps: list[str]) -> list[Config]:
             changes |= {k: None for k in base if k not in flat}
             key = config_key(changes)
             config = configs.setdefault(key, Config(key, [] if not changes else overrides))
-            config.points[sweep] = " ".join(o.split("=", 1)[1] for o in overrides)
+            config.points[sweep] = " ".join(o.written for o in parse_overrides(overrides))
     ordered = sorted(configs.values(), key=lambda c: c.key != BASELINE)
     return ordered
 

@@ -16,6 +16,7 @@ import os
 from pathlib import Path
 
 from physgnn.errors import PhysgnnError
+from physgnn.overrides import parse_override
 from physgnn.training.layout import key_of_today
 
 # Statuses of a run whose result is in: trained to the budget (or stopped by the clock guard,
@@ -64,7 +65,7 @@ def study_key_of_today(key: str) -> str:
     today = [key_of_today(part) for part in parts]
     if today == parts:
         return key
-    return " ".join(sorted(today, key=lambda part: part.partition("=")[0]))
+    return " ".join(sorted(today, key=lambda part: parse_override(part).written_key))
 
 
 def record_id(record: dict) -> tuple:

@@ -19,6 +19,7 @@ from physgnn.cli import compose_config
 from physgnn.data.dataset import is_dataset
 from physgnn.errors import PhysgnnError
 from physgnn.groundtruth.generate import generate
+from physgnn.overrides import given
 from physgnn.training.layout import key_of_today
 
 
@@ -63,8 +64,8 @@ def job_spec(job: Job, cfg: DictConfig, common: list[str], rev: str | None, budg
 
 def _cost(overrides: list[str]) -> float:
     """Relative cost of a configuration: the network's share grows with M (baseline 1)."""
-    today = [key_of_today(o) for o in overrides]  # a record's of the flat layout too
-    m = next((int(o.split("=")[1]) for o in today if o.startswith("model.network.M=")), 5)
+    today = given([key_of_today(o) for o in overrides])  # a record's of the flat layout too
+    m = int(today["model.network.M"].value) if "model.network.M" in today else 5
     m = 1 if "+variant=m1" in overrides else m
     return 0.3 + 0.7 * m / 5
 

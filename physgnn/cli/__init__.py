@@ -65,6 +65,7 @@ from physgnn.errors import (
     sigterm_interrupts,
 )
 from physgnn.files import write_text
+from physgnn.overrides import given
 
 # A sweep job's folder name (conf/train.yaml: hydra.sweep.subdir) is its overrides: at most
 # this many characters (a file name holds 255 bytes), and a path in one (``data.dir=/a/b``)
@@ -239,9 +240,9 @@ def run_dir_is_hydras(argv: list[str]) -> list[str]:
     """``argv`` with ``hydra.run.dir=X`` added where ``run_dir=X`` is given without it: Hydra's
     own folder is then the run's (else it makes a stray ``runs/<experiment>/<now>/`` with an
     empty log beside the run being trained)."""
-    given = dict(arg.lstrip("+").split("=", 1) for arg in argv if "=" in arg)
-    if "run_dir" in given and "hydra.run.dir" not in given:
-        return [*argv, f"hydra.run.dir={given['run_dir']}"]
+    keys = given(argv)
+    if "run_dir" in keys and "hydra.run.dir" not in keys:
+        return [*argv, f"hydra.run.dir={keys['run_dir'].written}"]
     return argv
 
 

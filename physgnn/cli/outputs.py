@@ -9,6 +9,7 @@ import shutil
 import sys
 
 from physgnn.errors import ConfigError
+from physgnn.overrides import given as given_overrides
 
 # Folders Hydra makes (or a command writes under) before any command runs; a mistake in one
 # would be Hydra's traceback.
@@ -42,11 +43,10 @@ def check_outputs_env(argv: list[str] | None = None, own: str | None = "paths.ou
             f"PHYSGNN_OUTPUTS={outputs} is a file: set it to a folder (physgnn writes its data, "
             "runs and reports there), or unset it to write into ./outputs"
         )
-    given = dict(
-        arg.lstrip("+").partition("=")[::2]
-        for arg in (sys.argv[1:] if argv is None else argv)
-        if "=" in arg
-    )
+    given = {
+        key: str(o.value) if o.value is not None else ""
+        for key, o in given_overrides(sys.argv[1:] if argv is None else argv).items()
+    }
     value = given.get("paths.outputs")
     if value and os.path.exists(value) and not os.path.isdir(value):
         raise ConfigError(

@@ -27,8 +27,7 @@ from pathlib import Path
 
 from hydra.compose import compose
 from hydra.core.global_hydra import GlobalHydra
-from hydra.core.override_parser.overrides_parser import OverridesParser
-from hydra.errors import HydraException, MissingConfigException, OverrideParseException
+from hydra.errors import HydraException, MissingConfigException
 from hydra.initialize import initialize_config_dir
 from hydra.utils import get_object
 from omegaconf import DictConfig, OmegaConf
@@ -36,6 +35,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
 from physgnn.errors import ConfigError
+from physgnn.overrides import key_of, parse_overrides
 
 # Sections whose keys go on to another program as they are (submitit's executor parameters).
 OPEN_SECTIONS = ("launcher.slurm",)
@@ -47,8 +47,7 @@ def check_added_keys(cfg: DictConfig, overrides: list[str], command: str) -> Non
     for override in overrides:
         if not override.startswith("+") or override.startswith("++"):
             continue
-        key = override[1:].partition("=")[0]
-        problem = _unread(cfg, key, command)
+        problem = _unread(cfg, key_of(override), command)
         if problem:
             raise ConfigError(f"{override}: {problem}")
 
@@ -56,19 +55,7 @@ def check_added_keys(cfg: DictConfig, overrides: list[str], command: str) -> Non
 def check_quoting(argv: list[str]) -> None:
     """An override holding a character Hydra's grammar does not take unquoted (a path with
     ``é``: Hydra says only ``LexerNoViableAltException``) is one line with the quoting fix."""
-    for arg in argv:
-        if arg.startswith("-") or "=" not in arg or arg.isascii():
-            continue
-        try:
-            OverridesParser.create().parse_overrides([arg])
-        except OverrideParseException:
-            key, _, value = arg.partition("=")
-            odd = next(c for c in arg if not c.isascii())
-            quoted = f"'{key}=\"{value}\"'"
-            raise ConfigError(
-                f"{key}: Hydra reads a value with {odd!r} only in quotes: write {quoted} (the "
-                "shell's quotes around Hydra's)"
-            ) from None
+    parse_overrides([arg for arg in argv if not arg.isascii()])
 
 
 def compose_config(name: str, overrides: list[str] | None = None) -> DictConfig:

@@ -13,25 +13,19 @@ import sys
 import traceback
 from pathlib import Path
 
-from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.experimental.callback import Callback
 from hydra.utils import get_method
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.cli import JOB_ERROR, USER_ERRORS, disk_error, disk_problem, fail
+from physgnn.overrides import parse_overrides
 
 
 def swept_values(config: DictConfig) -> dict[str, list]:
     """The values each key of a sweep's command line took (``shard=range(0,3)`` -> [0, 1, 2],
     ``data=tiny`` -> ['tiny'])."""
     task = [str(o) for o in OmegaConf.select(config, "hydra.overrides.task") or []]
-    values = {}
-    for override in OverridesParser.create().parse_overrides(task):
-        sweep = override.is_sweep_override()
-        values[override.key_or_group] = (
-            list(override.sweep_iterator()) if sweep else [override.value()]
-        )
-    return values
+    return {o.key: list(o.values) for o in parse_overrides(task)}
 
 
 def failed_jobs(sweep_dir: Path) -> dict[str, str]:

@@ -23,7 +23,7 @@ from pathlib import Path, PurePosixPath
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.data.dataset import write_split
-from physgnn.errors import ConfigError, check_flag
+from physgnn.errors import ConfigError
 from physgnn.evaluation import onestep, rerun_log, same_work
 from physgnn.evaluation.bounce import bounce_rows
 from physgnn.evaluation.freefall import freefall_rows
@@ -50,6 +50,7 @@ from physgnn.evaluation.runs import (
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.files import claim_folder, staged_outputs
 from physgnn.metrics import check_tolerance
+from physgnn.ranges import FLAG, whole
 from physgnn.report import bounce, figures, freefall, invariance, stability, table
 from physgnn.report import onestep as onestep_report
 from physgnn.report.document import write_report
@@ -57,6 +58,7 @@ from physgnn.report.document import write_report
 # What an eval writes into its report_dir (replaced whole by the next eval).
 # The eval's switches: true or false (``save_rollouts=maybe`` is refused, not taken as true).
 FLAGS = ("overwrite", "videos", "save_rollouts", "sleeping_compare", "stability")
+MAX_FRAMES = whole(2, also=(None,), what="whole trajectories", example=100, exact=True)
 REPORT_OUTPUTS = (
     "report.md",
     "metrics.csv",
@@ -95,16 +97,10 @@ def check_eval_values(cfg: DictConfig) -> None:
     """``max_frames`` is null or a whole number >= 2 (a rollout needs frames to predict);
     ``tol`` a number >= 0; each switch true or false; ``pybullet`` null or its substep
     counts and processes."""
-    frames = cfg.get("max_frames")
-    if frames is not None and (
-        not isinstance(frames, int) or isinstance(frames, bool) or frames < 2
-    ):
-        raise ConfigError(
-            f"max_frames must be a whole number >= 2 or null (whole trajectories), got {frames!r}"
-        )
+    MAX_FRAMES.check("max_frames", cfg.get("max_frames"))
     check_tolerance(cfg.get("tol"), ConfigError)
     for key in FLAGS:
-        check_flag(key, cfg.get(key))
+        FLAG.check(key, cfg.get(key))
     same_work.check_settings(cfg.get("pybullet"))
     onestep.check_settings(cfg.get("onestep"))
 

@@ -40,6 +40,7 @@ from physgnn.models.protocol import hooks_of, motion_of
 from physgnn.physics import integrator
 from physgnn.physics.scene import EFFECT_NAMES, GRAVITY
 from physgnn.physics.trajectory import Trajectory, scene_at
+from physgnn.ranges import whole
 from physgnn.report.table import ENGINE
 
 ROTATION = EFFECT_NAMES.index("rotation")
@@ -53,11 +54,9 @@ def check_settings(cfg: DictConfig | None) -> tuple[list[str], int | None] | Non
     splits = OmegaConf.to_container(cfg.splits) if cfg.get("splits") is not None else None
     if not isinstance(splits, list) or not splits or not set(splits) <= set(SPLITS):
         raise ConfigError(f"onestep.splits must be a list of {list(SPLITS)}, got {splits!r}")
-    frames = cfg.get("frames")
-    if frames is not None and (
-        isinstance(frames, bool) or not isinstance(frames, int) or frames < 1
-    ):
-        raise ConfigError(f"onestep.frames must be a whole number >= 1 or null, got {frames!r}")
+    frames = whole(1, also=(None,), what="null: every frame").check(
+        "onestep.frames", cfg.get("frames")
+    )
     return list(dict.fromkeys(splits)), frames
 
 

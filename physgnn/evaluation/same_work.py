@@ -27,6 +27,7 @@ from physgnn.evaluation.rollouts import metrics_row, progress
 from physgnn.evaluation.runs import SPLITS, RunInfo
 from physgnn.groundtruth.engine import simulate
 from physgnn.physics.trajectory import Trajectory, continued, scene_at
+from physgnn.ranges import whole
 from physgnn.report.table import ENGINE
 
 
@@ -107,11 +108,7 @@ def check_settings(cfg: DictConfig | None) -> tuple[list[int], int] | None:
             if hasattr(os, "sched_getaffinity")
             else os.cpu_count() or 1
         )
-    if isinstance(processes, bool) or not isinstance(processes, int) or processes < 1:
-        raise ConfigError(
-            f"pybullet.processes must be a whole number >= 1 or null (one per core), "
-            f"got {processes!r}"
-        )
+    processes = whole(1, also=(None,), what="one per core").check("pybullet.processes", processes)
     return [int(k) for k in substeps], processes
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 
-from physgnn.errors import check_number, check_whole
+from physgnn.ranges import number, whole
 
 
 def _diameter(c: Mapping) -> float:
@@ -39,11 +39,12 @@ def check_family(c: Mapping, key_of: Callable[[str], str]) -> None:
     naming ``key_of(key)`` (``data.scene.side_min``), the least value and the one given."""
     for key, (least, what) in WHOLE.items():
         if key in c:
-            check_whole(key_of(key), c[key], int(least(c)), what)
+            whole(int(least(c)), what=what).check(key_of(key), c[key])
     for key, (least, what) in NUMBERS.items():
         if key in c:
             bound = least(c)
-            check_number(key_of(key), c[key], bound if isinstance(bound, int | float) else 0, what)
+            least_ = bound if isinstance(bound, int | float) else 0
+            number(least_, what=what).check(key_of(key), c[key])
 
 
 def check_preset_scenes(scene: Mapping, fit: Mapping | None, ood: Mapping | None) -> None:

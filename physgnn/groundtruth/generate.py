@@ -19,7 +19,6 @@ from pathlib import Path
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.errors import check_seed
 from physgnn.groundtruth.engine import as_stored
 from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.folders import FILES, build_folder, check_target
@@ -37,6 +36,7 @@ from physgnn.groundtruth.shards import (
     write_shard,
 )
 from physgnn.locks import exclusive
+from physgnn.ranges import check_seed
 
 __all__ = ["FILES", "SPLITS", "after_sweep", "generate", "plan", "trajectory_seed", "written"]
 

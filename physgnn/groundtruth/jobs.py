@@ -15,12 +15,13 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from physgnn.errors import ConfigError, forked_worker
+from physgnn.errors import forked_worker
 from physgnn.groundtruth.engine import as_stored, simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.family_ranges import check_preset_scenes
 from physgnn.physics.scene import SceneError
 from physgnn.physics.trajectory import Trajectory
+from physgnn.ranges import whole
 
 SPLITS = ("train", "val", "test", "ood")
 
@@ -117,6 +118,4 @@ def _indexed(item: tuple[int, Job]) -> tuple[int, Trajectory]:
 
 
 def check_workers(workers) -> int:
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ConfigError(f"workers must be a whole number >= 1 (processes), got {workers!r}")
-    return workers
+    return whole(1, what="processes").check("workers", workers)

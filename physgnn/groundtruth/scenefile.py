@@ -30,7 +30,6 @@ import numpy as np
 import yaml
 
 from physgnn import SCENES_DIR
-from physgnn.errors import check_whole
 from physgnn.files import write_text
 from physgnn.groundtruth.layouts import check_above_ground, check_clear_of_planes, check_no_overlap
 from physgnn.groundtruth.scene_schema import MATERIAL, PLANE, SCHEMA, SPHERE
@@ -55,9 +54,10 @@ from physgnn.physics.scene import (
     as_float32,
     ground_plane,
 )
+from physgnn.ranges import whole
 
 DEFAULT_MATERIAL = "default"
-FRAMES = "frames to simulate, the first is the start"
+FRAMES = whole(2, what="frames to simulate, the first is the start")
 
 
 def _materials(where: str, d) -> tuple[list[str], np.ndarray]:
@@ -173,7 +173,9 @@ def scene_from_dict(d, where: str = "scene") -> Scene:
         plane_materials=_plane_materials([ground_e] + [e for *_, e in planes]),
         materials=as_float32(materials),
         dt=number(f"{where}: dt", d.get("dt", 0.1), positive=True),
-        n_frames=check_whole(f"{where}: frames", d.get("frames", 100), 2, FRAMES, SceneError),
+        n_frames=FRAMES.check(
+            f"{where}: frames", d.get("frames", 100), "e.g. frames: 100", SceneError
+        ),
         effects=effects,
         gravity=tuple(vector(f"{where}: gravity", d.get("gravity", list(GRAVITY)), 3)),
     )

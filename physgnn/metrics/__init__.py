@@ -20,7 +20,7 @@ one :class:`MetricError` line instead of returning a silent NaN. Conventions:
 - accuracy metrics are averaged over all frames given (seed frames included, as the report).
 """
 
-from physgnn.metrics.checks import MetricError, check_tolerance
+from physgnn.metrics.checks import TOLERANCE, MetricError, check_tolerance
 from physgnn.metrics.penetration import (
     PENETRATION_KEYS,
     max_penetration,
@@ -46,6 +46,7 @@ from physgnn.metrics.trajectory import trajectory_metrics
 
 __all__ = [
     "PENETRATION_KEYS",
+    "TOLERANCE",
     "MetricError",
     "chamfer",
     "check_tolerance",

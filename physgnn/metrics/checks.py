@@ -4,10 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from physgnn.errors import PhysgnnError, check_number
+from physgnn.errors import PhysgnnError
+from physgnn.ranges import number
 
 # Above this many pair distances (T·N·M) the per-frame k-d tree paths are used.
 BRUTE_FORCE_MAX = 2_000_000
+
+
+# The penetration tolerance, a fraction of the diameter (make eval, simulate, api.score)
+TOLERANCE = number(0, what="a fraction of the diameter; 0: any overlap counts", example=0)
 
 
 class MetricError(PhysgnnError, ValueError):
@@ -17,7 +22,7 @@ class MetricError(PhysgnnError, ValueError):
 def check_tolerance(tol, error: type = MetricError) -> float:
     """The penetration tolerance ``tol``: a finite number >= 0, a fraction of the diameter
     (``make eval``, ``simulate`` and ``api.score`` alike); else one line naming ``tol``."""
-    return check_number("tol", tol, 0, "a fraction of the diameter; 0: any overlap counts", error)
+    return float(TOLERANCE.check("tol", tol, error=error))
 
 
 def frames(x, name: str, width: int = 3) -> np.ndarray:

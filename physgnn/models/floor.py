@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import torch
 
-from physgnn.graph.rules import ballistic_velocity
 from physgnn.graph.edges import PS
+from physgnn.graph.rules import ballistic_velocity
 
 RIM = 1e-4  # m: a closest point further than this from the foot of the normal is on the rim
 

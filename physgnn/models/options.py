@@ -2,32 +2,16 @@
 frozen dataclass: the one source of its defaults, units and ranges. Each is mirrored by one
 node of ``conf/model/baseline.yaml`` (``model.inputs``, ``model.contacts``: its keys are the
 fields, Hydra builds it from its ``_target_``); a value out of range is refused when the group
-is made, in one line naming the key (:class:`~physgnn.errors.ConfigError`, a ``ValueError``).
+is made (:func:`physgnn.ranges.check_fields`: a field's range is its metadata), in one line
+naming the key (:class:`~physgnn.errors.ConfigError`, a ``ValueError``).
 """
 
 from __future__ import annotations
 
-import math
-import numbers
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import ClassVar
 
-from physgnn.errors import ConfigError, check_flag, check_whole
-
-
-def _check_flags(group) -> None:
-    """Every ``bool`` field of ``group`` is true or false."""
-    for field in fields(group):
-        if field.type in ("bool", bool):
-            check_flag(f"{group.NODE}.{field.name}", getattr(group, field.name))
-
-
-def _check_positive(group, key: str, unit: str) -> None:
-    """The field ``key`` of ``group`` is a finite number > 0."""
-    value = getattr(group, key)
-    number = isinstance(value, numbers.Real) and not isinstance(value, bool)
-    if not number or not math.isfinite(value) or value <= 0:
-        raise ConfigError(f"{group.NODE}.{key} must be a number > 0 ({unit}), got {value!r}")
+from physgnn.ranges import check_fields, number, ranged, whole
 
 
 @dataclass(frozen=True)
@@ -47,7 +31,7 @@ class ModelInputs:
 
     NODE: ClassVar[str] = "model.inputs"
     boundary_features: bool = False
-    boundary_radius: float = 2.0
+    boundary_radius: float = ranged(number(0, above=True, what="m"), default=2.0)
     contact_features: bool = True
     material_features: bool = True
     relative_pairs: bool = True
@@ -56,8 +40,7 @@ class ModelInputs:
     engine_state: bool = True
 
     def __post_init__(self) -> None:
-        _check_flags(self)
-        _check_positive(self, "boundary_radius", "m")
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -80,16 +63,14 @@ class ContactHandling:
 
     NODE: ClassVar[str] = "model.contacts"
     gravity_prior: bool = True
-    contact_passes: int = 2
+    contact_passes: int = ranged(whole(0, what="rebuilds; 0: one pass"), default=2)
     pair_impulses: bool = True
     rest_decision: bool = True
-    rest_speed: float = 0.01
+    rest_speed: float = ranged(number(0, above=True, what="m/s"), default=0.01)
     recent_contact: bool = False
     contact_memory: bool = False
     plane_floor: bool = True
     plane_newton: bool = True
 
     def __post_init__(self) -> None:
-        _check_flags(self)
-        check_whole(f"{self.NODE}.contact_passes", self.contact_passes, 0, "rebuilds; 0: one pass")
-        _check_positive(self, "rest_speed", "m/s")
+        check_fields(self)

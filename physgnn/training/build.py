@@ -22,6 +22,7 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import InterpolationResolutionError
 
 from physgnn.errors import ConfigError
+from physgnn.ranges import whole
 from physgnn.training.checkpoint_io import AtomicCheckpointIO
 from physgnn.training.checks import (
     check_arguments,
@@ -112,8 +113,7 @@ def check_val_rollout(cfg: DictConfig) -> None:
             ) from None
         if key == "max_frames" and value is None:
             continue
-        if not isinstance(value, int) or isinstance(value, bool) or value < least[key]:
-            raise ConfigError(f"{name} must be a whole number >= {least[key]}, got {value!r}")
+        whole(least[key], exact=True).check(name, value)
 
 
 def check_trainer(cfg: DictConfig) -> None:

@@ -6,7 +6,7 @@ share the default ``runs/<experiment>/<time>`` folder; or one ``run_dir=`` given
 rewrote the first run's config, and the finished run no longer loaded. :class:`ClaimRunDir`, a
 Hydra callback (``hydra.callbacks.claim_run_dir`` in conf/train.yaml), runs before those
 writes: it holds ``<run_dir>.lock`` (:func:`physgnn.locks.exclusive`) until the run ends and
-checks the folder (:func:`~physgnn.training.checks.check_run_dir`), so a refused training
+checks the folder (:func:`~physgnn.training.resume_checks.check_run_dir`), so a refused training
 writes nothing there. DDP's other processes leave it to the first.
 """
 
@@ -23,7 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import PhysgnnError, one_line
 from physgnn.locks import exclusive
-from physgnn.training.checks import check_run_dir
+from physgnn.training.resume_checks import check_run_dir
 
 # The lock of this process's run: released at the run's end, or when the process exits.
 _held = ExitStack()

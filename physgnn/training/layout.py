@@ -22,6 +22,7 @@ from __future__ import annotations
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
+from physgnn.overrides import parse_override, parse_overrides
 
 # Model targets of runs trained before the package was split into subpackages.
 MOVED_TARGETS = {"physgnn.simulator.LearnedSimulator": "physgnn.models.learned.LearnedSimulator"}
@@ -170,10 +171,16 @@ def key_of_today(key: str) -> str:
     """``"model.M=1"`` → ``"model.network.M=1"``, ``"lit.noise_std=0"`` → ``"lit.noise.std=0"``:
     a dotted key (or ``key=value``) of the flat layout in today's; any other key comes back as
     it is."""
-    name, sep, value = key.partition("=")
+    if "=" not in key:
+        return _name_of_today(key)
+    given = parse_override(key)
+    return f"{given.prefix}{_name_of_today(given.key)}={given.written}"
+
+
+def _name_of_today(name: str) -> str:
     if name.startswith("model.") and name.count(".") == 1 and name[6:] in FLAT_KEYS:
         name = "model." + ".".join(FLAT_KEYS[name[6:]])
-    return (renamed_key(name) or name) + sep + value
+    return renamed_key(name) or name
 
 
 def flat_layout(keys: dict) -> dict:
@@ -244,11 +251,12 @@ def check_renamed(argv: list[str]) -> None:
     """A flat recipe or simulator key of an earlier physgnn on a command line
     (``lit.noise_std=0.01``, ``model.contact_passes=0``, a ``final_lr_factor``) is refused in
     one line naming today's key."""
-    for arg in argv:
-        name, sep, value = arg.lstrip("+~").partition("=")
+    for given in parse_overrides(argv):
+        name, value = given.key, given.written
         new = renamed_key(name)
         if new:
-            raise ConfigError(f"{name} is now {new}: write {new}{sep}{value}")
+            fix = new if given.prefix == "~" else f"{new}={value}"
+            raise ConfigError(f"{name} is now {new}: write {fix}")
         if name == "lit.scheduler.final_lr_factor":
             raise ConfigError(
                 f"{name} is now lit.scheduler.decay_per_epoch ** lit.scheduler.epochs: write "

@@ -24,9 +24,19 @@ from omegaconf import DictConfig, OmegaConf
 from torch.optim.lr_scheduler import ExponentialLR
 
 from physgnn.errors import ConfigError
+from physgnn.ranges import number, whole
 
 # The default's decay: 0.97 per epoch over its 90 epochs (÷15.5 over the run)
 DECAY_PER_EPOCH, EPOCHS = 0.97, 90
+# A factor per epoch: at 0 the rate vanishes, below it turns negative (gradient ascent, and the
+# run still "finishes")
+DECAY = number(
+    0, 1e3, above=True, below=True, what="lr x decay_per_epoch^epochs at the end; 1 keeps the rate"
+)
+EPOCHS_RANGE = whole(
+    1, what="the run length at which the rate falls by decay_per_epoch each epoch", exact=True
+)
+GAMMA = number(0, 1e3, above=True, below=True, what="lr x gamma^epoch; 1 keeps the rate", example=1)
 
 
 class RunLengthDecay(ExponentialLR):
@@ -112,22 +122,13 @@ def lr_scheduler(factory, optimizer, trainer) -> dict:
 def check_decay(decay_per_epoch, epochs) -> None:
     """``decay_per_epoch`` a number > 0 (at 0 the rate vanishes, below it turns negative:
     gradient ascent, and the run still "finishes") and ``epochs`` a whole number >= 1."""
-    if (
-        not isinstance(decay_per_epoch, int | float)
-        or isinstance(decay_per_epoch, bool)
-        or not (0 < decay_per_epoch < 1e3)
-    ):
-        raise ConfigError(
-            f"lit.scheduler.decay_per_epoch must be a number > 0 (lr x decay_per_epoch^epochs "
-            f"at the end of the run; 1 keeps the rate), got {decay_per_epoch!r} (the default: "
-            f"lit.scheduler.decay_per_epoch={DECAY_PER_EPOCH})"
-        )
-    if not isinstance(epochs, int) or isinstance(epochs, bool) or epochs < 1:
-        raise ConfigError(
-            f"lit.scheduler.epochs must be a whole number >= 1 (the run length at which the "
-            f"rate falls by decay_per_epoch each epoch), got {epochs!r} (the default: "
-            f"lit.scheduler.epochs={EPOCHS})"
-        )
+    key = "lit.scheduler"
+    DECAY.check(
+        f"{key}.decay_per_epoch",
+        decay_per_epoch,
+        f"the default: {key}.decay_per_epoch={DECAY_PER_EPOCH}",
+    )
+    EPOCHS_RANGE.check(f"{key}.epochs", epochs, f"the default: {key}.epochs={EPOCHS}")
 
 
 def check_scheduler(lit_cfg: DictConfig | None) -> None:
@@ -139,11 +140,5 @@ def check_scheduler(lit_cfg: DictConfig | None) -> None:
         return
     if "decay_per_epoch" in node or "epochs" in node:
         check_decay(node.get("decay_per_epoch", DECAY_PER_EPOCH), node.get("epochs", EPOCHS))
-    gamma = node.get("gamma")
-    if gamma is not None and (
-        not isinstance(gamma, int | float) or isinstance(gamma, bool) or not 0 < gamma < 1e3
-    ):
-        raise ConfigError(
-            f"lit.scheduler.gamma must be a number > 0 (lr x gamma^epoch; 1 keeps the rate), "
-            f"got {gamma!r}"
-        )
+    if node.get("gamma") is not None:
+        GAMMA.check("lit.scheduler.gamma", node.get("gamma"))

@@ -22,6 +22,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import PhysgnnError, one_line
 from physgnn.files import write_json
+from physgnn.overrides import parse_overrides
 from physgnn.training.datamodule import check_training_data
 from physgnn.training.runs import RUN_JSON, read_run_json
 
@@ -89,10 +90,8 @@ def swept_keys(config: DictConfig) -> list[str]:
     """The keys a sweep varies: ``hydra.sweeper.params`` and command-line overrides with
     several values (``model.network.M=1,2``, ``range(...)``, ``choice(...)``)."""
     keys = [str(k) for k in (OmegaConf.select(config, "hydra.sweeper.params") or {})]
-    for override in OmegaConf.select(config, "hydra.overrides.task") or []:
-        key, _, value = str(override).partition("=")
-        if "," in value or "(" in value:
-            keys.append(key)
+    task = OmegaConf.select(config, "hydra.overrides.task") or []
+    keys += [o.key for o in parse_overrides(list(task)) if o.sweep]
     return keys
 
 

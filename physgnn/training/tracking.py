@@ -20,6 +20,8 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from physgnn.overrides import key_of, parse_overrides
+
 # wandb shows 128 characters of a name; a file name holds 255
 NAME_CHARS = 120
 
@@ -27,9 +29,9 @@ NAME_CHARS = 120
 def run_name(experiment: str, overrides: list[str] = ()) -> str:
     """``experiment`` and ``overrides`` (``key=value``) as one readable, file-safe name."""
     parts = [str(experiment)]
-    for override in overrides:
-        key, sep, value = override.lstrip("+~").partition("=")
-        parts.append(".".join(key.split(".")[-2:]) + sep + value)
+    for given in parse_overrides(list(overrides)):
+        short = ".".join(given.key.split(".")[-2:])
+        parts.append(short if given.prefix == "~" else f"{short}={given.written}")
     name = re.sub(r"[^A-Za-z0-9._=+-]+", "-", "_".join(parts))
     if len(name) <= NAME_CHARS:
         return name
@@ -43,7 +45,7 @@ def job_overrides() -> list[str]:
         return []
     hydra = HydraConfig.get()
     left_out = set(OmegaConf.select(hydra, "job.config.override_dirname.exclude_keys") or [])
-    return [o for o in hydra.overrides.task if o.lstrip("+~").split("=")[0] not in left_out]
+    return [o for o in hydra.overrides.task if key_of(o) not in left_out]
 
 
 def _job_run_name(experiment: str) -> str:

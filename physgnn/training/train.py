@@ -24,14 +24,15 @@ from lightning.pytorch.callbacks import Timer
 from lightning.pytorch.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.errors import ConfigError, Interrupted, check_seed, one_line, signal_name
+from physgnn.errors import ConfigError, Interrupted, one_line, signal_name
 from physgnn.files import write_text
+from physgnn.ranges import check_seed
 from physgnn.training.build import build
-from physgnn.training.checks import check_checkpoint, check_run_dir, resume_from
 from physgnn.training.datamodule import dataset_identity
 from physgnn.training.lit import NonFiniteLossError
 from physgnn.training.progress import RunProgress, StopOnSignal, StopTraining, save_last
 from physgnn.training.quiet import quiet_lightning
+from physgnn.training.resume_checks import check_checkpoint, check_run_dir, resume_from
 from physgnn.training.runlog import run_log
 from physgnn.training.runs import write_run_json
 
