@@ -19,6 +19,7 @@ from truthkit import SCENE
 
 import physgnn.evaluation.runs as R
 import physgnn.evaluation.simulate as S
+import physgnn.evaluation.simulate_learned as SL
 from physgnn.cli import compose_config
 from physgnn.data.dataset import read_split
 from physgnn.groundtruth.scenefile import scene_from_dict
@@ -41,7 +42,7 @@ def test_simulate_compiled_rolls_out_as_eager_and_says_what_compiling_cost(
 ):
     monkeypatch.setenv("TORCHINDUCTOR_CACHE_DIR", str(tmp_path / "before"))
     fast = functools.partial(compile_simulator, backend="aot_eager")
-    monkeypatch.setattr(S, "compile_simulator", fast)
+    monkeypatch.setattr(SL, "compile_simulator", fast)
     scene, out = tmp_path / "tiny.yaml", tmp_path / "out"
     scene.write_text(SCENE)
     args = [f"scene_file={scene}", f"run={tiny_run}", f"out={out}", "video=false", "frames=8"]
