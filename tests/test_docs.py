@@ -179,3 +179,30 @@ def test_mkdocs_build_strict(tmp_path):
     )
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     assert (tmp_path / "site" / "index.html").exists()
+
+
+def test_the_headline_results_page_measures_todays_default():
+    # docs/index.md's headline page names the fingerprint of the default it measures
+    # (physgnn.ablation.jobs.current_fingerprint): a new default fails here until its page is
+    # the headline
+    from physgnn.ablation.jobs import current_fingerprint
+
+    index = (ROOT / "docs/index.md").read_text(encoding="utf-8")
+    target = re.search(r"\[the default model's results\]\(([^)]+)\)", index)
+    assert target, "docs/index.md names no headline results page"
+    page = (ROOT / "docs" / target.group(1)).read_text(encoding="utf-8")
+    assert current_fingerprint() in page
+
+
+def test_the_module_cap_the_docs_state_is_the_one_the_architecture_test_holds():
+    from test_architecture import MAX_FUNCTION_LINES, MAX_MODULE_LINES
+
+    rule = re.search(
+        r"^6\. Modules of at most (\d+) lines, functions of at most (\d+)\.",
+        (ROOT / "docs/ARCHITECTURE.md").read_text(encoding="utf-8"),
+        re.M,
+    )
+    assert rule and (int(rule.group(1)), int(rule.group(2))) == (
+        MAX_MODULE_LINES,
+        MAX_FUNCTION_LINES,
+    )
