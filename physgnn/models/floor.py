@@ -49,12 +49,18 @@ def contact_directions(graph, radius: torch.Tensor) -> tuple[torch.Tensor, torch
 
 
 def plane_floor(
-    state, graph, mean: torch.Tensor, end: torch.Tensor | None = None, bounce: bool = False
+    state,
+    graph,
+    mean: torch.Tensor,
+    end: torch.Tensor | None = None,
+    bounce: bool = False,
+    contacts: tuple[torch.Tensor, torch.Tensor] | None = None,
 ):
     """``(mean, end)`` after the floor of every ps edge (module doc): ``mean [N, 3]`` the
     frame's move ū, ``end [N, 3]`` the end velocity (None: a finite-difference state, only the
-    move); ``bounce``: where the floor acted, add :func:`free_bounce`'s rebound."""
-    direction, clearance, deficit = _deficits(state, graph, mean)
+    move); ``bounce``: where the floor acted, add :func:`free_bounce`'s rebound; ``contacts``:
+    :func:`contact_directions` of the graph, where the caller has them already."""
+    direction, clearance, deficit = _deficits(state, graph, mean, contacts)
     sphere = graph.ps_index[1]
     dt = state.scene_dt[sphere]
     mean = mean.index_add(0, sphere, deficit[:, None] * direction)
@@ -69,18 +75,18 @@ def plane_floor(
     return mean, end.index_add(0, sphere, approach[:, None] * direction)
 
 
-def pressed(state, graph, mean: torch.Tensor) -> torch.Tensor:
+def pressed(state, graph, mean: torch.Tensor, contacts=None) -> torch.Tensor:
     """``[N]`` bool: the spheres whose move ``mean [N, 3]`` some plane's floor stops (the
     spheres a plane touches in the frame: resting, rolling, landing)."""
-    deficit = _deficits(state, graph, mean)[2]
+    deficit = _deficits(state, graph, mean, contacts)[2]
     acted = (deficit > 0).to(mean.dtype)
     return mean.new_zeros(mean.shape[0]).index_add_(0, graph.ps_index[1], acted) > 0
 
 
-def _deficits(state, graph, mean):
+def _deficits(state, graph, mean, contacts=None):
     """``(d [F, 3], c [F], deficit [F])``: each ps edge's contact direction and clearance and
     the speed along ``d`` that the floor adds to ``mean`` (0 where the move does not cross)."""
-    direction, clearance = contact_directions(graph, state.radius)
+    direction, clearance = contacts or contact_directions(graph, state.radius)
     sphere = graph.ps_index[1]
     limit = -clearance.clamp_min(0) / state.scene_dt[sphere]
     deficit = torch.relu(limit - (mean[sphere] * direction).sum(1))

@@ -26,7 +26,7 @@ from __future__ import annotations
 import torch
 
 from physgnn.graph.rules import ballistic_velocity
-from physgnn.models.floor import plane_floor, pressed
+from physgnn.models.floor import contact_directions, plane_floor, pressed
 from physgnn.models.outputs import PAIR, regression
 
 INERTIA_FACTOR = 0.4  # I = 2/5 m r² of a solid sphere
@@ -88,11 +88,13 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
         dvel, dang = pair_changes(state, graph.pp_index, pair_out[:half, columns], *scales, weight)
         changes.append([dvel + share * fall, dang])
     newton = sim.contacts.plane_floor and sim.contacts.plane_newton
+    # the ps edges' contact directions and clearances, once for every floor of the pass
+    contacts = contact_directions(graph, state.radius) if sim.contacts.plane_floor else None
     if newton:  # the node decoder's own change only where a plane touches the sphere
         vel = state.vel[:, 0]
-        own = own * pressed(state, graph, vel + changes[-1][0])[:, None].to(own.dtype)
+        own = own * pressed(state, graph, vel + changes[-1][0], contacts)[:, None].to(own.dtype)
     if sim.contacts.plane_floor:
-        floored(state, graph, changes, sim.contacts.plane_newton)
+        floored(state, graph, changes, sim.contacts.plane_newton, contacts)
     parts = []
     for (prefix, _), (dvel, dang) in zip(motions, changes, strict=True):
         own_vel = outputs.take(node_out, f"delta_{prefix}vel") * sim.delta_vel_std
@@ -101,7 +103,7 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
         dang = dang + own * own_ang
         if newton and prefix == motions[-1][0]:  # the move: it may not cross a plane either
             vel = state.vel[:, 0]
-            dvel = plane_floor(state, graph, vel + dvel)[0] - vel
+            dvel = plane_floor(state, graph, vel + dvel, contacts=contacts)[0] - vel
         parts.append((dvel - sim.delta_vel_mean) / sim.delta_vel_std)
         parts.append((dang - sim.delta_angvel_mean) / sim.delta_angvel_std)
     rest = node_out[:, regression(outputs).width :]
@@ -122,14 +124,16 @@ def start_from_the_law(sim) -> None:
                 last.bias[rows] = 0.0
 
 
-def floored(state, graph, changes: list, bounce: bool = False) -> None:
+def floored(state, graph, changes: list, bounce: bool = False, contacts=None) -> None:
     """``changes`` (``[[Δv, Δω]]`` of the end velocity, then of the mean move with the engine
     state) after the planes' floor (:func:`~physgnn.models.floor.plane_floor`; ``bounce``: with
     the closed-form rebound of a sphere arriving in free flight), in place."""
     vel = state.vel[:, 0]
     if len(changes) == 1:  # a finite-difference state: its velocity is its move
-        mean, _ = plane_floor(state, graph, vel + changes[0][0])
+        mean, _ = plane_floor(state, graph, vel + changes[0][0], contacts=contacts)
         changes[0][0] = mean - vel
         return
-    mean, end = plane_floor(state, graph, vel + changes[1][0], vel + changes[0][0], bounce)
+    mean, end = plane_floor(
+        state, graph, vel + changes[1][0], vel + changes[0][0], bounce, contacts
+    )
     changes[0][0], changes[1][0] = end - vel, mean - vel
