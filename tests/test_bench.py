@@ -18,9 +18,10 @@ from physgnn.benchmark import crossover, interleaved
 from physgnn.benchmark import gpu as gpu_module
 from physgnn.benchmark import scenes as bench_scenes
 from physgnn.benchmark.gpu import gpu_section
-from physgnn.benchmark.learned import frame_states, make_simulator, time_learned
+from physgnn.benchmark.learned import frame_states, time_learned
 from physgnn.benchmark.profile import step_flops
-from physgnn.benchmark.run import BenchError, bench, quick_config
+from physgnn.benchmark.run import bench, quick_config
+from physgnn.benchmark.source import BenchError, make_simulator
 from physgnn.benchmark.targets import targets
 from physgnn.benchmark.training_tables import gpu_section as gpu_tables
 from physgnn.data.stats import compute_stats

@@ -9,14 +9,10 @@ import lightning as L
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from physgnn.benchmark.learned import (
-    frame_states,
-    make_simulator,
-    measuring_trainer,
-    time_cases,
-)
+from physgnn.benchmark.learned import frame_states, measuring_trainer, time_cases
 from physgnn.benchmark.profile import step_flops
 from physgnn.benchmark.scenes import bench_run, resting_scene, with_effects, without_walls
+from physgnn.benchmark.source import Source
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 from physgnn.groundtruth.engine import simulate
 from physgnn.models.profiling import StepTimer
@@ -83,11 +79,11 @@ def training_throughput(cfg: DictConfig, trajectories: list, stats: dict, matmul
     return out
 
 
-def activity_rows(cfg: DictConfig, runs: dict, stats: dict, rng) -> list[dict]:
-    """Baseline ms per frame for idle spheres, contacts and walls (one row per case), all timed
-    together (:func:`physgnn.benchmark.learned.time_cases`)."""
+def activity_rows(cfg: DictConfig, runs: dict, source: Source, rng) -> list[dict]:
+    """The trained model's (``source``) ms per frame for idle spheres, contacts and walls (one
+    row per case), all timed together (:func:`physgnn.benchmark.learned.time_cases`)."""
     a = cfg.activity
-    sim = make_simulator(cfg.model, {}, stats)
+    sim = source.simulator()
     base = runs[a.n_spheres]["traj"]
     engine = OmegaConf.to_container(cfg.engine)
     n_frames = sim.H + a.sleep_k + a.frames + 1
@@ -118,10 +114,11 @@ def activity_rows(cfg: DictConfig, runs: dict, stats: dict, rng) -> list[dict]:
     return rows
 
 
-def rollout_rows(cfg: DictConfig, runs: dict, stats: dict) -> list[dict]:
-    """The baseline through :func:`physgnn.rollout.rollout` (the path ``make eval`` times) on
-    the bench scenes of ``rollout_sizes``: FPS and ms per frame of each part."""
-    sim = make_simulator(cfg.model, {}, stats)
+def rollout_rows(cfg: DictConfig, runs: dict, source: Source) -> list[dict]:
+    """The trained model (``source``) through :func:`physgnn.rollout.rollout` (the path ``make
+    eval`` times) on the bench scenes of ``rollout_sizes``: FPS and ms per frame of each
+    part."""
+    sim = source.simulator()
     rows = []
     for n in cfg.rollout_sizes:
         traj = runs[n]["traj"]

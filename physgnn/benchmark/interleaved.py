@@ -115,7 +115,8 @@ def interleaved_table(result: dict) -> str:
 def interleaved_section(result: dict) -> list[str]:
     return [
         "## Learned against pybullet, taking turns",
-        "The learned configurations (random weights) and pybullet on the same frames of the "
+        "The learned configurations (their weights: the learned table's) and pybullet on the "
+        "same frames of the "
         "same scene in motion, in interleaved rounds (learned, pybullet, learned, …): a busy "
         "spell slows both halves of a round, so each round's ratio of learned FPS to "
         "pybullet's is kept and the targets judge their median; the load average shows how "

@@ -1,5 +1,6 @@
-"""Learned steps timed: the model of a config with random weights (the cost does not depend on
-them), one step per ground-truth frame, split into graph, network and integration by a
+"""Learned steps timed: the model of a config (the trained model of the bench's ``run``, or
+random weights for a configuration that changes the architecture: :mod:`.source`), one step
+per ground-truth frame, split into graph, network and integration by a
 :class:`~physgnn.models.profiling.StepTimer`."""
 
 from __future__ import annotations
@@ -8,24 +9,16 @@ import time
 
 import numpy as np
 import torch
-from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 from torch_geometric.data import Batch
 
+from physgnn.benchmark.source import Source
 from physgnn.data.state import TrajectoryFrames
 from physgnn.models.capture import compile_simulator
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.models.profiling import StepTimer
 from physgnn.models.protocol import motion_of
 from physgnn.physics import integrator
-
-
-def make_simulator(model_cfg: DictConfig, overrides: dict, stats: dict):
-    """The model of ``model_cfg`` with ``overrides`` (constructor keys), random weights."""
-    cfg = OmegaConf.merge(model_cfg, overrides)
-    sim = instantiate(cfg, stats=stats).eval()
-    sim.effects_trained.fill_(True)  # as if trained on every effect: no rollout warning
-    return sim
 
 
 def frame_states(traj, H: int, copies: int = 1) -> list:
@@ -131,17 +124,19 @@ def repeats_for(n: int, c: DictConfig) -> int:
     return int(min(max(c.sphere_frames // max(n, 1), c.min_repeats), c.max_repeats))
 
 
-def build_simulators(cfg: DictConfig, stats: dict) -> dict[str, tuple[object, list[int]]]:
-    """Every configuration of ``cfg.learned.configs``: its simulator (random weights; compiled
-    or followed by the constraint stage when the configuration says so) and its sizes."""
+def build_simulators(cfg: DictConfig, source: Source) -> dict[str, tuple[object, list[int], str]]:
+    """Every configuration of ``cfg.learned.configs``: its simulator (``source``'s, of its
+    ``weights``; compiled or followed by the constraint stage when the configuration says so),
+    its sizes and what its weights are (the run, or random weights)."""
     sims = {}
     for name, c in cfg.learned.configs.items():
-        sim = make_simulator(cfg.model, OmegaConf.to_container(c.overrides), stats)
+        sim = source.simulator(c.weights, OmegaConf.to_container(c.overrides))
         if c.get("compile"):  # as lit.compile.enabled=true: two regions, dynamic shapes
             compile_simulator(sim)
         if c.get("constraints"):  # the learned step followed by the constraint stage
             sim = ConstrainedSimulator(sim, int(c.constraints))
-        sims[name] = sim, list(cfg.sizes) if c.sizes is None else list(c.sizes)
+        sizes = list(cfg.sizes) if c.sizes is None else list(c.sizes)
+        sims[name] = sim, sizes, source.weights_label(c.weights)
     return sims
 
 
@@ -150,14 +145,15 @@ def learned_rows(cfg: DictConfig, runs: dict, sims: dict, matmul_gflops: float) 
     (``runs[n]`` = pybullet run of size n); the configurations of one size are timed together
     (:func:`time_cases`)."""
     rows = {}
-    for n in sorted({n for _, sizes in sims.values() for n in sizes}):
-        names = [name for name, (_, sizes) in sims.items() if n in sizes]
+    for n in sorted({n for _, sizes, _ in sims.values() for n in sizes}):
+        names = [name for name, (_, sizes, _) in sims.items() if n in sizes]
         states = {h: frame_states(runs[n]["traj"], h) for h in {sims[k][0].H for k in names}}
         cases = [(sims[k][0], states[sims[k][0].H]) for k in names]
         for name, t in zip(names, time_cases(cases, repeats_for(n, cfg.learned)), strict=True):
             rate = t["gflop_per_step"] / max(t["network_ms"] / 1000, 1e-12)
             rows[name, n] = {
                 "config": name,
+                "weights": sims[name][2],
                 "n_spheres": n,
                 **t,
                 "share_of_matmul": rate / matmul_gflops,
@@ -168,13 +164,13 @@ def learned_rows(cfg: DictConfig, runs: dict, sims: dict, matmul_gflops: float) 
                 f"{rate:.1f} GFLOP/s",
                 flush=True,
             )
-    return [rows[name, n] for name, (_, sizes) in sims.items() for n in sizes]
+    return [rows[name, n] for name, (_, sizes, _) in sims.items() for n in sizes]
 
 
-def batched_rows(cfg: DictConfig, runs: dict, stats: dict) -> list[dict]:
-    """The baseline on ``batched.scenes`` copies of one scene in one graph: cost per scene
-    (the batch sizes are timed together, :func:`time_cases`)."""
-    sim = make_simulator(cfg.model, {}, stats)
+def batched_rows(cfg: DictConfig, runs: dict, source: Source) -> list[dict]:
+    """The trained model (``source``) on ``batched.scenes`` copies of one scene in one graph:
+    cost per scene (the batch sizes are timed together, :func:`time_cases`)."""
+    sim = source.simulator()
     n, sizes = cfg.batched.n_spheres, list(cfg.batched.scenes)
     cases = [(sim, frame_states(runs[n]["traj"], sim.H, copies=b)) for b in sizes]
     rows = []

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import os
 
-from physgnn.benchmark import crossover
+from physgnn.benchmark import crossover_table
 from physgnn.benchmark.interleaved import interleaved_section
 from physgnn.benchmark.targets import targets
 from physgnn.benchmark.training_tables import (
@@ -60,6 +60,7 @@ def learned_table(extra: dict) -> str:
         body.append(
             [
                 r["config"],
+                r["weights"],
                 str(r["n_spheres"]),
                 f"{r['fps']:.1f}",
                 f"{frame:.2f}",
@@ -77,6 +78,7 @@ def learned_table(extra: dict) -> str:
     return md_table(
         [
             "config",
+            "weights",
             "spheres",
             "FPS",
             "ms/frame",
@@ -213,9 +215,9 @@ def batched_table(extra: dict) -> str:
     )
 
 
-def targets_heading(settings: dict) -> str:
-    """``## Targets (baseline M=.. H=.. <connectivity> h=..)`` from the bench's model config."""
-    model = settings.get("model", {})
+def targets_heading(model: dict) -> str:
+    """``## Targets (baseline M=.. H=.. <connectivity> h=..)`` from the learned rows' model
+    config (the run's, else the bench's)."""
     net, graph = model.get("network", {}), model.get("graph", {})
     return (
         f"## Targets (baseline M={net.get('M', '?')} H={model.get('H', '?')} "
@@ -228,8 +230,10 @@ def write_markdown(result: dict, extra: dict) -> str:
     s = extra.get("settings", {})
     parts = [
         "# physgnn bench: accuracy versus time",
-        f"One run of `python -m physgnn.bench` ({extra.get('wall_s', 0):.0f} s). Learned "
-        "simulators have random weights (cost does not depend on them) and are timed one step "
+        f"One run of `python -m physgnn.bench` ({result.get('wall_s', 0):.0f} s in all). The "
+        f"learned rows run the model of `run` ({result.get('run', '?')}); the configurations "
+        "marked random weights (an architecture change, or the baseline with random weights) "
+        "cannot run the trained weights. Learned steps are timed one step "
         "per pybullet frame of the same scene in motion (random_box, "
         f"{s.get('area_per_sphere', '?')} m² of floor per sphere, after "
         f"{s.get('warmup_frames', '?')} warm-up frames).",
@@ -238,18 +242,17 @@ def write_markdown(result: dict, extra: dict) -> str:
         + ".",
         "## Machine",
         machine_table(extra),
-        targets_heading(s),
+        targets_heading(extra.get("learned_model", s.get("model", {}))),
         md_table(["target", "measured", "status"], targets(result, extra)),
         "## Learned simulator per configuration and size",
         "ms/frame = graph + network (incl. normalisation) + integration; share of matmul = "
         "network FLOP rate / best measured matmul rate.",
         learned_table(extra),
-        "### The same baseline through `physgnn.rollout`: where a rollout frame's time goes "
-        "(random weights: the spheres drift)",
+        "### The trained model through `physgnn.rollout`: where a rollout frame's time goes",
         rollout_table(extra),
         "### Batching scenes (baseline, copies of the same scene in one graph)",
         batched_table(extra),
-        *crossover.section(result),
+        *crossover_table.section(result),
         *interleaved_section(result),
         "## pybullet frame rate",
         pybullet_table(result),

@@ -13,7 +13,10 @@ accuracy-versus-time curve on the bench pile (``pybullet_accuracy.png``) and ``b
 
 Scenes are random_box scenes in motion: pybullet runs ``warmup_frames`` from the initial
 state, and the timed frames start from there, so learned steps (one step per ground-truth
-frame, random weights) see the contacts of a real pile. Weights do not change the cost.
+frame) see the contacts of a real pile. The learned rows run the trained model of ``run``
+(:mod:`.source`; its graph rebuilds within a frame are a trained model's), the configurations
+that change the architecture random weights of the same model. ``large=true`` merges
+``large_settings`` (the large sizes, more draws), ``quick=true`` then ``quick_settings``.
 """
 
 from __future__ import annotations
@@ -34,20 +37,15 @@ from physgnn.benchmark.interleaved import interleaved_rows
 from physgnn.benchmark.learned import batched_rows, build_simulators, learned_rows
 from physgnn.benchmark.markdown import ACCURACY_FIGURE, write_markdown
 from physgnn.benchmark.pybullet import accuracy_sweep, pybullet_rows, pybullet_runs
+from physgnn.benchmark.source import BenchError, learned_source
 from physgnn.data.stats import compute_stats
-from physgnn.errors import ConfigError
 from physgnn.files import write_json, write_text
 from physgnn.report.pareto import bench_figure
 
 
-class BenchError(ConfigError):
-    """A bench setting that cannot be run (one-line message)."""
-
-
 def bench(cfg: DictConfig) -> dict:
     """Run every measurement of ``cfg`` (see ``conf/bench.yaml``); returns bench.json's dict."""
-    if cfg.quick:
-        cfg = quick_config(cfg)
+    cfg = merged_config(cfg)
     if int(cfg.threads) < 1:
         raise BenchError(f"threads must be >= 1 (got {cfg.threads})")
     unknown = [c for c in cfg.interleaved.configs if c not in cfg.learned.configs]
@@ -67,6 +65,8 @@ def bench(cfg: DictConfig) -> dict:
     phases: dict[str, float] = {}
     m = measure(cfg, np.random.default_rng(int(cfg.seed)), info["matmul_gflops"], phases)
     result = {
+        "wall_s": time.perf_counter() - start,
+        "run": m["source"].label,
         "machine": {k: info[k] for k in ("cpu", "threads", "matmul_gflops")},
         "learned": [{k: r[k] for k in LEARNED_KEYS} for r in m["learned"]],
         "pybullet": pybullet_rows(cfg, m["runs"], m["pybullet_accuracy"]),
@@ -83,9 +83,10 @@ def bench(cfg: DictConfig) -> dict:
     }
     extra = {
         "machine": info,
-        **{k: v for k, v in m.items() if k not in ("runs", "interleaved", "crossover")},
+        **{k: v for k, v in m.items() if k not in ("runs", "interleaved", "crossover", "source")},
         "settings": OmegaConf.to_container(cfg, resolve=True),
-        "wall_s": time.perf_counter() - start,
+        "learned_model": OmegaConf.to_container(m["source"].model, resolve=True),
+        "wall_s": result["wall_s"],
         "phase_s": phases,
         "loadavg_end": os.getloadavg()[0],
     }
@@ -105,38 +106,65 @@ def measure(cfg: DictConfig, rng: np.random.Generator, matmul: float, phases: di
 
     train_trajs = timed("training data", scenes.training_trajectories, cfg, rng)
     stats = compute_stats(train_trajs)
-    m = {"runs": timed("pybullet sizes", pybullet_runs, cfg, rng)}
+    source = timed("loading the run", learned_source, cfg, stats)
+    m = {"source": source, "runs": timed("pybullet sizes", pybullet_runs, cfg, rng)}
     runs = m["runs"]
-    sims = build_simulators(cfg, stats)
+    sims = build_simulators(cfg, source)
     m["learned"] = timed("learned", learned_rows, cfg, runs, sims, matmul)
     m["interleaved"] = timed("interleaved", interleaved_rows, cfg, runs, sims)
     start = runs[cfg.accuracy.n_spheres]["start"]
     m["pybullet_accuracy"] = timed("pybullet substeps", accuracy_sweep, cfg, start)
     m["training"] = timed("training", activity.training_throughput, cfg, train_trajs, stats, matmul)
     m["profile"] = timed("profile", profile.training_profile, cfg, train_trajs, stats, matmul)
-    m["activity"] = timed("activity", activity.activity_rows, cfg, runs, stats, rng)
-    m["rollout"] = timed("rollout", activity.rollout_rows, cfg, runs, stats)
-    m["batched"] = timed("batched", batched_rows, cfg, runs, stats)
+    m["activity"] = timed("activity", activity.activity_rows, cfg, runs, source, rng)
+    m["rollout"] = timed("rollout", activity.rollout_rows, cfg, runs, source)
+    m["batched"] = timed("batched", batched_rows, cfg, runs, source)
     moving = runs[cfg.gpu_readiness.rollout_size]["traj"]
     m["gpu_readiness"] = timed("gpu readiness", gpu_readiness, cfg, train_trajs, stats, moving)
     m["gpu"] = timed("gpu", gpu_section, cfg, train_trajs, stats, runs)
-    m["crossover"] = timed("crossover", crossover, cfg, rng, stats)
+    m["crossover"] = timed("crossover", crossover, cfg, rng, source)
     return m
 
 
+# The mappings that quick_settings replaces whole (a shorter list of configurations or learned
+# settings), where the rest of it is merged key by key.
+REPLACED = ("learned.configs", "crossover.learned_settings")
+
+
+def merged_config(cfg: DictConfig) -> DictConfig:
+    """``cfg`` with ``large_settings`` merged over it key by key when ``large`` is true, then
+    :func:`quick_config` when ``quick`` is true."""
+    if cfg.get("large"):
+        cfg = settings_merged(cfg, cfg.large_settings, replaced=())
+    return quick_config(cfg) if cfg.quick else cfg
+
+
 def quick_config(cfg: DictConfig) -> DictConfig:
-    """``cfg`` with ``quick_settings`` merged over it; its list of configurations replaces
-    the full one (not merged into it)."""
+    """``cfg`` with ``quick_settings`` merged over it, its mappings of :data:`REPLACED`
+    replacing the full ones."""
+    return settings_merged(cfg, cfg.quick_settings, REPLACED)
+
+
+def settings_merged(cfg: DictConfig, block: DictConfig, replaced: tuple) -> DictConfig:
+    """``cfg`` with the settings ``block`` merged over it; a mapping of ``replaced`` that the
+    block gives replaces the full one (not merged into it); a section that ``cfg`` turns off
+    (``crossover=null``) stays off."""
     cfg = cfg.copy()
     OmegaConf.set_struct(cfg, False)
-    quick = cfg.quick_settings
-    if quick.get("learned", {}).get("configs") is not None:
-        cfg.learned.configs = quick.learned.configs
-    return OmegaConf.merge(cfg, quick)
+    for key in replaced:
+        given = OmegaConf.select(block, key)
+        if given is not None and OmegaConf.select(cfg, key) is not None:
+            OmegaConf.update(cfg, key, given, merge=False)
+    off = [key for key in block if key in cfg and cfg[key] is None]
+    merged = OmegaConf.merge(cfg, block)
+    for key in off:
+        merged[key] = None
+    return merged
 
 
 LEARNED_KEYS = (
     "config",
+    "weights",
     "n_spheres",
     "fps",
     "graph_ms",
