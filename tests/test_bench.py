@@ -11,21 +11,30 @@ import pytest
 import torch
 from gpukit import OPS_PER_TRAINING_STEP
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 from torch.utils.flop_counter import FlopCounterMode
 
 from physgnn import CONF_DIR
-from physgnn.benchmark import crossover, interleaved
+from physgnn.benchmark import crossover, crossover_table, interleaved
 from physgnn.benchmark import gpu as gpu_module
 from physgnn.benchmark import scenes as bench_scenes
+from physgnn.benchmark.crossover_summary import (
+    front_from,
+    judged,
+    learned_on_front,
+    spread,
+    summary,
+)
 from physgnn.benchmark.gpu import gpu_section
 from physgnn.benchmark.learned import frame_states, time_learned
 from physgnn.benchmark.profile import step_flops
-from physgnn.benchmark.run import bench, quick_config
-from physgnn.benchmark.source import BenchError, make_simulator
+from physgnn.benchmark.run import bench, merged_config, quick_config
+from physgnn.benchmark.source import BenchError, Source, learned_source, make_simulator
 from physgnn.benchmark.targets import targets
 from physgnn.benchmark.training_tables import gpu_section as gpu_tables
 from physgnn.data.stats import compute_stats
 from physgnn.groundtruth.engine import simulate
+from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.models.profiling import StepTimer
 from physgnn.nn.epd import EncodeProcessDecode, Widths
 from physgnn.report import pareto
@@ -57,6 +66,8 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
     data = json.loads((out / "bench.json").read_text())
     assert data == json.loads(json.dumps(result))
     assert set(data) == {
+        "wall_s",
+        "run",
         "machine",
         "learned",
         "pybullet",
@@ -77,8 +88,11 @@ def test_bench_json_has_exactly_the_agreed_keys(quick):
         assert "Skipped: torch saw no CUDA device" in (out / "bench.md").read_text()
     assert set(data["machine"]) == {"cpu", "threads", "matmul_gflops"}
     assert set(data["training"]) == {"pairs_per_s", "nodes_per_s", "share_of_matmul"}
+    assert data["run"] == "random weights" and data["wall_s"] > 0  # quick: run null
+    assert f"({data['wall_s']:.0f} s in all)" in (out / "bench.md").read_text()
     learned_keys = {
         "config",
+        "weights",
         "n_spheres",
         "fps",
         "graph_ms",
@@ -282,8 +296,9 @@ def _learned(n, fps, graph, network, share):
     }
 
 
-def _size(n, substeps, ratio, load):
+def _size(n, substeps, ratio, load, window="landed"):
     return {
+        "window": window,
         "n_spheres": n,
         "matched_substeps": substeps,
         "matched_ratio": ratio,
@@ -301,11 +316,9 @@ def test_targets_table_met_and_not_met():
         ],
         "training": {"share_of_matmul": 0.65, "gflops": 100.0, "nodes_per_s": 30_000.0},
     }
-    result = {
-        "crossover": {
-            "sizes": [_size(154, 5, 3.0, 0.5), _size(1000, 5, 4.0, 2.5), _size(10000, 2, 0.5, 2.5)]
-        }
-    }
+    cases = [_size(154, 5, 3.0, 0.5), _size(1000, 5, 4.0, 2.5), _size(10000, 2, 0.5, 2.5)]
+    # the in-motion window is not judged by the speed target
+    result = {"crossover": {"cases": [*cases, _size(154, None, None, 0.5, "in_motion")]}}
     fps154, fps1000, share, graph, linear, pybullet, train_share, nodes = targets(result, extra)
     assert fps154[1:] == ["450.0 FPS", "met"]
     assert fps1000[1:] == ["50.0 FPS (needs ×2.4)", "not met"]
@@ -317,9 +330,9 @@ def test_targets_table_met_and_not_met():
         "154: 3.00× against 5 substeps (load 0.5); 1000: 4.00× against 5 substeps (load 2.5)"
     )
     assert pybullet[2] == "not met"  # 4 < 5 at 1 000 spheres
-    result["crossover"]["sizes"][1] = _size(1000, 10, 5.5, 0.5)
+    result["crossover"]["cases"][1] = _size(1000, 10, 5.5, 0.5)
     assert targets(result, extra)[5][2] == "met"
-    result["crossover"]["sizes"][1] = _size(1000, None, None, 0.5)  # none as accurate
+    result["crossover"]["cases"][1] = _size(1000, None, None, 0.5)  # none as accurate
     assert targets(result, extra)[5][1:] == [
         "154: 3.00× against 5 substeps (load 0.5); 1000: no setting tried is as accurate",
         "not met",
@@ -386,64 +399,214 @@ def test_interleaved_configs_must_be_learned_configs(tmp_path):
 
 
 # -------------------------------------------------------------------------------- crossover
-def _sim(name, mse20, fps, ratio=None, diverged=None):
-    substeps = None if name == "learned" else int(name.split("-")[1])
+def _point(name, mse20, fps, ratio=None, diverged=0):
+    learned = name.startswith("learned")
     return {
         "simulator": name,
-        "substeps": substeps,
+        "setting": name.split()[1] if learned else None,
+        "substeps": None if learned else int(name.split("-")[1]),
         "mse20": mse20,
         "fps": fps,
         "ratio": ratio,
-        "diverged_at": diverged,
+        "diverged": diverged,
     }
 
 
 def test_crossover_judges_the_front_and_the_matched_setting():
     engine = [
-        _sim("pybullet-1", 1.0, 400.0, 0.25),
-        _sim("pybullet-5", 0.1, 100.0, 1.0),
-        _sim("pybullet-20", 0.01, 25.0, 4.0),
+        _point("pybullet-1", 1.0, 400.0, 0.25),
+        _point("pybullet-5", 0.1, 100.0, 1.0),
+        _point("pybullet-20", 0.01, 25.0, 4.0),
     ]
     # 100 FPS at 0.5: pybullet-5 is as fast and more accurate -> off; matched: pybullet-5
-    assert crossover.judged([_sim("learned", 0.5, 100.0), *engine]) == {
+    assert judged([_point("learned a", 0.5, 100.0), *engine]) == {
+        "front": ["pybullet-1", "pybullet-5", "pybullet-20"],
         "on_front": False,
         "matched_substeps": 5,
         "matched_ratio": 1.0,
     }
-    # 200 FPS at 0.05: nothing as fast is as accurate -> on; the fastest as accurate: 20 substeps
-    assert crossover.judged([_sim("learned", 0.05, 200.0), *engine]) == {
+    # 200 FPS at 0.05, and a second setting at 50 FPS and 0.02: both on the front, which
+    # pybullet-5 leaves; the fastest as accurate as the first: 20 substeps
+    two = [_point("learned a", 0.05, 200.0), _point("learned b", 0.02, 50.0)]
+    assert judged([*two, *engine]) == {
+        "front": ["pybullet-1", "learned a", "learned b", "pybullet-20"],
         "on_front": True,
         "matched_substeps": 20,
         "matched_ratio": 4.0,
     }
     # more accurate than every setting tried: on the front, no matched setting
-    assert crossover.judged([_sim("learned", 0.001, 1.0), *engine])["matched_substeps"] is None
-    # a diverged rollout is never on the front
-    assert not crossover.judged([_sim("learned", 0.05, 200.0, diverged=9), *engine])["on_front"]
+    assert judged([_point("learned a", 0.001, 1.0), *engine])["matched_substeps"] is None
+    # a setting that diverged in a draw is never on the front, nor matched
+    off = judged([_point("learned a", 0.05, 200.0, diverged=1), *engine])
+    assert off == {
+        "front": ["pybullet-1", "pybullet-5", "pybullet-20"],
+        "on_front": False,
+        "matched_substeps": None,
+        "matched_ratio": None,
+    }
 
-    def sizes(*fronts: bool) -> list[dict]:
+    def cases(*fronts: bool) -> list[dict]:
         return [
             {"n_spheres": n, "on_front": f} for n, f in zip((154, 1000, 3000), fronts, strict=True)
         ]
 
-    assert crossover.front_from(sizes(False, True, True)) == 1000
-    assert crossover.front_from(sizes(True, False, True)) == 3000
-    assert crossover.front_from(sizes(True, True, False)) is None
+    assert front_from(cases(False, True, True)) == 1000
+    assert front_from(cases(True, False, True)) == 3000
+    assert front_from(cases(True, True, False)) is None
 
 
-def test_quick_bench_runs_the_crossover_on_landed_piles(quick):
+def test_the_learned_settings_on_the_front_are_listed_by_size():
+    a, b, p1 = (
+        _point("learned a", 0.1, 10.0),
+        _point("learned b", 0.2, 20.0),
+        _point("pybullet-1", 1, 5),
+    )
+    cases = [
+        {"n_spheres": 1000, "points": [a, b, p1], "front": ["learned b"]},
+        {"n_spheres": 154, "points": [a, b, p1], "front": ["learned a", "learned b"]},
+    ]
+    assert learned_on_front(cases) == {"a": [154], "b": [154, 1000]}
+
+
+def _row(name, mse20, fps, ratio=None, diverged_at=None):
+    point = _point(name, mse20, fps, ratio)
+    del point["diverged"]
+    return point | {"diverged_at": diverged_at, "chamfer": fps / 100, "depth_sphere": 0.0}
+
+
+def test_the_draws_are_summarised_by_median_and_spread():
+    assert spread([None, 3.0, 1.0]) == (2.0, 1.0, 3.0)
+    assert spread([None, None]) == (None, None, None)
+    draws = [
+        [_row("learned a", 0.2, 10.0), _row("pybullet-1", 0.1, 100.0, 0.1)],
+        [_row("learned a", 0.6, 30.0, diverged_at=7), _row("pybullet-1", 0.3, 300.0, 0.1)],
+        [_row("learned a", 0.4, 20.0), _row("pybullet-1", None, 200.0, 0.2)],
+    ]
+    for row in (r for rows in draws for r in rows):
+        row["depth_ground"] = None
+    learned, engine = summary(draws)
+    assert learned == {
+        "simulator": "learned a",
+        "setting": "a",
+        "substeps": None,
+        **{"mse20": 0.4, "mse20_min": 0.2, "mse20_max": 0.6},
+        **{"fps": 20.0, "fps_min": 10.0, "fps_max": 30.0},
+        **{"ratio": None, "ratio_min": None, "ratio_max": None},
+        **{"chamfer": 0.2, "depth_sphere": 0.0, "depth_ground": None},
+        "diverged": 1,
+    }
+    # a draw without a score (None) is left out of its median and spread
+    assert (engine["mse20"], engine["mse20_min"], engine["mse20_max"]) == (0.2, 0.1, 0.3)
+    assert (engine["fps"], engine["ratio"], engine["ratio_max"]) == (200.0, 0.1, 0.2)
+    assert engine["diverged"] == 0
+
+
+def _tiny_source(trained: bool) -> Source:
+    cfg = _cfg("quick=true")
+    traj = simulate(bench_scenes.bench_scene(cfg.scene, 6, np.random.default_rng(0), 8, 4, 6), {})
+    stats = compute_stats([traj])
+    model = OmegaConf.merge(cfg.model, {"network": {"hidden": 8, "M": 1}})
+    sim = make_simulator(model, {}, stats) if trained else None
+    return Source(model, sim, "a run" if trained else "random weights", stats)
+
+
+def test_a_source_gives_trained_copies_and_random_weights_apart():
+    source = _tiny_source(trained=True)
+    copy = source.simulator()
+    assert copy is not source.trained
+    pairs = zip(copy.parameters(), source.trained.parameters(), strict=True)
+    assert all(torch.equal(a, b) for a, b in pairs)
+    assert source.simulator("random", {"network": {"M": 2}}).M == 2
+    assert (source.weights_label("trained"), source.weights_label("random")) == (
+        "a run",
+        "random weights",
+    )
+    with pytest.raises(BenchError, match="architecture is its own"):
+        source.simulator("trained", {"network": {"M": 2}})
+    with pytest.raises(BenchError, match="weights must be trained or random"):
+        source.simulator("other")
+
+
+def test_the_learned_settings_set_their_knobs_on_copies():
+    source = _tiny_source(trained=True)
+    own = source.trained.contacts.contact_passes
+    c = OmegaConf.create(
+        {
+            "learned_settings": {
+                "as_trained": {},
+                "passes0": {"contact_passes": 0},
+                "constraints3": {"constraints": 3},
+                "threads1": {"threads": 1},
+            }
+        }
+    )
+    settings = {s.name: s for s in crossover.learned_settings(c, source, threads=2)}
+    knobs = {name: s.knobs for name, s in settings.items()}
+    base = {"contact_passes": own, "constraints": 0, "compile": False, "threads": 2}
+    assert knobs == {
+        "as_trained": base,
+        "passes0": base | {"contact_passes": 0},
+        "constraints3": base | {"constraints": 3},
+        "threads1": base | {"threads": 1},
+    }
+    assert settings["passes0"].sim.contacts.contact_passes == 0
+    assert source.trained.contacts.contact_passes == own  # the trained model itself unchanged
+    assert isinstance(settings["constraints3"].sim, ConstrainedSimulator)
+    assert settings["constraints3"].sim.iterations == 3
+    bad = OmegaConf.create({"learned_settings": {"x": {"passes": 1}}})
+    with pytest.raises(BenchError, match="unknown knob passes"):
+        crossover.learned_settings(bad, source, threads=2)
+
+
+def test_the_shipped_weights_are_the_bench_default_source():
+    cfg = _cfg()
+    assert cfg.run == "pretrained" and quick_config(cfg).run is None
+    source = learned_source(cfg, stats={})
+    assert source.label == "pretrained" and source.trained is not None
+    assert source.model.network.M == source.trained.M
+    [passes0] = crossover.learned_settings(
+        OmegaConf.create({"learned_settings": {"passes0": {"contact_passes": 0}}}), source, 1
+    )
+    assert passes0.sim.contacts.contact_passes == 0 != source.trained.contacts.contact_passes
+
+
+def test_quick_bench_runs_the_crossover_over_draws_and_windows(quick):
     out, result = quick
     cross = result["crossover"]
-    assert cross["run"] == "random weights"
-    assert [s["n_spheres"] for s in cross["sizes"]] == [10, 30]
-    for size in cross["sizes"]:
-        assert [r["simulator"] for r in size["rows"]] == ["learned", "pybullet-1", "pybullet-2"]
-        assert all(r["fps"] > 0 and r["mse20"] is not None for r in size["rows"])
-        assert size == {**size, **crossover.judged(size["rows"])}
-    assert cross["front_from"] == crossover.front_from(cross["sizes"])
+    assert (cross["run"], cross["draws"]) == ("random weights", 2)
+    assert [(c["window"], c["n_spheres"]) for c in cross["cases"]] == [
+        ("in_motion", 10),
+        ("landed", 10),
+    ]
+    assert cross["settings"]["passes0"]["contact_passes"] == 0
+    names = ["learned as_trained", "learned passes0", "pybullet-1", "pybullet-2"]
+    for case in cross["cases"]:
+        assert [p["simulator"] for p in case["points"]] == names
+        assert [[r["simulator"] for r in rows] for rows in case["draws"]] == [names, names]
+        assert all(r["fps"] > 0 and r["mse20"] is not None for r in case["draws"][0])
+        assert case["points"] == summary(case["draws"])
+        assert case == {**case, **judged(case["points"])}
+    for window in ("in_motion", "landed"):
+        cases = [c for c in cross["cases"] if c["window"] == window]
+        assert cross["front_from"][window] == front_from(cases)
     md = (out / "bench.md").read_text()
     assert "## Crossover: the trained model against pybullet on the same work" in md
-    assert crossover.headline(cross) in md
+    assert crossover_table.headline(cross, "landed") in md
+    assert crossover_table.fronts_line(cross, "in_motion") in md
+
+
+def test_the_default_bench_keeps_to_medium_sizes_and_large_adds_the_rest():
+    default, large = merged_config(_cfg()), merged_config(_cfg("large=true"))
+    assert max(default.sizes) == max(default.crossover.sizes) == 1000
+    assert max(large.sizes) == max(large.crossover.sizes) == 10000
+    assert large.crossover.draws > default.crossover.draws
+    # large merges key by key: the default settings stay, the compiled point is added
+    assert list(large.crossover.learned_settings) == [
+        *default.crossover.learned_settings,
+        "compiled",
+    ]
+    assert large.learned.configs.constraints.weights == "trained"
+    assert merged_config(_cfg("quick=true", "crossover=null")).crossover is None
 
 
 # ------------------------------------------------------------------- pybullet's bench curve

@@ -64,7 +64,6 @@ class Source:
             return copy.deepcopy(self.trained)
         return make_simulator(self.model, overrides or {}, self.stats)
 
-
     def weights_label(self, weights: str) -> str:
         """What the rows of ``weights`` run: the run (trained, with one), else random weights."""
         return self.label if weights == TRAINED else "random weights"
