@@ -4,8 +4,8 @@ scripts/crossover_runs.py RUN RUN ... [--sizes 154 1000]``.
 Each size draws one ``conf/bench.yaml`` random_box pile, the sizes one after another from the
 bench's seed (not the draws of a whole ``make bench``, whose earlier phases draw first), and
 lands it. Every RUN (a run folder or ``pretrained``) then takes its turns against pybullet at
-``crossover.substeps`` on that window (``judged_size``: the crossover's rounds, one scene at a
-time, one thread). Printed per size and run: MSE20 and median frames/s of the learned model and
+``crossover.substeps`` on its landed window (the crossover's rounds, one scene at a time, one
+thread). Printed per size and run: MSE20 and median frames/s of the learned model and
 of each setting, the median learned-over-pybullet ratio, whether the model is on the MSE20
 front and its matched setting.
 """
@@ -13,11 +13,13 @@ front and its matched setting.
 from __future__ import annotations
 
 import argparse
+import os
 
 import numpy as np
 import torch
 
-from physgnn.benchmark.crossover import judged_size, landed_window
+from physgnn.benchmark.crossover import as_loaded, taking_turns, truth_windows
+from physgnn.benchmark.crossover_summary import judged, summary
 from physgnn.cli.overrides import compose_config
 from physgnn.training.runs import load_run
 
@@ -36,12 +38,14 @@ def main() -> None:
     H = histories.pop()
     rng = np.random.default_rng(cfg.seed)
     for n in args.sizes:
-        window = landed_window(cfg, n, rng, H, {})
+        window = truth_windows(cfg, n, rng, H, {})["landed"]
         for run, sim in sims.items():
-            size = judged_size(sim, window, n, cfg.crossover, {})
-            load = f"load {size['loadavg_start']:.1f} → {size['loadavg_end']:.1f}"
-            print(f"{n} spheres, {run} ({load}):")
-            for r in size["rows"]:
+            start = os.getloadavg()[0]
+            c = cfg.crossover
+            rows = taking_turns([as_loaded(run, sim, 1)], window, {}, list(c.substeps), c.rounds)
+            size = judged(summary([rows]))
+            print(f"{n} spheres, {run} (load {start:.1f} → {os.getloadavg()[0]:.1f}):")
+            for r in rows:
                 ratio = "" if r["ratio"] is None else f", learned / it {r['ratio']:.3g}×"
                 speed = f"{r['fps']:.3g} frames/s{ratio}"
                 print(f"  {r['simulator']:12s} MSE20 {r['mse20']:.3g} at {speed}")

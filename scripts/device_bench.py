@@ -42,10 +42,10 @@ QUICK = os.environ.get("DEVICE_BENCH_QUICK") == "1"  # tiny sizes, the CPU as th
 
 
 def bench_config():
-    cfg = compose_config("bench", ["crossover.run=null"])
+    cfg = compose_config("bench", ["run=null"])
     if not QUICK:
         return cfg
-    cfg = compose_config("bench", ["crossover.run=null", "gpu.device=cpu"])
+    cfg = compose_config("bench", ["run=null", "gpu.device=cpu"])
     return OmegaConf.merge(cfg, {"gpu": cfg.quick_settings.gpu})
 
 
@@ -55,7 +55,7 @@ def sizes() -> tuple[int, ...]:
 
 def prepare(folder: Path) -> None:
     from physgnn.benchmark import scenes
-    from physgnn.benchmark.crossover import landed_window
+    from physgnn.benchmark.crossover import truth_windows
     from physgnn.data.stats import compute_stats
 
     cfg = bench_config()
@@ -63,7 +63,7 @@ def prepare(folder: Path) -> None:
     rng = np.random.default_rng(int(cfg.seed))
     train = scenes.training_trajectories(cfg, rng)
     moving = {n: scenes.bench_run(cfg, n, rng) for n in cfg.gpu.rollout_sizes}
-    windows = {n: landed_window(cfg, n, rng, int(cfg.model.H), {}) for n in sizes()}
+    windows = {n: truth_windows(cfg, n, rng, int(cfg.model.H), {})["landed"] for n in sizes()}
     folder.mkdir(parents=True, exist_ok=True)
     stats = compute_stats(train)
     inputs = {"train": train, "stats": stats, "moving": moving, "windows": windows}
@@ -73,7 +73,8 @@ def prepare(folder: Path) -> None:
 def on_cpu(folder: Path, runs: list[str]) -> None:
     """The crossover's rows on this CPU (1 thread): each RUN and pybullet at every substep
     count, interleaved, over the saved windows; ``DIR/cpu.pt``."""
-    from physgnn.benchmark.crossover import judged, taking_turns
+    from physgnn.benchmark.crossover import as_loaded, taking_turns
+    from physgnn.benchmark.crossover_summary import judged, summary
     from physgnn.training.runs import load_run
 
     cfg = bench_config()
@@ -85,7 +86,8 @@ def on_cpu(folder: Path, runs: list[str]) -> None:
         cpu[run] = {}
         for n, window in windows.items():
             load = os.getloadavg()[0]
-            rows = taking_turns(sim, window, {}, list(cfg.crossover.substeps), ROUNDS)
+            turns = [as_loaded(run, sim, 1)]
+            rows = summary([taking_turns(turns, window, {}, list(cfg.crossover.substeps), ROUNDS)])
             cpu[run][n] = {"rows": rows, **judged(rows), "loadavg": [load, os.getloadavg()[0]]}
             print(f"cpu: {run} n={n}: {judged(rows)}", flush=True)
     torch.save(cpu, folder / "cpu.pt")
@@ -163,7 +165,7 @@ def engine_rows(cpu_rows: dict, n: int) -> list[dict]:
 def same_work_table(crossover: dict, cpu_rows: dict) -> list[str]:
     """Per size: pybullet's rows, then each run's learned rows on the CPU and on the GPU, each
     judged against those engine rows as the crossover judges (front, matched setting)."""
-    from physgnn.benchmark.crossover import judged
+    from physgnn.benchmark.crossover_summary import judged
     from physgnn.report.format import fmt, md_table
 
     body = []
@@ -183,7 +185,9 @@ def same_work_table(crossover: dict, cpu_rows: dict) -> list[str]:
             )
         for run, sizes in crossover.items():
             cpu = cpu_rows[run][n]["rows"][0]
-            gpu = {**cpu, **sizes[str(n)], "substeps": None}
+            measured = sizes[str(n)]
+            diverged = int(measured["diverged_at"] is not None)
+            gpu = {**cpu, **measured, "substeps": None, "diverged": diverged}
             for where, row in (("CPU", cpu), ("GPU", gpu)):
                 j = judged([row] + engine)
                 best = next((e for e in engine if e["substeps"] == j["matched_substeps"]), None)

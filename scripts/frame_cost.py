@@ -20,7 +20,7 @@ from statistics import median
 import numpy as np
 import torch
 
-from physgnn.benchmark.crossover import landed_window
+from physgnn.benchmark.crossover import truth_windows
 from physgnn.cli.overrides import compose_config
 from physgnn.graph.builder import GraphBuilder
 from physgnn.rollout import rollout
@@ -63,11 +63,11 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()
     torch.set_num_threads(1)
-    cfg = compose_config("bench", ["crossover.run=null"])
+    cfg = compose_config("bench", ["run=null"])
     sims = [load_run(run)[0].eval() for run in args.runs]
     rng = np.random.default_rng(int(cfg.seed))
     for n in args.sizes:
-        window = landed_window(cfg, n, rng, max(int(s.H) for s in sims), {})
+        window = truth_windows(cfg, n, rng, max(int(s.H) for s in sims), {})["landed"]
         frames = window.n_frames
         for sim in sims:
             rollout(sim, [window.truncated(sim.H + 3)])  # warm-up

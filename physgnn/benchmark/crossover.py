@@ -4,7 +4,7 @@ each of its substep counts on the same work, on piles of growing size.
 Per size of ``cfg.crossover.sizes`` and per draw (``draws`` random_box piles, one after the
 other from the bench's generator): one pile simulated at the truth's settings
 (``crossover.engine``: null, the datasets' own); each window of ``crossover.windows`` (its
-name: the frame after the drop where it starts: 0 in motion, ``land_frames`` landed) is the
+name: the frame after the drop where it starts: 0 in motion, 30 landed) is the
 truth's ``H + 1 + frames`` frames from there. Every learned setting of
 ``crossover.learned_settings`` (the model's own knobs: contact passes, the constraint stage,
 compiled or eager, torch threads; :func:`learned_settings`) rolls out from the window's
@@ -78,6 +78,14 @@ def learned_settings(c: DictConfig, source: Source, threads: int) -> list[Learne
         }
         settings.append(LearnedSetting(str(name), sim, used))
     return settings
+
+
+def as_loaded(name: str, sim, threads: int) -> LearnedSetting:
+    """``sim`` as it is (its own contact passes, eager, no constraint stage) at ``threads``
+    torch threads (the scripts' runs side by side)."""
+    passes = int(sim.contacts.contact_passes)
+    knobs = {"contact_passes": passes, "constraints": 0, "compile": False, "threads": threads}
+    return LearnedSetting(name, sim, knobs)
 
 
 @contextlib.contextmanager
