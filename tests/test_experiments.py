@@ -110,7 +110,7 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
     expected = {
         "m1": {"model.network.M": 1},
         "epsilon": {"model.graph.connectivity": "epsilon"},
-        "h0": {"model.H": 0},
+        "h0": {},  # the report's H = 0 row: the default's history since the engine state
         "energy": {"lit.loss.lambda_energy": 10.0},
         "no_noise": {"lit.noise.std": 0.0},
         "no_third_law": {"model.network.third_law": False},
@@ -118,6 +118,7 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
             "model.network.third_law": False,
             "model.network.use_surfaces": False,
             "model.inputs.boundary_features": True,
+            "model.H": 2,
             **REPORT_INPUTS,
         },
         # each invariance of the default model undone alone
@@ -139,7 +140,7 @@ def test_components_variants_change_what_they_name(tiny_dataset, tmp_path):
             for key, value in dotted_model(cfg[section]).items():
                 want = changes.get(f"{section}.{key}", default[key])
                 assert value == want, (variant, key)
-    assert baseline.model.network.M == 5 and baseline.model.H == 2
+    assert baseline.model.network.M == 5 and baseline.model.H == 0
     assert baseline.lit.loss.lambda_energy == 0
     assert baseline.model.graph.connectivity == "approach" and baseline.lit.noise.std == 0.03
     assert baseline.model.network.aggregation == "mean" and baseline.lit.noise.rest_scale == 0.05

@@ -399,7 +399,7 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
             "skips the MLPs a batch lacks): leave trainer.strategy=auto (DDP is chosen for "
             "several devices) or set trainer.strategy=ddp_find_unused_parameters_true",
         ),
-        ("data.val_rollout.frames=3", "data.val_rollout.frames must be a whole number >= 4, got 3"),
+        ("data.val_rollout.frames=1", "data.val_rollout.frames must be a whole number >= 2, got 1"),
         (
             "~data.val_rollout",
             "data.val_rollout.trajectories is missing (data=tiny): add val_rollout: "
@@ -411,9 +411,9 @@ def test_bad_generate_workers_are_one_line(tmp_path, monkeypatch, capsys, overri
             "data.val_rollout.horizon must be a whole number >= 1, got 0",
         ),
         (  # found at the first rollout validation, after one epoch
-            "data.val_rollout.horizon=18",
+            "data.val_rollout.horizon=20",
             "validation trajectory 'traj_00000' has 20 frames, the score needs H + horizon + 1 "
-            "= 21: lower callbacks.rollout.horizon=18 (the data preset's val_rollout.horizon)",
+            "= 21: lower callbacks.rollout.horizon=20 (the data preset's val_rollout.horizon)",
         ),
         (
             "callbacks.rollout.n_val_trajectories=0",

@@ -59,11 +59,14 @@ class StudyError(PhysgnnError, ValueError):
 class Config:
     """One unique training configuration: ``key`` (its changes from the default,
     ``"model.network.M=1"``, or ``baseline``), ``overrides`` (the first sweep's, as given to
-    ``physgnn.train``) and ``points`` (``{sweep: x}``: where each sweep plots it)."""
+    ``physgnn.train``), ``points`` (``{sweep: x}``: where each sweep plots it) and ``aliases``
+    (``{sweep: [x, ...]}``: further points of one sweep that are this same configuration, e.g.
+    the variant ``h0`` where the default's history is already H = 0)."""
 
     key: str
     overrides: list[str]
     points: dict[str, str] = field(default_factory=dict)
+    aliases: dict[str, list[str]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -131,7 +134,11 @@ def study_configs(sweeps: list[str]) -> list[Config]:
             changes |= {k: None for k in base if k not in flat}
             key = config_key(changes)
             config = configs.setdefault(key, Config(key, [] if not changes else overrides))
-            config.points[sweep] = " ".join(o.written for o in parse_overrides(overrides))
+            point = " ".join(o.written for o in parse_overrides(overrides))
+            if sweep in config.points:
+                config.aliases.setdefault(sweep, []).append(point)
+            else:
+                config.points[sweep] = point
     ordered = sorted(configs.values(), key=lambda c: c.key != BASELINE)
     return ordered
 

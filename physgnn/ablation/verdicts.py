@@ -19,6 +19,7 @@ from physgnn.ablation.jobs import Config
 
 ALPHA = 0.05
 SPLIT = "ood"
+SWEEP_2 = "ablation_components"  # the sweep whose points are Table 2's rows
 
 # ablation_components name → (row, report MSE, Chamfer, energy gain, finding)
 REPORT_TABLE2 = {
@@ -103,7 +104,8 @@ def worse(mine: list[dict], base: list[dict]) -> str:
 def best(groups: dict[str, list[dict]], keys: dict[str, str]) -> str:
     """The baseline against every other of the report's rows on OOD MSE."""
     base = groups.get(keys.get("baseline", ""), [])
-    others = {n: groups[k] for n, k in keys.items() if n != "baseline" and groups.get(k)}
+    base_key = keys.get("baseline")
+    others = {n: groups[k] for n, k in keys.items() if k != base_key and groups.get(k)}
     if not base or not others:
         return "not comparable: no baseline or no other row"
     tests = {name: difference(recs, base) for name, recs in others.items()}
@@ -128,7 +130,10 @@ def table2(groups: dict[str, list[dict]], configs: list[Config], cells) -> list[
     the report's three figures, ``cells(records)`` (ours), the OOD MSE difference to the
     baseline with its p, the report's finding and the verdict."""
     keys = {
-        c.points["ablation_components"]: c.key for c in configs if "ablation_components" in c.points
+        name: c.key
+        for c in configs
+        for name in [c.points.get(SWEEP_2), *c.aliases.get(SWEEP_2, [])]
+        if name is not None
     }
     base = groups.get(keys.get("baseline", ""), [])
     rows = []
@@ -148,6 +153,8 @@ def table2(groups: dict[str, list[dict]], configs: list[Config], cells) -> list[
 def _delta(mine: list[dict], base: list[dict], name: str) -> str:
     if name == "baseline" or not base:
         return "–"
+    if mine is base:
+        return "0 (the baseline itself)"
     d, p = difference(mine, base)
     if not math.isfinite(d):
         return f"{'+' if d > 0 else '−'}∞: diverged more (p = {p:.2g})"

@@ -65,13 +65,13 @@ class LearnedSimulator(nn.Module):
     ``pad_to_buckets``: the network sees graphs padded to capacity buckets (opt-in capture
     path, :mod:`physgnn.nn.padding`). Node input per sphere: the blocks of
     :attr:`node_layout` (:mod:`physgnn.models.features`), ``6·(H+1) + 5`` numbers with the
-    default inputs (masses as pair ratios, material values): 23 for the default model, H = 2.
+    default inputs (masses as pair ratios, material values): 11 for the default model, H = 0.
     """
 
     def __init__(
         self,
         stats: dict,
-        H: int = 2,
+        H: int = 0,
         network: Callable[..., EncodeProcessDecode] | None = None,
         graph: GraphBuilder | None = None,
         length_scale: float | None = None,
