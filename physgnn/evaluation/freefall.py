@@ -110,16 +110,20 @@ def freefall_rows(
                 "z_pred": z_pred,
                 "z_error": abs(z_pred - z_true),
                 "z_error_pct": 100.0 * abs(z_pred - z_true) / fall,
-                "dvz_first": _first_dvz(pred.pos[:, 0, 2], truth.vel[0, 0, 2], start, dt),
+                "dvz_first": _first_dvz(pred.pos[:, 0, 2], start, dt),
             }
         )
     return rows
 
 
-def _first_dvz(z: np.ndarray, vz0: float, start: int, dt: float) -> float:
-    """``(z_{s+1} − 2 z_s + z_{s−1}) / dt`` at the first predicted frame ``s + 1``; with no
-    history (``s = 0``) the seed velocity ``vz0`` stands for ``(z_s − z_{s−1}) / dt``."""
-    if len(z) < start + 2:
-        return float("nan")
-    before = (z[start] - z[start - 1]) / dt if start > 0 else vz0
-    return float((z[start + 1] - z[start]) / dt - before)
+def _first_dvz(z: np.ndarray, start: int, dt: float) -> float:
+    """``(z_{s+1} − 2 z_s + z_{s−1}) / dt``: the velocity change of the first predicted frame
+    ``s + 1``, read from positions. With no history (``s = 0``) no position before the seed
+    exists (the seed's velocity, the engine's at the frame's end, is not the mean velocity over
+    a frame that positions give), so the second predicted frame's change
+    ``(z_2 − 2 z_1 + z_0) / dt`` stands for it (in free flight every frame's is ``−g·dt``)."""
+    if start > 0 and len(z) >= start + 2:
+        return float((z[start + 1] - 2 * z[start] + z[start - 1]) / dt)
+    if start == 0 and len(z) >= 3:
+        return float((z[2] - 2 * z[1] + z[0]) / dt)
+    return float("nan")
