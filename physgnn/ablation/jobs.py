@@ -46,6 +46,7 @@ ADDED_AT_EARLIER_VALUE = {
     "model.engine_state": False,
     "model.plane_floor": False,
     "model.plane_newton": False,
+    "model.pair_floor": False,
     "lit.loss.event_share": 0.0,
     "lit.loss.event_speed": 0.05,
 }

@@ -28,6 +28,7 @@ import torch
 from physgnn.graph.rules import ballistic_velocity
 from physgnn.models.floor import contact_directions, plane_floor, pressed
 from physgnn.models.outputs import PAIR, regression
+from physgnn.models.pair_floor import pair_floor
 
 INERTIA_FACTOR = 0.4  # I = 2/5 m r² of a solid sphere
 
@@ -95,15 +96,17 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
         own = own * pressed(state, graph, vel + changes[-1][0], contacts)[:, None].to(own.dtype)
     if sim.contacts.plane_floor:
         floored(state, graph, changes, sim.contacts.plane_newton, contacts)
-    parts = []
-    for (prefix, _), (dvel, dang) in zip(motions, changes, strict=True):
+    for (prefix, _), change in zip(motions, changes, strict=True):
         own_vel = outputs.take(node_out, f"delta_{prefix}vel") * sim.delta_vel_std
         own_ang = outputs.take(node_out, f"delta_{prefix}angvel") * sim.delta_angvel_std
-        dvel = dvel + own * own_vel
-        dang = dang + own * own_ang
-        if newton and prefix == motions[-1][0]:  # the move: it may not cross a plane either
-            vel = state.vel[:, 0]
-            dvel = plane_floor(state, graph, vel + dvel, contacts=contacts)[0] - vel
+        change[0], change[1] = change[0] + own * own_vel, change[1] + own * own_ang
+    if sim.contacts.pair_floor:
+        pairs_floored(state, graph, changes, weight)
+    if newton:  # the move: it may not cross a plane either
+        vel = state.vel[:, 0]
+        changes[-1][0] = plane_floor(state, graph, vel + changes[-1][0], contacts=contacts)[0] - vel
+    parts = []
+    for dvel, dang in changes:
         parts.append((dvel - sim.delta_vel_mean) / sim.delta_vel_std)
         parts.append((dang - sim.delta_angvel_mean) / sim.delta_angvel_std)
     rest = node_out[:, regression(outputs).width :]
@@ -122,6 +125,20 @@ def start_from_the_law(sim) -> None:
                 rows = sim.outputs.slice(name)
                 last.weight[rows] = 0.0
                 last.bias[rows] = 0.0
+
+
+def pairs_floored(state, graph, changes: list, weight=None) -> None:
+    """``changes`` (as :func:`floored`'s) after the pairs' floor
+    (:func:`~physgnn.models.pair_floor.pair_floor`: no pair closes its gap past contact in the
+    move, momentum kept), in place."""
+    vel = state.vel[:, 0]
+    if len(changes) == 1:
+        changes[0][0] = (
+            pair_floor(state, graph.pp_index, vel + changes[0][0], None, weight)[0] - vel
+        )
+        return
+    mean, end = pair_floor(state, graph.pp_index, vel + changes[1][0], vel + changes[0][0], weight)
+    changes[0][0], changes[1][0] = end - vel, mean - vel
 
 
 def floored(state, graph, changes: list, bounce: bool = False, contacts=None) -> None:

@@ -59,7 +59,9 @@ class ContactHandling:
     law: a sphere arriving in free flight rebounds with its contact's restitution in closed
     form, the network's change on top where a plane stops the sphere (the engine state;
     :func:`physgnn.models.floor.free_bounce`), and after that change the move still may not
-    cross a plane."""
+    cross a plane; ``pair_floor`` (opt-in): after the pair impulses and the node decoder's
+    change, no pp pair's move closes its gap past contact, momentum kept
+    (:mod:`physgnn.models.pair_floor`)."""
 
     NODE: ClassVar[str] = "model.contacts"
     gravity_prior: bool = True
@@ -71,6 +73,7 @@ class ContactHandling:
     contact_memory: bool = False
     plane_floor: bool = True
     plane_newton: bool = True
+    pair_floor: bool = False
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -45,11 +45,11 @@ PREVIOUS_MODEL = {
     "plane_materials": False,
     "contact_memory": False,
 }
-# Keys that runs before the engine state or the planes by Newton's law lack, per node, with the
-# value their model had.
+# Keys that runs before the engine state, the planes by Newton's law or the pairs' floor lack,
+# per node, with the value their model had.
 BEFORE_ENGINE_STATE = {
     "inputs": {"engine_state": False},
-    "contacts": {"plane_floor": False, "plane_newton": False},
+    "contacts": {"plane_floor": False, "plane_newton": False, "pair_floor": False},
 }
 LEARNED = "physgnn.models.learned.LearnedSimulator"
 # The nodes of today's layout, with the Hydra keys that build them.
@@ -95,6 +95,7 @@ FLAT_KEYS = {
     "engine_state": ("inputs", "engine_state"),
     "plane_floor": ("contacts", "plane_floor"),
     "plane_newton": ("contacts", "plane_newton"),
+    "pair_floor": ("contacts", "pair_floor"),
 }
 
 
