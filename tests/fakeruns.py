@@ -58,7 +58,9 @@ def eval_cfg(*overrides):
     with initialize_config_dir(CONF_DIR, version_base="1.3"):
         # the stability section rolls out 2000-frame hard scenes: tests/test_stability.py
         # the invariance checks roll 2000-frame grids out: tests/test_invariances.py
-        return compose("eval", ["stability=false", "invariance=null", *overrides])
+        # the fake simulators have no knobs to set: tests/test_eval_settings.py
+        overrides = ["stability=false", "invariance=null", "learned_settings=null", *overrides]
+        return compose("eval", overrides)
 
 
 class Exploding(torch.nn.Module):

@@ -131,6 +131,10 @@ def test_bad_simulate_values_are_one_line(tmp_path, capsys, arg, message):
         ),
         ("max_frames=-1", "max_frames must be a whole number >= 2 or null"),
         ("tol=-1", "tol must be a number >= 0 (a fraction of the diameter"),
+        (
+            "learned_settings.passes0.contact_passes=-1",
+            "learned_settings.passes0.contact_passes must be a whole number >= 0 or null",
+        ),
     ],
 )
 def test_bad_eval_values_are_refused(tmp_path, override, message):

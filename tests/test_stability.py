@@ -355,7 +355,10 @@ TINY_HARD = [
 ]
 # What these evals do not check: videos, the sleeping comparison, pybullet on the same work
 # (and its Pareto figures: tests/test_eval.py), the invariance checks (test_invariance_checks.py)
-QUIET = ["videos=false", "sleeping_compare=false", "pybullet=null", "invariance=null"]
+QUIET = [
+    *("videos=false", "sleeping_compare=false", "pybullet=null", "invariance=null"),
+    "learned_settings=null",  # the fake simulators have no knobs to set
+]
 
 
 class Falling(GravityOnlySimulator):

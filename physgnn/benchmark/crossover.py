@@ -18,33 +18,29 @@ their median taken. Over the draws each point is summarised by its median and sp
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import os
 from dataclasses import dataclass
 from statistics import median
 
-import torch
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn import metrics
 from physgnn.benchmark.crossover_summary import front_from, judged, summary
 from physgnn.benchmark.scenes import bench_scene, timed_pybullet
-from physgnn.benchmark.source import BenchError, Source, with_contact_passes
+from physgnn.benchmark.source import BenchError, Source
 from physgnn.groundtruth.engine import simulate
-from physgnn.models.capture import compile_simulator
-from physgnn.models.constrained import ConstrainedSimulator
+from physgnn.models.settings import check_knobs, torch_threads, with_knobs
 from physgnn.physics.trajectory import FRAME_KEYS, continued, scene_at
 from physgnn.rollout import rollout
 
 KEYS = ("mse20", "chamfer", "depth_sphere", "depth_ground")
-# The knobs a learned setting may set (absent: the model's own, eager, the bench's threads)
-KNOBS = ("contact_passes", "constraints", "compile", "threads")
 
 
 @dataclass
 class LearnedSetting:
-    """One learned point: its name, simulator and knobs (every one of :data:`KNOBS`)."""
+    """One learned point: its name, simulator and knobs (every one of
+    :data:`~physgnn.models.settings.KNOBS`)."""
 
     name: str
     sim: object
@@ -53,29 +49,12 @@ class LearnedSetting:
 
 def learned_settings(c: DictConfig, source: Source, threads: int) -> list[LearnedSetting]:
     """Each setting of ``c.learned_settings`` (``c``: the ``crossover`` config): the trained
-    model of ``source`` with its knobs (:data:`KNOBS`) set, each its own copy."""
+    model of ``source`` with its knobs set, each its own copy
+    (:func:`physgnn.models.settings.with_knobs`; absent knobs: eager, ``threads``)."""
     settings = []
     for name, knobs in c.learned_settings.items():
-        unknown = sorted(set(knobs) - set(KNOBS))
-        if unknown:
-            raise BenchError(
-                f"crossover.learned_settings.{name}: unknown knob {', '.join(unknown)} "
-                f"(knobs: {', '.join(KNOBS)})"
-            )
-        sim = source.simulator()
-        if knobs.get("contact_passes") is not None:
-            with_contact_passes(sim, knobs.contact_passes)
-        passes = int(sim.contacts.contact_passes)
-        if knobs.get("compile"):  # as lit.compile.enabled=true: two regions, dynamic shapes
-            compile_simulator(sim)
-        if knobs.get("constraints"):
-            sim = ConstrainedSimulator(sim, int(knobs.constraints))
-        used = {
-            "contact_passes": passes,
-            "constraints": int(knobs.get("constraints") or 0),
-            "compile": bool(knobs.get("compile")),
-            "threads": int(knobs.get("threads") or threads),
-        }
+        checked = check_knobs(f"crossover.learned_settings.{name}", knobs, BenchError)
+        sim, used = with_knobs(source.simulator(), checked, threads)
         settings.append(LearnedSetting(str(name), sim, used))
     return settings
 
@@ -86,17 +65,6 @@ def as_loaded(name: str, sim, threads: int) -> LearnedSetting:
     passes = int(sim.contacts.contact_passes)
     knobs = {"contact_passes": passes, "constraints": 0, "compile": False, "threads": threads}
     return LearnedSetting(name, sim, knobs)
-
-
-@contextlib.contextmanager
-def torch_threads(n: int):
-    """torch's intra-op threads set to ``n`` inside the block, restored after it."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(int(n))
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 def truth_windows(cfg: DictConfig, n: int, rng, H: int, engine: dict) -> dict:

@@ -13,7 +13,6 @@ bench data's statistics: what an architecture change costs).
 from __future__ import annotations
 
 import copy
-import dataclasses
 from dataclasses import dataclass
 
 from hydra.utils import instantiate
@@ -75,10 +74,3 @@ def learned_source(cfg: DictConfig, stats: dict) -> Source:
         return Source(cfg.model, None, "random weights", stats)
     sim, run_cfg, _ = load_run(str(cfg.run))
     return Source(run_cfg.model, sim.eval(), str(cfg.run), stats)
-
-
-def with_contact_passes(sim, passes: int):
-    """``sim`` with at most ``passes`` graph rebuilds within a frame
-    (:class:`~physgnn.models.options.ContactHandling` ``contact_passes``), in place."""
-    sim.contacts = dataclasses.replace(sim.contacts, contact_passes=int(passes))
-    return sim

@@ -24,7 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.data.dataset import write_split
 from physgnn.errors import ConfigError
-from physgnn.evaluation import onestep, rerun_log, same_work
+from physgnn.evaluation import learned_settings, onestep, rerun_log, same_work
 from physgnn.evaluation.bounce import bounce_rows
 from physgnn.evaluation.freefall import freefall_rows
 from physgnn.evaluation.invariance import invariance_rows
@@ -96,13 +96,14 @@ def evaluate(cfg: DictConfig) -> Path:
 def check_eval_values(cfg: DictConfig) -> None:
     """``max_frames`` is null or a whole number >= 2 (a rollout needs frames to predict);
     ``tol`` a number >= 0; each switch true or false; ``pybullet`` null or its substep
-    counts and processes."""
+    counts and processes; ``learned_settings`` null or its settings' knobs."""
     MAX_FRAMES.check("max_frames", cfg.get("max_frames"))
     check_tolerance(cfg.get("tol"), ConfigError)
     for key in FLAGS:
         FLAG.check(key, cfg.get(key))
     same_work.check_settings(cfg.get("pybullet"))
     onestep.check_settings(cfg.get("onestep"))
+    learned_settings.check_settings(cfg.get("learned_settings"))
 
 
 def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
@@ -126,6 +127,7 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
     collected = Collected(keep, filmed, cfg.tol, stab, rest_tol(cfg))
     collected.saved = {} if cfg.get("save_rollouts") else None
     out = roll_all(jobs, data, collected, settings, batch_scenes=batched)
+    out.rows += learned_settings.eval_rows(cfg, runs, data, settings, batched)
     out.rows += engine_rows(cfg, runs, data, batched)
     if out.saved:
         write_rollouts(report_dir / "rollouts", out.saved)

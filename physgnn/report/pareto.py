@@ -1,10 +1,11 @@
 """The Pareto view: accuracy against cost (ms per frame) on the same work.
 
-``make eval`` draws the learned runs and pybullet at each substep count, every point from the
-same start states and scored against the same truth (metrics.csv; the points and the front:
-:mod:`physgnn.report.same_work`). ``make bench`` draws pybullet's own curve on its bench pile
-against a fine reference (``bench.json`` for the frame rate, ``bench_extra.json`` for the
-accuracy of each substep count): a different work, so it stays in the bench report.
+``make eval`` draws the learned runs, each trained run at its learned settings and pybullet at
+each substep count, every point from the same start states and scored against the same truth
+(metrics.csv; the points and the front: :mod:`physgnn.report.same_work`). ``make bench``
+draws pybullet's own curve on its bench pile against a fine reference (``bench.json`` for the
+frame rate, ``bench_extra.json`` for the accuracy of each substep count): a different work, so
+it stays in the bench report.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from physgnn.metrics.names import PARETO, label  # noqa: E402
 from physgnn.report.figures import save_figure  # noqa: E402
-from physgnn.report.same_work import Point, front, points  # noqa: E402
+from physgnn.report.same_work import SETTING, Point, front, points  # noqa: E402
 from physgnn.report.table import SPLITS  # noqa: E402
 
 
@@ -47,6 +48,7 @@ def _draw(ax, points: list[Point], title: str, ylabel: str) -> None:
     on_front = front(points)
     styles = {
         "learned": dict(marker="o", color="tab:blue"),
+        SETTING: dict(marker="^", color="tab:green"),
         "pybullet": dict(marker="s", color="tab:orange"),
     }
     for kind, st in styles.items():

@@ -1,8 +1,9 @@
-"""Accuracy against cost on the same work: the learned runs and pybullet at each substep count
-(the rows ``pybullet-<k>`` of metrics.csv), every point from the same start states, scored
-against the same truth. One point per simulator and split: the mean of the metric and of the
-frame rate over its rollouts. Lower is better on both axes; the front is the set of points
-no other point beats or ties on both (:func:`pareto_frontier`).
+"""Accuracy against cost on the same work: the learned runs, each trained run at its own
+learned settings (the rows ``<run> · <setting>`` of metrics.csv, its column ``setting``) and
+pybullet at each substep count (the rows ``pybullet-<k>``), every point from the same start
+states, scored against the same truth. One point per simulator and split: the mean of the
+metric and of the frame rate over its rollouts. Lower is better on both axes; the front is the
+set of points no other point beats or ties on both (:func:`pareto_frontier`), drawn over all.
 """
 
 from __future__ import annotations
@@ -13,10 +14,20 @@ from dataclasses import dataclass
 
 from physgnn.metrics.names import PARETO
 from physgnn.report.format import fmt, md_table
-from physgnn.report.table import ENGINE, SPLITS, diverged_note, group_rows, select, stat
+from physgnn.report.table import (
+    ENGINE,
+    SPLITS,
+    config_label,
+    diverged_note,
+    group_rows,
+    select,
+    stat,
+)
 
 # The accuracy a simulator is judged on in the table (the matched-accuracy metric)
 FRONT_METRIC = "mse20"
+# The kind of a trained run's point at one of its learned settings
+SETTING = "learned setting"
 
 
 @dataclass(frozen=True)
@@ -26,7 +37,7 @@ class Point:
     label: str
     ms_per_frame: float
     error: float
-    kind: str  # "learned" or "pybullet"
+    kind: str  # "learned", "learned setting" (:data:`SETTING`) or "pybullet"
     valid: bool = True
 
 
@@ -57,6 +68,17 @@ def engine_groups(rows: list[dict]) -> dict[str, list[dict]]:
     return dict(sorted(groups.items(), key=lambda kv: (kv[1][0].get("substeps") or 0, kv[0])))
 
 
+def setting_groups(rows: list[dict]) -> dict[str, list[dict]]:
+    """The learned settings' rows (column ``setting`` set) by ``"<experiment>: <configuration>
+    · <setting>"``, the label of the learned runs' points with the setting after it."""
+    groups: dict[str, list[dict]] = defaultdict(list)
+    for row in rows:
+        if row.get("setting"):
+            run = f"{row['experiment'] or 'default'}: {config_label(row['overrides'])}"
+            groups[f"{run} · {row['setting']}"].append(row)
+    return dict(sorted(groups.items()))
+
+
 def _point(label: str, rows: list[dict], metric: str, kind: str) -> Point | None:
     err, fps = stat(rows, metric), stat(rows, "fps")
     if err is None or fps is None or fps[0] <= 0:
@@ -65,16 +87,20 @@ def _point(label: str, rows: list[dict], metric: str, kind: str) -> Point | None
 
 
 def points(rows: list[dict], split: str, metric: str) -> list[Point]:
-    """The learned configurations (one per experiment and configuration) and pybullet at each
-    substep count on ``split``, in that order; groups without the metric or a rate left out."""
+    """The learned configurations (one per experiment and configuration), their learned
+    settings and pybullet at each substep count on ``split``, in that order; groups without
+    the metric or a rate left out."""
     learned = [
         _point(f"{exp}: {label}", select(g, split), metric, "learned")
         for (exp, label), g in group_rows(rows).items()
     ]
+    settings = [
+        _point(name, select(g, split), metric, SETTING) for name, g in setting_groups(rows).items()
+    ]
     engine = [
         _point(run, select(g, split), metric, ENGINE) for run, g in engine_groups(rows).items()
     ]
-    return [p for p in learned + engine if p is not None]
+    return [p for p in learned + settings + engine if p is not None]
 
 
 def front(pts: list[Point]) -> list[Point]:
@@ -90,6 +116,7 @@ def split_table(rows: list[dict], split: str) -> str:
     it is on the :data:`FRONT_METRIC` front."""
     on_front = {p.label for p in front(points(rows, split, FRONT_METRIC))}
     groups = [(f"{e}: {c}", select(g, split)) for (e, c), g in group_rows(rows).items()]
+    groups += [(name, select(g, split)) for name, g in setting_groups(rows).items()]
     groups += [(run, select(g, split)) for run, g in engine_groups(rows).items()]
     body = []
     for name, sel in groups:
@@ -112,12 +139,29 @@ def split_table(rows: list[dict], split: str) -> str:
     return md_table(header, body)
 
 
+def settings_on_front(rows: list[dict], split: str) -> str:
+    """Which learned settings are on ``split``'s :data:`FRONT_METRIC` front, in one line ("" when
+    the split has no learned setting's point)."""
+    pts = points(rows, split, FRONT_METRIC)
+    if not any(p.kind == SETTING for p in pts):
+        return ""
+    on = [f"`{p.label}`" for p in front(pts) if p.kind == SETTING]
+    where = f"{split}'s {FRONT_METRIC} front"
+    return (
+        f"Learned settings on {where}: {', '.join(on)}."
+        if on
+        else f"No learned setting is on {where}."
+    )
+
+
 def section(rows: list[dict]) -> str:
-    """report.md's same-work section: one table per split, or why there is none."""
+    """report.md's same-work section: one table per split, each with the line of the learned
+    settings on its front, or why there is none."""
     if not engine_groups(rows):
         return "No pybullet rows (no learned run was evaluated, or the eval's `pybullet` is null)."
     parts = []
     for split in SPLITS:
         if select(rows, split):
-            parts += [f"**{split}**", split_table(rows, split)]
+            line = settings_on_front(rows, split)
+            parts += [f"**{split}**", split_table(rows, split), *([line] if line else [])]
     return "\n\n".join(parts)

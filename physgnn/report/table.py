@@ -19,10 +19,11 @@ from physgnn.report.format import fmt_stat
 
 # metrics.csv: identification columns, then the metrics (:data:`physgnn.metrics.names.TABLE`:
 # the divergence step and the speed last; ``substeps``: pybullet's, on its rows
-# ``pybullet-<k>``; empty on the others).
+# ``pybullet-<k>``; ``setting``: the learned setting of a trained run at its own knobs, on its
+# rows ``<run> · <setting>`` (physgnn.evaluation.learned_settings); each empty on the others).
 COLUMNS = [
     *("run", "experiment", "overrides", "seed", "split", "trajectory", "n_spheres", "n_frames"),
-    "substeps",
+    *("substeps", "setting"),
     *TABLE,
 ]
 INTS = ["n_spheres", "n_frames", "diverged_at", "seed", "substeps"]
@@ -84,11 +85,14 @@ def config_label(overrides: str) -> str:
 
 
 def group_rows(rows: list[dict]) -> dict[tuple[str, str], list[dict]]:
-    """Learned runs grouped by (experiment, configuration label); references, pybullet's rows
-    and the extra sleeping rollouts (see :func:`sleeping_section`) excluded."""
+    """Learned runs grouped by (experiment, configuration label); references, pybullet's rows,
+    the learned settings' rows (the same-work view's alone) and the extra sleeping rollouts
+    (see :func:`sleeping_section`) excluded."""
     groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for row in rows:
         if row["experiment"] in (*REFERENCES, ENGINE) or row["run"].endswith(SLEEP_SUFFIX):
+            continue
+        if row.get("setting"):
             continue
         groups[(row["experiment"] or "default", config_label(row["overrides"]))].append(row)
     return dict(sorted(groups.items()))
