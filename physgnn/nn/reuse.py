@@ -1,0 +1,206 @@
+r"""A pass of :class:`~physgnn.nn.epd.EncodeProcessDecode` again, computing only what changed.
+
+A second pass over a graph that differs from the first in a few edges (a rebuild within the
+frame, :mod:`physgnn.models.passes`) gives the same numbers as the first wherever its inputs
+are the same within reach. With ``D_k`` the nodes within ``k`` pp hops of the changes
+(:mod:`physgnn.nn.changes`), only these differ after ``k`` blocks:
+
+.. math::  v^{k+1}_i = v^k_i + \mathrm{MLP}_v([v^k_i, \mathrm{Agg}^k_i]),
+           \qquad i \in D_{k+1}; \qquad v^{k+1}_i = \bar v^{k+1}_i \text{ otherwise}
+
+(``\bar v`` the earlier pass's latent). Block ``k`` so runs on a subgraph: its pairs with an
+endpoint in ``D_{k+1}`` (every message into ``D_{k+1}``; a pair's two directions, as the third
+law needs), the ps edges of ``D_{k+1}``, and their endpoints (within ``D_{k+2}``); its pp edge
+latents ``e^{k+1} = e^k + m^k`` are new for those pairs, the earlier pass's for the others
+(a pair with neither end in ``D_{k+1}`` has the same ends and latent as before). The encoders
+run on the changed rows only, the node decoder on ``D_M``, the pair decoder on the pairs
+touching ``D_M``; every other row is the earlier pass's. The result is the whole pass's up to
+float rounding (the sums run over the same terms in another grouping).
+
+:class:`Latents` is what a pass keeps for the next: its inputs, the node latents ``[N, h]`` and
+pp edge latents ``[E, h]`` after each block, the ps latents, its outputs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from physgnn.nn.aggregation import inverse_degree
+from physgnn.nn.changes import changes, hops
+
+
+@dataclass(frozen=True)
+class Latents:
+    """One pass (module doc): inputs ``x [N, node_in]``, ``material [N] | None``, ``pp_index
+    [2, E]``, ``pp_attr [E, pp_in]``, ``ps_index [2, F]``, ``ps_attr [F, ps_in]``; ``nodes`` the
+    M+1 node latents ``[N, h]`` (``nodes[0]`` encoded, ``nodes[k]`` after k blocks), ``edges``
+    the M+1 pp edge latents ``[E, h]``, ``e_ps [F, h] | None``; outputs ``out [N, out_dim]`` and
+    ``pairs [E/2, pair_out] | None``."""
+
+    x: Tensor
+    material: Tensor | None
+    pp_index: Tensor
+    pp_attr: Tensor
+    ps_index: Tensor
+    ps_attr: Tensor
+    nodes: list
+    edges: list
+    e_ps: Tensor | None
+    out: Tensor
+    pairs: Tensor | None
+
+
+def whole(net, x, pp_index, pp_attr, ps_index, ps_attr, material=None, pairs=False):
+    """``(out [N, out_dim], pair_out [E/2, pair_out] | None, Latents)``: ``net.forward`` (with
+    ``pairs``: ``net.forward_pairs``), the same operations, keeping its latents."""
+    inputs = (x, pp_index, pp_attr, ps_index, ps_attr, material)
+    net._check(*inputs)
+    v, e_pp, e_ps, inv_pp, inv_ps = net.encode(*inputs)
+    nodes, edges = [v], [e_pp]
+    for block in net.blocks:
+        v, e_pp = block(v, pp_index, e_pp, ps_index, e_ps, inv_pp, inv_ps)
+        nodes.append(v)
+        edges.append(e_pp)
+    out = net.decoder(v)
+    pair_out = _decoded_pairs(net, v, pp_index, e_pp) if pairs else None
+    return out, pair_out, Latents(x, material, *inputs[1:5], nodes, edges, e_ps, out, pair_out)
+
+
+def _decoded_pairs(net, v, pp_index, e_pp) -> Tensor:
+    """``[E/2, pair_out]``: ``net``'s pair decoder (as in ``forward_pairs``)."""
+    if net.pair_decoder is None:
+        raise ValueError("pair outputs need a network built with pair_out > 0")
+    if pp_index.shape[1] == 0:
+        return v.new_zeros(0, net.pair_decoder.mlp.out_dim)
+    return net.pair_decoder(v, pp_index, e_pp)
+
+
+def again(net, earlier, x, pp_index, pp_attr, ps_index, ps_attr, material=None, pairs=False):
+    """:func:`whole`'s answer, computing only what differs from ``earlier`` (a
+    :class:`Latents` of ``net`` on the same N nodes; module doc). One read-back: the sizes of
+    the changed sets."""
+    inputs = (x, pp_index, pp_attr, ps_index, ps_attr, material)
+    if earlier is None or x.shape != earlier.x.shape or (pairs and earlier.pairs is None):
+        return whole(net, *inputs, pairs=pairs)
+    net._check(*inputs)
+    found = changes(earlier, *inputs)
+    m, half = len(net.blocks), pp_index.shape[1] // 2
+    reached = hops(found.seed, pp_index, m + 1)
+    touching = [r[pp_index[0, :half]] | r[pp_index[1, :half]] for r in reached[: m + 1]]
+    on_planes = [r[ps_index[1]] for r in reached[: m + 1]]
+    changed = (found.node_changed, found.pair_changed, found.ps_changed)
+    sets = positions([*changed, *reached, *touching, *on_planes])
+    nodes_c, pairs_c, ps_c = sets[:3]
+    reached, touching = sets[3 : m + 5], sets[m + 5 : 2 * m + 6]
+    on_planes = sets[2 * m + 6 :]
+    old_edges = torch.cat([found.pair_old, found.pair_old + earlier.pp_index.shape[1] // 2])
+    v, e_pp, e_ps = _encoded(net, earlier, inputs, found, old_edges, (nodes_c, pairs_c, ps_c))
+    inv = _inverse_degrees(net, v, pp_index, ps_index, e_ps)
+    nodes, edges = [v], [e_pp]
+    for k, block in enumerate(net.blocks):
+        subgraph = (reached[k + 1], reached[k + 2], touching[k + 1], on_planes[k + 1])
+        old = (earlier.nodes[k + 1], _carried(earlier.edges[k + 1], old_edges))
+        v, e_pp = _block(block, v, e_pp, e_ps, inv, pp_index, ps_index, subgraph, old)
+        nodes.append(v)
+        edges.append(e_pp)
+    out = earlier.out.index_copy(0, reached[m], net.decoder(v[reached[m]]))
+    pair_out = None
+    if pairs:
+        pair_out = _pairs_again(net, earlier, v, e_pp, pp_index, found, reached[m + 1], touching[m])
+    return out, pair_out, Latents(x, material, *inputs[1:5], nodes, edges, e_ps, out, pair_out)
+
+
+def positions(masks: list[Tensor]) -> list[Tensor]:
+    """The positions ``[count]`` (long, in order) of the True entries of each of ``masks``:
+    their counts read back at once, the one read-back of :func:`again` (the rows to compute
+    are data: a rebuild's graph reads its own size back likewise), then each compacted with
+    its count known (``nonzero`` would read back once per mask on a GPU)."""
+    counts = torch.stack([mask.sum() for mask in masks]).tolist() if masks else []
+    return [_compact(mask, count) for mask, count in zip(masks, counts, strict=True)]
+
+
+def _compact(mask: Tensor, count: int) -> Tensor:
+    """Positions of the ``count`` True entries of ``mask [P]``, in order, ``[count]``."""
+    slot = torch.where(mask, torch.cumsum(mask, 0) - 1, count)  # the rest: a spare slot
+    out = torch.empty(count + 1, dtype=torch.long, device=mask.device)
+    out.scatter_(0, slot, torch.arange(mask.shape[0], device=mask.device))
+    return out[:count]
+
+
+def _carried(old: Tensor, rows: Tensor) -> Tensor:
+    """``old [K', d]`` at ``rows [K]`` (zeros ``[K, d]`` when ``K' = 0``: every row is new)."""
+    return old[rows] if old.shape[0] else old.new_zeros(rows.shape[0], old.shape[1])
+
+
+def _encoded(net, earlier, inputs, found, old_edges, rows) -> tuple:
+    """``(v [N, h], e_pp [E, h], e_ps [F, h] | None)``: the earlier pass's encoded latents,
+    the changed ``rows`` ``(nodes, pairs, ps edges)`` encoded anew."""
+    x, pp_index, pp_attr, ps_index, ps_attr, material = inputs
+    nodes, pairs, ps_rows = rows
+    v = earlier.nodes[0]
+    if nodes.shape[0]:
+        own = None if material is None else material[nodes]
+        v = v.index_copy(0, nodes, net.node_encoder(net._node_input(x[nodes], own)))
+    e_pp = _carried(earlier.edges[0], old_edges)
+    if pairs.shape[0]:
+        edges = torch.cat([pairs, pairs + pp_index.shape[1] // 2])
+        e_pp = e_pp.index_copy(0, edges, net.pp_encoder(pp_attr[edges]))
+    e_ps = None
+    if net.ps_encoder is not None and ps_index.shape[1] > 0:
+        if earlier.e_ps is None:  # the earlier graph had no ps edge: every row is new
+            e_ps = v.new_zeros(ps_index.shape[1], v.shape[1])
+        else:
+            e_ps = _carried(earlier.e_ps, found.ps_old)
+        if ps_rows.shape[0]:
+            e_ps = e_ps.index_copy(0, ps_rows, net.ps_encoder(ps_attr[ps_rows]))
+    return v, e_pp, e_ps
+
+
+def _inverse_degrees(net, v, pp_index, ps_index, e_ps) -> tuple:
+    """``(inv_pp, inv_ps)`` ``[N, 1] | None`` of the whole graph, as
+    :meth:`~physgnn.nn.epd.EncodeProcessDecode.encode` has them."""
+    if net.aggregation != "mean":
+        return None, None
+    n = v.shape[0]
+    inv_pp = inverse_degree(pp_index[1], n, v) if pp_index.shape[1] > 0 else None
+    return inv_pp, (inverse_degree(ps_index[1], n, v) if e_ps is not None else None)
+
+
+def _local(nodes: Tensor, n: int) -> Tensor:
+    """``[N]`` long: the row of each node in ``nodes [K]`` (sorted, unique), −1 elsewhere."""
+    local = torch.full((n,), -1, dtype=torch.long, device=nodes.device)
+    return local.index_copy(0, nodes, torch.arange(nodes.shape[0], device=nodes.device))
+
+
+def _block(block, v, e_pp, e_ps, inv, pp_index, ps_index, subgraph, old) -> tuple:
+    """``(v^{k+1} [N, h], e^{k+1} [E, h])`` of ``block`` (module doc): ``subgraph`` the
+    positions ``(D_{k+1}, D_{k+2}, pairs touching D_{k+1}, ps edges of D_{k+1})``, ``old``
+    the earlier pass's ``(v^{k+1}, e^{k+1})`` (the latter in this graph's edge order)."""
+    targets, nodes, pairs, ps_rows = subgraph
+    local = _local(nodes, v.shape[0])
+    edges = torch.cat([pairs, pairs + pp_index.shape[1] // 2])
+    sub_ps = torch.stack([ps_index[0, ps_rows], local[ps_index[1, ps_rows]]])
+    sub_e_ps = e_ps[ps_rows] if e_ps is not None and ps_rows.shape[0] else None
+    inv_pp, inv_ps = (None if w is None else w[nodes] for w in inv)
+    agg, e_sub = block.aggregate(
+        v[nodes], local[pp_index[:, edges]], e_pp[edges], sub_ps, sub_e_ps, inv_pp, inv_ps
+    )
+    agg = None if agg is None else agg[local[targets]]
+    v_next = old[0].index_copy(0, targets, block.update(v[targets], agg))
+    return v_next, old[1].index_copy(0, edges, e_sub)
+
+
+def _pairs_again(net, earlier, v, e_pp, pp_index, found, nodes, pairs) -> Tensor:
+    """``[E/2, pair_out]``: the earlier pass's pair outputs, those of ``pairs`` (the pairs
+    touching ``D_M``, their ends within ``nodes``) decoded anew."""
+    half = pp_index.shape[1] // 2
+    out = _carried(earlier.pairs, found.pair_old)
+    if not pairs.shape[0]:
+        return out
+    local = _local(nodes, v.shape[0])
+    edges = torch.cat([pairs, pairs + half])
+    sub = _decoded_pairs(net, v[nodes], local[pp_index[:, edges]], e_pp[edges])
+    return out.index_copy(0, pairs, sub)
