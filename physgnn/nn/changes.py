@@ -7,11 +7,14 @@ pair ``(j, i)`` of the first half of the paired layout, ps by ``(plane, sphere)`
 compared exactly (a NaN counts as changed), so the changed set does not depend on *why* the
 inputs differ (:func:`changes`).
 
-After ``k`` message-passing blocks a node's latent can differ only within ``k`` pp hops of a
-*seed*: a node whose input row differs, or an endpoint of a pp pair or the sphere of a ps edge
-that is new, gone or whose input row differs (its messages, its degree or its edge latents
-change). :func:`hops` gives the seeds' ``k``-hop sets; a ps edge joins no two spheres (planes
-hold no latent), so only pp edges spread a change.
+Which latents differ: with ``V_0`` the nodes whose input row differs (their encoded latent
+does) and ``S`` the endpoints of pp pairs and the spheres of ps edges that are new, gone or whose
+input row differs (their messages, degrees and edge latents do), a node's latent after block 1
+can differ only in the *seed* ``T_1 = N[V_0] ∪ S`` (``N[·]``: the set and its pp neighbours),
+and after block ``k`` only in ``T_k = N^{k-1}[T_1]``: a block spreads a difference by one pp
+hop, and the pp edge latents that differ join nodes of ``T_k`` only. :func:`hops` gives the
+``T_k``; a ps edge joins no two spheres (planes hold no latent), so only pp edges spread a
+change.
 
 Shapes (N nodes; E, E' pp edges and F, F' ps edges of the new and the earlier graph):
 ``pp_index [2, E]`` in the paired layout (edge ``e + E/2`` is the reverse of edge ``e``),
@@ -31,7 +34,7 @@ class Changes:
     """``pair_old [E/2]``, ``ps_old [F]`` (long): the earlier graph's row of each pair / ps
     edge (any valid row where it has none); ``pair_changed [E/2]``, ``ps_changed [F]``,
     ``node_changed [N]`` (bool): rows that are new or whose inputs differ; ``seed [N]`` (bool):
-    the nodes from which a difference spreads (module doc)."""
+    ``T_1``, the nodes whose latent may differ after the first block (module doc)."""
 
     pair_old: Tensor
     pair_changed: Tensor
@@ -67,7 +70,7 @@ def changes(earlier, x, pp_index, pp_attr, ps_index, ps_attr, material=None) -> 
     node_changed = (x != earlier.x).any(1)
     if material is not None:
         node_changed = node_changed | (material != earlier.material)
-    seed = node_changed.to(torch.int32)  # a count per node: index_add_, no mask read back
+    seed = torch.zeros(n, dtype=torch.int32, device=x.device)  # S, counted: no read-back
     pair_old, pair_changed = _pp_changes(earlier, pp_index, pp_attr, n, seed)
     old_planes, old_spheres = earlier.ps_index
     ps_keys, old_ps_keys = ps_index[0] * n + ps_index[1], old_planes * n + old_spheres
@@ -76,7 +79,8 @@ def changes(earlier, x, pp_index, pp_attr, ps_index, ps_attr, material=None) -> 
     gone = ~matched(ps_keys, old_ps_keys)[1]
     seed.index_add_(0, ps_index[1], ps_changed.to(torch.int32))
     seed.index_add_(0, old_spheres, gone.to(torch.int32))
-    return Changes(pair_old, pair_changed, ps_old, ps_changed, node_changed, seed > 0)
+    seed = (seed > 0) | hops(node_changed, pp_index, 1)[1]  # S ∪ N[V_0]
+    return Changes(pair_old, pair_changed, ps_old, ps_changed, node_changed, seed)
 
 
 def _pp_changes(earlier, pp_index, pp_attr, n: int, seed: Tensor) -> tuple[Tensor, Tensor]:

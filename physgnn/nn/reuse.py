@@ -2,19 +2,20 @@ r"""A pass of :class:`~physgnn.nn.epd.EncodeProcessDecode` again, computing only
 
 A second pass over a graph that differs from the first in a few edges (a rebuild within the
 frame, :mod:`physgnn.models.passes`) gives the same numbers as the first wherever its inputs
-are the same within reach. With ``D_k`` the nodes within ``k`` pp hops of the changes
-(:mod:`physgnn.nn.changes`), only these differ after ``k`` blocks:
+are the same within reach. With ``T_k`` the nodes whose latent may differ after ``k`` blocks
+(the changes' seed spread by ``k − 1`` pp hops, :mod:`physgnn.nn.changes`), block ``k`` (from
+0) computes
 
 .. math::  v^{k+1}_i = v^k_i + \mathrm{MLP}_v([v^k_i, \mathrm{Agg}^k_i]),
-           \qquad i \in D_{k+1}; \qquad v^{k+1}_i = \bar v^{k+1}_i \text{ otherwise}
+           \qquad i \in T_{k+1}; \qquad v^{k+1}_i = \bar v^{k+1}_i \text{ otherwise}
 
-(``\bar v`` the earlier pass's latent). Block ``k`` so runs on a subgraph: its pairs with an
-endpoint in ``D_{k+1}`` (every message into ``D_{k+1}``; a pair's two directions, as the third
-law needs), the ps edges of ``D_{k+1}``, and their endpoints (within ``D_{k+2}``); its pp edge
-latents ``e^{k+1} = e^k + m^k`` are new for those pairs, the earlier pass's for the others
-(a pair with neither end in ``D_{k+1}`` has the same ends and latent as before). The encoders
-run on the changed rows only, the node decoder on ``D_M``, the pair decoder on the pairs
-touching ``D_M``; every other row is the earlier pass's. The result is the whole pass's up to
+(``\bar v`` the earlier pass's latent) on a subgraph: the pairs with an endpoint in
+``T_{k+1}`` (every message into ``T_{k+1}``; a pair's two directions, as the third law needs),
+the ps edges of ``T_{k+1}``, and their endpoints (within ``T_{k+2}``); its pp edge latents
+``e^{k+1} = e^k + m^k`` are new for those pairs, the earlier pass's for the others (a pair with
+neither end in ``T_{k+1}`` has the same ends and latent as before). The encoders run on the
+changed rows only, the node decoder on ``T_M``, the pair decoder on the pairs touching
+``T_M``; every other row is the earlier pass's. The result is the whole pass's up to
 float rounding (the sums run over the same terms in another grouping).
 
 :class:`Latents` is what a pass keeps for the next: its inputs, the node latents ``[N, h]`` and
@@ -83,33 +84,33 @@ def again(net, earlier, x, pp_index, pp_attr, ps_index, ps_attr, material=None, 
     :class:`Latents` of ``net`` on the same N nodes; module doc). One read-back: the sizes of
     the changed sets."""
     inputs = (x, pp_index, pp_attr, ps_index, ps_attr, material)
-    if earlier is None or x.shape != earlier.x.shape or (pairs and earlier.pairs is None):
+    m, half = len(net.blocks), pp_index.shape[1] // 2
+    fresh = earlier is None or x.shape != earlier.x.shape or (pairs and earlier.pairs is None)
+    if fresh or m == 0:
         return whole(net, *inputs, pairs=pairs)
     net._check(*inputs)
     found = changes(earlier, *inputs)
-    m, half = len(net.blocks), pp_index.shape[1] // 2
-    reached = hops(found.seed, pp_index, m + 1)
-    touching = [r[pp_index[0, :half]] | r[pp_index[1, :half]] for r in reached[: m + 1]]
-    on_planes = [r[ps_index[1]] for r in reached[: m + 1]]
+    reached = hops(found.seed, pp_index, m)  # T_1 … T_{M+1}
+    touching = [r[pp_index[0, :half]] | r[pp_index[1, :half]] for r in reached[:m]]
+    on_planes = [r[ps_index[1]] for r in reached[:m]]
     changed = (found.node_changed, found.pair_changed, found.ps_changed)
     sets = positions([*changed, *reached, *touching, *on_planes])
     nodes_c, pairs_c, ps_c = sets[:3]
-    reached, touching = sets[3 : m + 5], sets[m + 5 : 2 * m + 6]
-    on_planes = sets[2 * m + 6 :]
+    reached, touching, on_planes = sets[3 : m + 4], sets[m + 4 : 2 * m + 4], sets[2 * m + 4 :]
     old_edges = torch.cat([found.pair_old, found.pair_old + earlier.pp_index.shape[1] // 2])
     v, e_pp, e_ps = _encoded(net, earlier, inputs, found, old_edges, (nodes_c, pairs_c, ps_c))
     inv = _inverse_degrees(net, v, pp_index, ps_index, e_ps)
     nodes, edges = [v], [e_pp]
     for k, block in enumerate(net.blocks):
-        subgraph = (reached[k + 1], reached[k + 2], touching[k + 1], on_planes[k + 1])
+        subgraph = (reached[k], reached[k + 1], touching[k], on_planes[k])
         old = (earlier.nodes[k + 1], _carried(earlier.edges[k + 1], old_edges))
         v, e_pp = _block(block, v, e_pp, e_ps, inv, pp_index, ps_index, subgraph, old)
         nodes.append(v)
         edges.append(e_pp)
-    out = earlier.out.index_copy(0, reached[m], net.decoder(v[reached[m]]))
+    out = earlier.out.index_copy(0, reached[m - 1], net.decoder(v[reached[m - 1]]))
     pair_out = None
     if pairs:
-        pair_out = _pairs_again(net, earlier, v, e_pp, pp_index, found, reached[m + 1], touching[m])
+        pair_out = _pairs_again(net, earlier, v, e_pp, pp_index, found, reached[m], touching[-1])
     return out, pair_out, Latents(x, material, *inputs[1:5], nodes, edges, e_ps, out, pair_out)
 
 
@@ -177,7 +178,7 @@ def _local(nodes: Tensor, n: int) -> Tensor:
 
 def _block(block, v, e_pp, e_ps, inv, pp_index, ps_index, subgraph, old) -> tuple:
     """``(v^{k+1} [N, h], e^{k+1} [E, h])`` of ``block`` (module doc): ``subgraph`` the
-    positions ``(D_{k+1}, D_{k+2}, pairs touching D_{k+1}, ps edges of D_{k+1})``, ``old``
+    positions ``(T_{k+1}, T_{k+2}, pairs touching T_{k+1}, ps edges of T_{k+1})``, ``old``
     the earlier pass's ``(v^{k+1}, e^{k+1})`` (the latter in this graph's edge order)."""
     targets, nodes, pairs, ps_rows = subgraph
     local = _local(nodes, v.shape[0])
@@ -195,7 +196,7 @@ def _block(block, v, e_pp, e_ps, inv, pp_index, ps_index, subgraph, old) -> tupl
 
 def _pairs_again(net, earlier, v, e_pp, pp_index, found, nodes, pairs) -> Tensor:
     """``[E/2, pair_out]``: the earlier pass's pair outputs, those of ``pairs`` (the pairs
-    touching ``D_M``, their ends within ``nodes``) decoded anew."""
+    touching ``T_M``, their ends within ``nodes``) decoded anew."""
     half = pp_index.shape[1] // 2
     out = _carried(earlier.pairs, found.pair_old)
     if not pairs.shape[0]:
