@@ -90,41 +90,80 @@ def again(net, earlier, x, pp_index, pp_attr, ps_index, ps_attr, material=None, 
         return whole(net, *inputs, pairs=pairs)
     net._check(*inputs)
     found = changes(earlier, *inputs)
-    reached = hops(found.seed, pp_index, m)  # T_1 … T_{M+1}
-    touching = [r[pp_index[0, :half]] | r[pp_index[1, :half]] for r in reached[:m]]
-    on_planes = [r[ps_index[1]] for r in reached[:m]]
-    changed = (found.node_changed, found.pair_changed, found.ps_changed)
-    sets = positions([*changed, *reached, *touching, *on_planes])
-    nodes_c, pairs_c, ps_c = sets[:3]
-    reached, touching, on_planes = sets[3 : m + 4], sets[m + 4 : 2 * m + 4], sets[2 * m + 4 :]
+    order, changed = _levels(found, pp_index, ps_index, m)
     old_edges = torch.cat([found.pair_old, found.pair_old + earlier.pp_index.shape[1] // 2])
-    v, e_pp, e_ps = _encoded(net, earlier, inputs, found, old_edges, (nodes_c, pairs_c, ps_c))
+    v, e_pp, e_ps = _encoded(net, earlier, inputs, found, old_edges, changed)
     inv = _inverse_degrees(net, v, pp_index, ps_index, e_ps)
+    inv = tuple(None if w is None else w[order.nodes] for w in inv)  # in the levels' order
+    e_ps = None if e_ps is None else (e_ps, e_ps[order.ps])
     nodes, edges = [v], [e_pp]
     for k, block in enumerate(net.blocks):
-        subgraph = (reached[k], reached[k + 1], touching[k], on_planes[k])
         old = (earlier.nodes[k + 1], _carried(earlier.edges[k + 1], old_edges))
-        v, e_pp = _block(block, v, e_pp, e_ps, inv, pp_index, ps_index, subgraph, old)
+        v, e_pp = _block(block, k, v, e_pp, e_ps, inv, order, old, half)
         nodes.append(v)
         edges.append(e_pp)
-    out = earlier.out.index_copy(0, reached[m - 1], net.decoder(v[reached[m - 1]]))
+    rows = order.nodes[: order.node_counts[m - 1]]  # T_M
+    out = earlier.out.index_copy(0, rows, net.decoder(v[rows]))
     pair_out = None
     if pairs:
-        pair_out = _pairs_again(net, earlier, v, e_pp, pp_index, found, reached[m], touching[-1])
+        pair_out = _pairs_again(net, earlier, v, e_pp, found, order, half)
+    e_ps = None if e_ps is None else e_ps[0]
     return out, pair_out, Latents(x, material, *inputs[1:5], nodes, edges, e_ps, out, pair_out)
 
 
-def positions(masks: list[Tensor]) -> list[Tensor]:
-    """The positions ``[count]`` (long, in order) of the True entries of each of ``masks``:
-    their counts read back at once, the one read-back of :func:`again` (the rows to compute
-    are data: a rebuild's graph reads its own size back likewise), then each compacted with
-    its count known (``nonzero`` would read back once per mask on a GPU)."""
-    counts = torch.stack([mask.sum() for mask in masks]).tolist() if masks else []
-    return [_compact(mask, count) for mask, count in zip(masks, counts, strict=True)]
+@dataclass(frozen=True)
+class Levels:
+    """The nodes, pairs and ps edges by the first ``T_k`` they are in (nodes), touch (pairs) or
+    whose sphere is in it (ps edges), so that each block's are a prefix: ``nodes [N]``,
+    ``pairs [E/2]``, ``ps [F]`` (positions); ``node_counts`` ``|T_1|, …, |T_{M+1}|``,
+    ``pair_counts`` and ``ps_counts`` those of ``T_1, …, T_M`` (host ints); ``sub_pp [2, E/2]``
+    the pairs in order with their ends as ranks in ``nodes``, ``sub_ps [2, F]`` likewise
+    (plane, rank of the sphere): the subgraph of block ``k`` is their first columns."""
+
+    nodes: Tensor
+    pairs: Tensor
+    ps: Tensor
+    node_counts: list
+    pair_counts: list
+    ps_counts: list
+    sub_pp: Tensor
+    sub_ps: Tensor
+
+
+def _levels(found, pp_index: Tensor, ps_index: Tensor, m: int) -> tuple:
+    """``(Levels, (changed nodes, changed pairs, changed ps edges))`` (positions) of
+    ``found`` (:class:`~physgnn.nn.changes.Changes`) for M = ``m`` blocks. The one read-back of
+    :func:`again`: every count at once (the rows to compute are data, as a rebuild's graph
+    reads its own size back)."""
+    half = pp_index.shape[1] // 2
+    reached = hops(found.seed, pp_index, m)  # T_1 … T_{M+1}
+    level = sum((~r).long() for r in reached)  # 0 in T_1, …, M + 1 beyond T_{M+1}
+    pair_level = torch.minimum(level[pp_index[0, :half]], level[pp_index[1, :half]])
+    ps_level = level[ps_index[1]]
+    orders = [torch.sort(lv, stable=True).indices for lv in (level, pair_level, ps_level)]
+    changed = (found.node_changed, found.pair_changed, found.ps_changed)
+    counts = [_histogram(lv, m + 2).cumsum(0) for lv in (level, pair_level, ps_level)]
+    counts = torch.cat([counts[0][: m + 1], counts[1][:m], counts[2][:m]])
+    counts = torch.cat([counts, torch.stack([c.sum() for c in changed])]).tolist()
+    nodes, pairs, ps = orders
+    rank = torch.empty_like(nodes).scatter_(0, nodes, torch.arange(nodes.shape[0]).to(nodes))
+    sub_pp = rank[pp_index[:, pairs]]
+    sub_ps = torch.stack([ps_index[0, ps], rank[ps_index[1, ps]]])
+    split = (counts[: m + 1], counts[m + 1 : 2 * m + 1], counts[2 * m + 1 : 3 * m + 1])
+    positions = [_compact(c, n) for c, n in zip(changed, counts[3 * m + 1 :], strict=True)]
+    return Levels(nodes, pairs, ps, *split, sub_pp, sub_ps), positions
+
+
+def _histogram(values: Tensor, bins: int) -> Tensor:
+    """``[bins]`` long: how many of ``values`` (long, in ``[0, bins)``) are each value (an
+    ``index_add_``: ``bincount`` reads its size back on a GPU)."""
+    counts = torch.zeros(bins, dtype=torch.long, device=values.device)
+    return counts.index_add_(0, values, torch.ones_like(values))
 
 
 def _compact(mask: Tensor, count: int) -> Tensor:
-    """Positions of the ``count`` True entries of ``mask [P]``, in order, ``[count]``."""
+    """Positions of the ``count`` True entries of ``mask [P]``, in order, ``[count]``
+    (``nonzero`` with its size given: nothing read back)."""
     slot = torch.where(mask, torch.cumsum(mask, 0) - 1, count)  # the rest: a spare slot
     out = torch.empty(count + 1, dtype=torch.long, device=mask.device)
     out.scatter_(0, slot, torch.arange(mask.shape[0], device=mask.device))
@@ -170,38 +209,39 @@ def _inverse_degrees(net, v, pp_index, ps_index, e_ps) -> tuple:
     return inv_pp, (inverse_degree(ps_index[1], n, v) if e_ps is not None else None)
 
 
-def _local(nodes: Tensor, n: int) -> Tensor:
-    """``[N]`` long: the row of each node in ``nodes [K]`` (sorted, unique), −1 elsewhere."""
-    local = torch.full((n,), -1, dtype=torch.long, device=nodes.device)
-    return local.index_copy(0, nodes, torch.arange(nodes.shape[0], device=nodes.device))
-
-
-def _block(block, v, e_pp, e_ps, inv, pp_index, ps_index, subgraph, old) -> tuple:
-    """``(v^{k+1} [N, h], e^{k+1} [E, h])`` of ``block`` (module doc): ``subgraph`` the
-    positions ``(T_{k+1}, T_{k+2}, pairs touching T_{k+1}, ps edges of T_{k+1})``, ``old``
-    the earlier pass's ``(v^{k+1}, e^{k+1})`` (the latter in this graph's edge order)."""
-    targets, nodes, pairs, ps_rows = subgraph
-    local = _local(nodes, v.shape[0])
-    edges = torch.cat([pairs, pairs + pp_index.shape[1] // 2])
-    sub_ps = torch.stack([ps_index[0, ps_rows], local[ps_index[1, ps_rows]]])
-    sub_e_ps = e_ps[ps_rows] if e_ps is not None and ps_rows.shape[0] else None
-    inv_pp, inv_ps = (None if w is None else w[nodes] for w in inv)
+def _block(block, k: int, v, e_pp, e_ps, inv, order: Levels, old, half: int) -> tuple:
+    """``(v^{k+1} [N, h], e^{k+1} [E, h])`` of ``block``, the ``k``-th (module doc): on the
+    pairs touching ``T_{k+1}``, the ps edges of ``T_{k+1}`` and the nodes of ``T_{k+2}`` (the
+    first of ``order``'s, :class:`Levels`); ``e_ps`` ``(e_ps [F, h], in order [F, h])`` or None,
+    ``inv`` the inverse degrees in order; ``old`` the earlier pass's ``(v^{k+1}, e^{k+1})``
+    (the latter in this graph's edge order)."""
+    targets, reach = order.node_counts[k], order.node_counts[k + 1]
+    n_pairs, n_ps = order.pair_counts[k], order.ps_counts[k]
+    pairs = order.pairs[:n_pairs]
+    edges = torch.cat([pairs, pairs + half])
+    forward = order.sub_pp[:, :n_pairs]
+    sub_pp = torch.cat([forward, forward.flip(0)], 1)
+    sub_e_ps = e_ps[1][:n_ps] if e_ps is not None and n_ps else None
+    inv_pp, inv_ps = (None if w is None else w[:reach] for w in inv)
+    sub_v = v[order.nodes[:reach]]
     agg, e_sub = block.aggregate(
-        v[nodes], local[pp_index[:, edges]], e_pp[edges], sub_ps, sub_e_ps, inv_pp, inv_ps
+        sub_v, sub_pp, e_pp[edges], order.sub_ps[:, :n_ps], sub_e_ps, inv_pp, inv_ps
     )
-    agg = None if agg is None else agg[local[targets]]
-    v_next = old[0].index_copy(0, targets, block.update(v[targets], agg))
+    new = block.update(sub_v[:targets], None if agg is None else agg[:targets])
+    v_next = old[0].index_copy(0, order.nodes[:targets], new)
     return v_next, old[1].index_copy(0, edges, e_sub)
 
 
-def _pairs_again(net, earlier, v, e_pp, pp_index, found, nodes, pairs) -> Tensor:
-    """``[E/2, pair_out]``: the earlier pass's pair outputs, those of ``pairs`` (the pairs
-    touching ``T_M``, their ends within ``nodes``) decoded anew."""
-    half = pp_index.shape[1] // 2
+def _pairs_again(net, earlier, v, e_pp, found, order: Levels, half: int) -> Tensor:
+    """``[E/2, pair_out]``: the earlier pass's pair outputs, those of the pairs touching
+    ``T_M`` decoded anew (their ends within ``T_{M+1}``)."""
     out = _carried(earlier.pairs, found.pair_old)
-    if not pairs.shape[0]:
+    n_pairs = order.pair_counts[-1]
+    if not n_pairs:
         return out
-    local = _local(nodes, v.shape[0])
+    pairs = order.pairs[:n_pairs]
+    forward = order.sub_pp[:, :n_pairs]
+    sub_v = v[order.nodes[: order.node_counts[-1]]]
     edges = torch.cat([pairs, pairs + half])
-    sub = _decoded_pairs(net, v[nodes], local[pp_index[:, edges]], e_pp[edges])
+    sub = _decoded_pairs(net, sub_v, torch.cat([forward, forward.flip(0)], 1), e_pp[edges])
     return out.index_copy(0, pairs, sub)
