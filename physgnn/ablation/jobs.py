@@ -39,7 +39,7 @@ EXECUTION = (
     "lit.compile_mode",
     "lit.compile_shapes",
     "model.fixed_capacity",
-    "model.contacts.incremental_passes",
+    "model.incremental_passes",
     "data.val_rollout.",
 )
 # Keys added since the study's records began, left out of the fingerprint while they hold the
