@@ -80,6 +80,23 @@ def test_a_pass_again_equals_the_whole_pass_on_random_graphs(options):
         assert_close(back, (out, pairs))
 
 
+def test_gradients_through_a_pass_again_are_the_whole_pass_s():
+    """A kept latent is the same function of the weights as the one the whole pass computes
+    (the inputs within its reach are the same), so the gradients agree too."""
+    torch.manual_seed(0)
+    widths = Widths(node_in=5, pp_in=3, ps_in=3, out_dim=7, pair_out=6)
+    net = EncodeProcessDecode(widths, hidden=16, M=3)
+    earlier, later = (inputs[:5] + (None,) for inputs in two_graphs(1))
+    params = list(net.parameters())
+
+    def gradients(out, pairs):
+        return torch.autograd.grad(out.square().sum() + pairs.square().sum(), params)
+
+    kept = reuse.whole(net, *earlier, pairs=True)[2]
+    again = gradients(*reuse.again(net, kept, *later, pairs=True)[:2])
+    assert_close(again, gradients(*net.forward_pairs(*later)))
+
+
 def test_the_decoder_sees_only_the_spheres_within_m_hops_of_the_change():
     torch.manual_seed(0)
     net = EncodeProcessDecode(Widths(node_in=5, pp_in=3, ps_in=3), hidden=16, M=2)
