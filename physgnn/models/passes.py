@@ -10,15 +10,17 @@ K passes.
 
 **A pass costs what its new edges cost** (``incremental_passes``, on by default): a rebuild adds
 a few edges (0.3–1 % on the bench's piles), so a pass after one runs the network only where the
-change can reach, the spheres within M hops (M message-passing blocks) of the edges it adds
-and of any input row that differs from the last pass's, and keeps the last pass's latents
-everywhere else (:mod:`physgnn.nn.reuse`): the same numbers up to float rounding, one more
-read-back (the size of the changed set). A :class:`PassMemory` carries the latents from pass to
+change can reach, within M − 1 pp hops (M message-passing blocks) of the ends of the edges it
+adds or lacks and of edges whose input row differs, within M hops of spheres whose input row
+differs, and keeps the last pass's latents everywhere else (:mod:`physgnn.nn.changes`,
+:mod:`physgnn.nn.reuse`): the same numbers up to float rounding, one more read-back (the
+sizes of the changed sets). A :class:`PassMemory` carries the latents from pass to
 pass. Whole passes where that cannot be: graphs padded to buckets or of fixed capacity (their
 shapes are meant to stay fixed), and a ``head`` set on the instance (a compiled region,
 :func:`~physgnn.models.capture.compile_simulator`; a test's oracle), which is called as it is.
 The training loss's one pass is a whole pass (there is nothing to reuse); push-forward and
-rollouts reuse, and gradients would flow through both the new and the kept latents.
+rollouts reuse. The path is differentiable: a kept latent is the same function of the weights
+as the whole pass's, so gradients through a reused pass are the whole pass's (tested).
 
 **Contact memory** (``contact_memory=True``, opt-in): the rules also link by the last frame's
 motion reversed (``−v_t``: since ``p_t − p_{t−1} = dt·v_t``, a pair or a plane that could have
