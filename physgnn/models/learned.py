@@ -209,16 +209,17 @@ class LearnedSimulator(nn.Module):
         graph = self.graph_builder(state)
         return self.network_prediction(state, graph), graph
 
-    def network_prediction(self, state, graph, on_plane=None) -> torch.Tensor:
+    def network_prediction(self, state, graph, on_plane=None, memory=None) -> torch.Tensor:
         """Network output ``[N, 6]`` (normalised Δv, Δω; then the rest logit) on ``graph``,
         built from ``state``. With ``pair_impulses`` the Δv and Δω are the pair impulses' and,
         for spheres ``on_plane [N]`` (None: :meth:`reach`'s), the node decoder's own, plus
-        gravity, in the same normalised units."""
+        gravity, in the same normalised units. ``memory``: a
+        :class:`~physgnn.models.passes.PassMemory` of the step's passes."""
         x = self.node_features(state)
         edges = graph.network_inputs(x.shape[0], *self.edge_features(graph, state))
         material = state.material if self.network.material is not None else None
         pairs = self.contacts.pair_impulses
-        run = self.network.forward_pairs if pairs else self.network
+        run = passes.network_call(self.network, pairs, memory)
         # fixed shapes for a captured step (physgnn/nn/padding.py); a fixed-capacity graph's
         # masked edges need padding's ghost node (self.padded says so)
         if self.padded:
@@ -276,22 +277,22 @@ class LearnedSimulator(nn.Module):
         """The velocities the rules also link by (:func:`~physgnn.models.passes.recalled`)."""
         return passes.recalled(self.contacts, state)
 
-    def head(self, state, graph, provisional: Sequence = ()) -> tuple[torch.Tensor, ...]:
+    def head(self, state, graph, provisional: Sequence = (), memory=None) -> tuple:
         """``(v_{t+1}, ω_{t+1}, ū, ω̄)`` ``[N, 3]`` each of :meth:`step`: everything of a step
         after the graph build, the region a compiled simulator compiles as one
         (:mod:`physgnn.models.capture`)."""
-        outputs = self.step(state, graph, provisional)
+        outputs = self.step(state, graph, provisional, memory)
         return outputs.vel, outputs.angvel, outputs.mean_vel, outputs.mean_angvel
 
-    def step(self, state, graph, provisional: Sequence = ()) -> StepOutputs:
+    def step(self, state, graph, provisional: Sequence = (), memory=None) -> StepOutputs:
         """One step on ``graph`` (built from ``state`` with ``provisional`` velocities): reach,
-        features, network, physical units. The one step function: the rollout (:meth:`head`)
-        and the training loss (:meth:`~physgnn.training.lit.LitSimulator.graph_losses`) both
-        call it."""
+        features, network (``memory``: :meth:`network_prediction`'s), physical units. The one
+        step function: the rollout (:meth:`head`) and the training loss
+        (:meth:`~physgnn.training.lit.LitSimulator.graph_losses`) both call it."""
         if not self.contacts.gravity_prior:
-            pred = self.network_prediction(state, graph)
+            pred = self.network_prediction(state, graph, memory=memory)
             return StepOutputs(pred, *self.motion(state, pred), None)
         where = self.reach(state, graph, provisional)
-        pred = self.network_prediction(state, graph, where.planes)
+        pred = self.network_prediction(state, graph, where.planes, memory)
         motion = self.motion(state, pred, where.spheres, where.supported)
         return StepOutputs(pred, *motion, where.spheres)

@@ -61,7 +61,10 @@ class ContactHandling:
     :func:`physgnn.models.floor.free_bounce`), and after that change the move still may not
     cross a plane; ``pair_floor`` (opt-in): after the pair impulses and the node decoder's
     change, no pp pair's move closes its gap past contact, momentum kept
-    (:mod:`physgnn.models.pair_floor`)."""
+    (:mod:`physgnn.models.pair_floor`); ``incremental_passes``: a pass after a rebuild
+    recomputes the network only within M hops of what the rebuild changed, the rest kept from
+    the pass before (the same numbers up to float rounding, faster; false: whole passes;
+    :mod:`physgnn.models.passes`)."""
 
     NODE: ClassVar[str] = "model.contacts"
     gravity_prior: bool = True
@@ -74,6 +77,7 @@ class ContactHandling:
     plane_floor: bool = True
     plane_newton: bool = True
     pair_floor: bool = False
+    incremental_passes: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

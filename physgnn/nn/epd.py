@@ -76,6 +76,12 @@ class ProcessorBlock(nn.Module):
         inv_pp: Tensor | None = None,
         inv_ps: Tensor | None = None,
     ) -> tuple[Tensor, Tensor]:
+        agg, e_pp = self.aggregate(v, pp_index, e_pp, ps_index, e_ps, inv_pp, inv_ps)
+        return self.update(v, agg), e_pp
+
+    def aggregate(self, v, pp_index, e_pp, ps_index, e_ps, inv_pp=None, inv_ps=None):
+        """``(Agg [N, h] | None, e_pp [E, h])``: the block's aggregate (None: no edges) and
+        its updated pp edge latents (the arguments of :meth:`forward`)."""
         aggs = []
         if pp_index.shape[1] > 0:
             agg_pp, m = self.pp(v, pp_index, e_pp)
@@ -84,13 +90,17 @@ class ProcessorBlock(nn.Module):
         if e_ps is not None:
             agg_ps = self.ps(v, ps_index, e_ps)
             aggs.append(agg_ps if inv_ps is None else agg_ps * inv_ps)
+        return (sum(aggs[1:], aggs[0]) if aggs else None), e_pp
+
+    def update(self, v: Tensor, agg: Tensor | None) -> Tensor:
+        """``v [N, h]`` + ``MLP_v([v, Agg])`` (``agg [N, h]``; None: no edges)."""
         # MLP_v([v, Agg]) with its first layer split, W_v v + W_a Agg: no [N, 2h] copy, and no
         # product at all on an Agg that is zero (no edges).
         w_v, w_a = self.node.first_layer_blocks([v.shape[1], v.shape[1]])
         pre = torch.addmm(self.node.lin1.bias, v, w_v.t())
-        if aggs:
-            pre = torch.addmm(pre, sum(aggs[1:], aggs[0]), w_a.t())
-        return v + self.node.finish(pre), e_pp
+        if agg is not None:
+            pre = torch.addmm(pre, agg, w_a.t())
+        return v + self.node.finish(pre)
 
     def flops(self, num_nodes: int, num_pp_edges: int, num_ps_edges: int) -> int:
         has_ps = self.ps is not None and num_ps_edges > 0
@@ -200,6 +210,17 @@ class EncodeProcessDecode(nn.Module):
     def process(self, x, pp_index, pp_attr, ps_index, ps_attr, material=None):
         """``(v [N, hidden], e_pp [E, hidden])``: the latents after the M blocks."""
         self._check(x, pp_index, pp_attr, ps_index, ps_attr, material)
+        v, e_pp, e_ps, inv_pp, inv_ps = self.encode(
+            x, pp_index, pp_attr, ps_index, ps_attr, material
+        )
+        for block in self.blocks:
+            v, e_pp = block(v, pp_index, e_pp, ps_index, e_ps, inv_pp, inv_ps)
+        return v, e_pp
+
+    def encode(self, x, pp_index, pp_attr, ps_index, ps_attr, material=None) -> tuple:
+        """``(v [N, h], e_pp [E, h], e_ps [F, h] | None, inv_pp [N, 1] | None, inv_ps [N, 1]
+        | None)``: the encoded latents (``e_ps`` None: no ps MLP runs) and, with the mean
+        aggregation, the inverse degrees the blocks weigh their sums by."""
         v = self.node_encoder(self._node_input(x, material))
         has_pp = pp_index.shape[1] > 0
         e_pp = self.pp_encoder(pp_attr) if has_pp else pp_attr.new_zeros(0, v.shape[1])
@@ -209,9 +230,7 @@ class EncodeProcessDecode(nn.Module):
         if self.aggregation == "mean":
             inv_pp = inverse_degree(pp_index[1], v.shape[0], v) if has_pp else None
             inv_ps = inverse_degree(ps_index[1], v.shape[0], v) if has_ps else None
-        for block in self.blocks:
-            v, e_pp = block(v, pp_index, e_pp, ps_index, e_ps, inv_pp, inv_ps)
-        return v, e_pp
+        return v, e_pp, e_ps, inv_pp, inv_ps
 
     def flops_per_step(self, num_nodes: int, num_pp_edges: int, num_ps_edges: int) -> int:
         """2 × multiply-adds of every dense layer one ``forward`` runs on a graph of this size

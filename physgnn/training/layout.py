@@ -96,6 +96,7 @@ FLAT_KEYS = {
     "plane_floor": ("contacts", "plane_floor"),
     "plane_newton": ("contacts", "plane_newton"),
     "pair_floor": ("contacts", "pair_floor"),
+    "incremental_passes": ("contacts", "incremental_passes"),
 }
 
 
