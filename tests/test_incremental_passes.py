@@ -177,7 +177,7 @@ def passes_of(sim, state, incremental: bool, monkeypatch) -> tuple:
 
 @pytest.mark.parametrize("weights", ["random", "shipped"])
 def test_incremental_passes_give_the_whole_passes_answer_on_supported_piles(weights, monkeypatch):
-    sim = make(M=5, hidden=32) if weights == "random" else load_run("pretrained")[0].eval()
+    sim = (make(M=5, hidden=32) if weights == "random" else load_run("pretrained")[0]).eval()
     assert sim.contacts.incremental_passes  # the default
     reused = 0
     for seed in range(6):

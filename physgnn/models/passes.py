@@ -64,9 +64,12 @@ def network_call(network, pairs: bool, memory: PassMemory | None):
 
 
 def reuses(sim) -> bool:
-    """True when ``sim``'s passes after a rebuild reuse the last pass's latents (module doc)."""
+    """True when ``sim``'s passes after a rebuild reuse the last pass's latents (module doc).
+    Not in training mode: a training step's push-forward keeps whole passes, so that it makes
+    no read-back beyond the training step's own (the reuse reads its set sizes once a pass)."""
     whole = sim.padded or "head" in vars(sim)  # a head set on the instance is called as it is
-    return sim.contacts.incremental_passes and sim.contacts.contact_passes > 0 and not whole
+    on = sim.contacts.incremental_passes and sim.contacts.contact_passes > 0
+    return on and not whole and not sim.training
 
 
 def recalled(contacts: ContactHandling, state) -> tuple[torch.Tensor, ...]:
