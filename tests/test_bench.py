@@ -682,3 +682,17 @@ def test_a_failing_gpu_row_is_reported_not_fatal(monkeypatch):
     out = gpu_section(cfg, trajectories, compute_stats(trajectories), {})
     assert out["training"] == [{"variant": "eager", "error": "ZeroDivisionError: division by zero"}]
     assert "| eager | failed: ZeroDivisionError" in "\n".join(gpu_tables({"gpu": out}))
+
+
+def test_cost_linearity_is_judged_between_two_sizes_from_300_spheres():
+    def linear(sizes_ms):
+        extra = {"learned": [_learned(n, 1000.0 / ms, 0.2, 1.0, 0.5) for n, ms in sizes_ms]}
+        return targets({}, extra)[4]
+
+    # the default sizes stop at 1 000: 1 000 against 300 spheres
+    assert linear([(154, 5.0), (300, 10.0), (1000, 40.0)])[1:] == ["1.20", "met"]
+    assert linear([(154, 5.0), (1000, 40.0)]) == [
+        "cost ~ linear",
+        "needs two sizes from 300 spheres",
+        "not judged",
+    ]

@@ -93,7 +93,10 @@ def _graph(ref: dict, base: list[dict]) -> list[str]:
 
 def _linear(base: list[dict]) -> list[str]:
     per = {r["n_spheres"]: r["total_ms"] / r["n_spheres"] for r in base}
-    big = [k for k in per if k >= 1000] or list(per)
+    big = [k for k in per if k >= 1000]
+    big = big if len(big) > 1 else [k for k in per if k >= SHARE_FROM]
+    if len(big) < 2:
+        return ["cost ~ linear", f"needs two sizes from {SHARE_FROM} spheres", "not judged"]
     lo, hi = min(big), max(big)
     ratio = per[hi] / per[lo]
     return [
