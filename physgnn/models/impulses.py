@@ -131,26 +131,24 @@ def pairs_floored(state, graph, changes: list, weight=None) -> None:
     """``changes`` (as :func:`floored`'s) after the pairs' floor
     (:func:`~physgnn.models.pair_floor.pair_floor`: no pair closes its gap past contact in the
     move, momentum kept), in place."""
-    vel = state.vel[:, 0]
-    if len(changes) == 1:
-        changes[0][0] = (
-            pair_floor(state, graph.pp_index, vel + changes[0][0], None, weight)[0] - vel
-        )
-        return
-    mean, end = pair_floor(state, graph.pp_index, vel + changes[1][0], vel + changes[0][0], weight)
-    changes[0][0], changes[1][0] = end - vel, mean - vel
+    _through(state, changes, lambda mean, end: pair_floor(state, graph.pp_index, mean, end, weight))
 
 
 def floored(state, graph, changes: list, bounce: bool = False, contacts=None) -> None:
     """``changes`` (``[[Δv, Δω]]`` of the end velocity, then of the mean move with the engine
     state) after the planes' floor (:func:`~physgnn.models.floor.plane_floor`; ``bounce``: with
     the closed-form rebound of a sphere arriving in free flight), in place."""
+    _through(
+        state, changes, lambda mean, end: plane_floor(state, graph, mean, end, bounce, contacts)
+    )
+
+
+def _through(state, changes: list, floor) -> None:
+    """``changes`` after ``floor(mean [N, 3], end [N, 3] | None) -> (mean, end)``, in place: a
+    finite-difference state (one change) passes its velocity as the move and no end."""
     vel = state.vel[:, 0]
     if len(changes) == 1:  # a finite-difference state: its velocity is its move
-        mean, _ = plane_floor(state, graph, vel + changes[0][0], contacts=contacts)
-        changes[0][0] = mean - vel
+        changes[0][0] = floor(vel + changes[0][0], None)[0] - vel
         return
-    mean, end = plane_floor(
-        state, graph, vel + changes[1][0], vel + changes[0][0], bounce, contacts
-    )
+    mean, end = floor(vel + changes[1][0], vel + changes[0][0])
     changes[0][0], changes[1][0] = end - vel, mean - vel
