@@ -33,7 +33,8 @@ def sinking_model(newton: bool, seed: int = 0) -> LearnedSimulator:
         H=1,
         network=network,
         inputs=ModelInputs(engine_state=True),
-        contacts=ContactHandling(plane_newton=newton),
+        # the control has neither last floor: the energy guard's floors the move too
+        contacts=ContactHandling(plane_newton=newton, energy_guard=newton),
     )
     last = [m for m in sim.network.decoder.modules() if isinstance(m, torch.nn.Linear)][-1]
     down = sim.outputs.slice("delta_mean_vel").start + 2

@@ -1,8 +1,10 @@
 """Does a scene lie inside what a run was trained on? One line naming what does not.
 
-The ranges come from the run's own config (``data.scene``: the training family's radius range,
-density, drop height and initial speed, frame interval and materials: the ranges of drawn
-materials, ``material_ranges``, else the fixed ``materials``): radius, mass
+The ranges come from the run's own config (``data.scene``: the training family's sphere count,
+radius range, density, drop height and initial speed, frame interval and materials: the ranges
+of drawn materials, ``material_ranges``, else the fixed ``materials``): spheres in the scene
+(a pile of 200 where the training scenes held at most 20 is deeper and denser than any the
+network saw), radius, mass
 (``density·4/3·π·r³`` over the radius range), speed (up to the initial speed bound plus a free
 fall from the highest start), frame interval and each material parameter. A scene value more
 than :data:`MARGIN` (relative) outside its range is named; a learned simulator there
@@ -33,6 +35,8 @@ def training_ranges(cfg) -> dict[str, tuple[float, float]]:
     r0, r1, rho = float(family.radius_min), float(family.radius_max), float(family.density)
     fall = math.sqrt(2 * 9.81 * float(family.get("h_max", 0.0)))
     ranges = {"radius (m)": (r0, r1), "mass (kg)": (_ball_mass(r0, rho), _ball_mass(r1, rho))}
+    if "n_min" in family and "n_max" in family:
+        ranges = {"spheres": (float(family.n_min), float(family.n_max))} | ranges
     ranges["speed (m/s)"] = (0.0, float(family.get("max_speed0", 0.0)) + fall)
     ranges["dt (s)"] = (float(family.dt), float(family.dt))
     drawn = family.get("material_ranges") or {}
@@ -46,7 +50,8 @@ def training_ranges(cfg) -> dict[str, tuple[float, float]]:
 
 def scene_values(scene) -> dict[str, np.ndarray]:
     """The same quantities of a :class:`~physgnn.physics.scene.Scene` at its start."""
-    values = {"radius (m)": scene.radius, "mass (kg)": scene.mass}
+    values = {"spheres": np.array([len(scene.radius)]), "radius (m)": scene.radius}
+    values["mass (kg)"] = scene.mass
     values["speed (m/s)"] = np.linalg.norm(scene.vel, axis=-1)
     values["dt (s)"] = np.array([scene.dt])
     params = np.asarray(scene.materials)[np.asarray(scene.material)]

@@ -250,10 +250,10 @@ class LearnedSimulator(nn.Module):
         first two of :meth:`motion`."""
         return self.motion(state, pred, reach, supported)[:2]
 
-    def motion(self, state, pred: torch.Tensor, reach=None, supported=None) -> tuple:
+    def motion(self, state, pred: torch.Tensor, reach=None, supported=None, graph=None) -> tuple:
         """Normalised output → ``(v_{t+1}, ω_{t+1}, ū, ω̄)`` ``[N, 3]`` each
-        (:func:`~physgnn.models.motion.physical_motion`)."""
-        return physical_motion(self, state, pred, reach, supported)
+        (:func:`~physgnn.models.motion.physical_motion`; ``graph``: the step's)."""
+        return physical_motion(self, state, pred, reach, supported, graph)
 
     def forward(self, state) -> tuple[torch.Tensor, ...]:
         """``(vel_next [N, 3], angvel_next [N, 3])`` in physical units (m/s, rad/s, world
@@ -294,5 +294,5 @@ class LearnedSimulator(nn.Module):
             return StepOutputs(pred, *self.motion(state, pred), None)
         where = self.reach(state, graph, provisional)
         pred = self.network_prediction(state, graph, where.planes, memory)
-        motion = self.motion(state, pred, where.spheres, where.supported)
+        motion = self.motion(state, pred, where.spheres, where.supported, graph)
         return StepOutputs(pred, *motion, where.spheres)

@@ -23,9 +23,13 @@ from __future__ import annotations
 import torch
 
 from physgnn.models import contact_inputs, rest
+from physgnn.models.energy_guard import guarded
+from physgnn.models.floor import plane_floor
 
 
-def physical_motion(sim, state, pred: torch.Tensor, reach=None, supported=None) -> tuple:
+def physical_motion(
+    sim, state, pred: torch.Tensor, reach=None, supported=None, graph=None
+) -> tuple:
     """Normalised output → ``(v_{t+1}, ω_{t+1}, ū, ω̄)``, each ``[N, 3]``: the next
     state's velocities and the frame's mean motion (the same tensors for a
     finite-difference state). Spheres of a scene without rotation keep ``ω_t``. With
@@ -33,7 +37,9 @@ def physical_motion(sim, state, pred: torch.Tensor, reach=None, supported=None) 
     graph) fly ballistically: ``v + g·dt`` and, with the engine state, the mean
     ``v + s·g·dt``, ``s`` the engine's own share
     (:func:`~physgnn.models.contact_inputs.gravity_share`). The rest decision stops spheres
-    that are ``supported [N]`` (None: those in ``reach``)."""
+    that are ``supported [N]`` (None: those in ``reach``). With ``energy_guard``, outside
+    training, the frame's contacts add no energy (:mod:`physgnn.models.energy_guard`); given
+    the step's ``graph``, the planes' floor then holds the move out of the planes again."""
     out, vel_t, angvel_t = sim.outputs, state.vel[:, 0], state.angvel[:, 0]
     vel = vel_t + out.take(pred, "delta_vel") * sim.delta_vel_std + sim.delta_vel_mean
     spin = out.take(pred, "delta_angvel") * sim.delta_angvel_std
@@ -42,14 +48,12 @@ def physical_motion(sim, state, pred: torch.Tensor, reach=None, supported=None) 
         mean = out.take(pred, "delta_mean_vel") * sim.delta_vel_std
         spin = out.take(pred, "delta_mean_angvel") * sim.delta_angvel_std
         moves += [vel_t + mean + sim.delta_vel_mean, angvel_t + spin + sim.delta_angvel_mean]
+    free = free_motion(sim, state)
     if sim.contacts.gravity_prior:
         if reach is None:
             raise ValueError("gravity_prior needs the spheres in reach of a contact")
-        vel_free, angvel_free = contact_inputs.free_flight(state)
-        free = [vel_free, angvel_free]
-        if sim.inputs.engine_state:
-            free += [vel_t + sim.gravity_share * (vel_free - vel_t), angvel_free]
         moves = [torch.where(reach[:, None], m, f) for m, f in zip(moves, free, strict=True)]
+    rest_now = None
     if sim.contacts.rest_decision:
         rest_now = rest.at_rest(
             out.take(pred, "rest")[:, 0], reach if supported is None else supported
@@ -57,4 +61,32 @@ def physical_motion(sim, state, pred: torch.Tensor, reach=None, supported=None) 
         moves = [torch.where(rest_now[:, None], torch.zeros_like(m), m) for m in moves]
     rotating = sim.rotating(state)[:, None]
     moves[1::2] = [torch.where(rotating, m, angvel_t) for m in moves[1::2]]
-    return tuple(moves) if sim.inputs.engine_state else (*moves, *moves)
+    moves = tuple(moves) if sim.inputs.engine_state else (*moves, *moves)
+    if sim.contacts.energy_guard and not sim.training:
+        free = free if sim.inputs.engine_state else (*free, *free)
+        moves = guarded(state, free, moves, rest_now, sim.contacts.energy_slack, graph)
+        if graph is not None and sim.contacts.plane_floor:
+            moves = floored_move(state, graph, moves, sim.inputs.engine_state)
+    return moves
+
+
+def floored_move(state, graph, moves: tuple, engine_state: bool) -> tuple:
+    """``moves`` ``(v, ω, ū, ω̄)`` with the move ``ū`` held out of every plane of ``graph`` by
+    the planes' floor (:func:`~physgnn.models.floor.plane_floor`); a finite-difference state's
+    velocity is its move."""
+    mean = plane_floor(state, graph, moves[2])[0]
+    if engine_state:
+        return moves[0], moves[1], mean, moves[3]
+    return mean, moves[1], mean, moves[3]
+
+
+def free_motion(sim, state) -> list:
+    """``[v, ω]`` of free flight (``v_t + g·dt``, ``ω_t``) ``[N, 3]`` each, with the engine
+    state also ``[ū, ω̄]``, the mean ``v_t + s·g·dt`` with the engine's own share ``s``
+    (:func:`~physgnn.models.contact_inputs.gravity_share`)."""
+    vel_t = state.vel[:, 0]
+    vel_free, angvel_free = contact_inputs.free_flight(state)
+    free = [vel_free, angvel_free]
+    if sim.inputs.engine_state:
+        free += [vel_t + sim.gravity_share * (vel_free - vel_t), angvel_free]
+    return free

@@ -64,7 +64,10 @@ class ContactHandling:
     (:mod:`physgnn.models.pair_floor`); ``incremental_passes``: a pass after a rebuild
     recomputes the network only within M hops of what the rebuild changed, the rest kept from
     the pass before (the same numbers up to float rounding, faster; false: whole passes;
-    :mod:`physgnn.models.passes`)."""
+    :mod:`physgnn.models.passes`); ``energy_guard``: outside training, a frame's contacts
+    raise no contact group's energy beyond what parts its overlaps, plus ``energy_slack``
+    metres of its weight (its contact changes scaled by one factor per group: momentum kept;
+    :mod:`physgnn.models.energy_guard`)."""
 
     NODE: ClassVar[str] = "model.contacts"
     gravity_prior: bool = True
@@ -78,6 +81,8 @@ class ContactHandling:
     plane_newton: bool = True
     pair_floor: bool = False
     incremental_passes: bool = True
+    energy_guard: bool = True
+    energy_slack: float = ranged(number(0, what="m of the scene's weight"), default=0.0)
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -97,6 +97,8 @@ FLAT_KEYS = {
     "plane_newton": ("contacts", "plane_newton"),
     "pair_floor": ("contacts", "pair_floor"),
     "incremental_passes": ("contacts", "incremental_passes"),
+    "energy_guard": ("contacts", "energy_guard"),
+    "energy_slack": ("contacts", "energy_slack"),
 }
 
 
