@@ -27,6 +27,7 @@ import torch
 
 from physgnn.graph.rules import ballistic_velocity
 from physgnn.models.floor import contact_directions, plane_floor, pressed
+from physgnn.models.friction import friction_cone, sphere_friction
 from physgnn.models.outputs import PAIR, regression
 from physgnn.models.pair_floor import pair_floor
 
@@ -94,12 +95,10 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
     if newton:  # the node decoder's own change only where a plane touches the sphere
         vel = state.vel[:, 0]
         own = own * pressed(state, graph, vel + changes[-1][0], contacts)[:, None].to(own.dtype)
+    before = [change[0] for change in changes]
     if sim.contacts.plane_floor:
         floored(state, graph, changes, sim.contacts.plane_newton, contacts)
-    for (prefix, _), change in zip(motions, changes, strict=True):
-        own_vel = outputs.take(node_out, f"delta_{prefix}vel") * sim.delta_vel_std
-        own_ang = outputs.take(node_out, f"delta_{prefix}angvel") * sim.delta_angvel_std
-        change[0], change[1] = change[0] + own * own_vel, change[1] + own * own_ang
+    add_own(sim, state, graph, node_out, own, changes, before)
     if sim.contacts.pair_floor:
         pairs_floored(state, graph, changes, weight)
     if newton:  # the move: it may not cross a plane either
@@ -111,6 +110,22 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
         parts.append((dang - sim.delta_angvel_mean) / sim.delta_angvel_std)
     rest = node_out[:, regression(outputs).width :]
     return torch.cat(parts + [rest], 1)
+
+
+def add_own(sim, state, graph, node_out, own, changes: list, before: list) -> None:
+    """``changes`` plus the node decoder's own change of every motion, where ``own [N, 1]``,
+    in place; with ``friction_cone``, outside training, its part along a plane within
+    Coulomb's cone of the plane's push (the floor's change since ``before``;
+    :mod:`physgnn.models.friction`)."""
+    outputs, motions = sim.outputs, ("", "mean_")[: len(changes)]
+    cone = sim.contacts.friction_cone and not sim.training
+    mu = sphere_friction(state, graph) if cone else None
+    for prefix, change, start in zip(motions, changes, before, strict=True):
+        own_vel = outputs.take(node_out, f"delta_{prefix}vel") * sim.delta_vel_std
+        own_ang = outputs.take(node_out, f"delta_{prefix}angvel") * sim.delta_angvel_std
+        if cone:
+            own_vel, own_ang = friction_cone(change[0] - start, own_vel, own_ang, mu)
+        change[0], change[1] = change[0] + own * own_vel, change[1] + own * own_ang
 
 
 def start_from_the_law(sim) -> None:

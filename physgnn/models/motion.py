@@ -37,9 +37,10 @@ def physical_motion(
     graph) fly ballistically: ``v + g·dt`` and, with the engine state, the mean
     ``v + s·g·dt``, ``s`` the engine's own share
     (:func:`~physgnn.models.contact_inputs.gravity_share`). The rest decision stops spheres
-    that are ``supported [N]`` (None: those in ``reach``). With ``energy_guard``, outside
-    training, the frame's contacts add no energy (:mod:`physgnn.models.energy_guard`); given
-    the step's ``graph``, the planes' floor then holds the move out of the planes again."""
+    that are ``supported [N]`` (None: those in ``reach``). With
+    ``energy_guard``, outside training, the frame's contacts add no energy
+    (:mod:`physgnn.models.energy_guard`); given the step's ``graph``, the planes' floor then
+    holds the move out of the planes again."""
     out, vel_t, angvel_t = sim.outputs, state.vel[:, 0], state.angvel[:, 0]
     vel = vel_t + out.take(pred, "delta_vel") * sim.delta_vel_std + sim.delta_vel_mean
     spin = out.take(pred, "delta_angvel") * sim.delta_angvel_std
@@ -71,12 +72,14 @@ def physical_motion(
 
 
 def floored_move(state, graph, moves: tuple, engine_state: bool) -> tuple:
-    """``moves`` ``(v, ω, ū, ω̄)`` with the move ``ū`` held out of every plane of ``graph`` by
-    the planes' floor (:func:`~physgnn.models.floor.plane_floor`); a finite-difference state's
-    velocity is its move."""
-    mean = plane_floor(state, graph, moves[2])[0]
+    """``moves`` ``(v, ω, ū, ω̄)`` after the planes' floor of ``graph``
+    (:func:`~physgnn.models.floor.plane_floor`): the move ``ū`` held out of every plane and,
+    where that acted, the end velocity ``v`` no longer approaching it; a finite-difference
+    state's velocity is its move."""
     if engine_state:
-        return moves[0], moves[1], mean, moves[3]
+        mean, end = plane_floor(state, graph, moves[2], moves[0])
+        return end, moves[1], mean, moves[3]
+    mean = plane_floor(state, graph, moves[2])[0]
     return mean, moves[1], mean, moves[3]
 
 

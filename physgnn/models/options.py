@@ -67,7 +67,9 @@ class ContactHandling:
     :mod:`physgnn.models.passes`); ``energy_guard``: outside training, a frame's contacts
     raise no contact group's energy beyond what parts its overlaps, plus ``energy_slack``
     metres of its weight (its contact changes scaled by one factor per group: momentum kept;
-    :mod:`physgnn.models.energy_guard`)."""
+    :mod:`physgnn.models.energy_guard`); ``friction_cone``: outside training, the node
+    decoder's own change along a plane that presses the sphere at most ``μ`` times the plane's
+    push (Coulomb; :mod:`physgnn.models.friction`)."""
 
     NODE: ClassVar[str] = "model.contacts"
     gravity_prior: bool = True
@@ -83,6 +85,7 @@ class ContactHandling:
     incremental_passes: bool = True
     energy_guard: bool = True
     energy_slack: float = ranged(number(0, what="m of the scene's weight"), default=0.0)
+    friction_cone: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

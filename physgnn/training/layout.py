@@ -99,6 +99,7 @@ FLAT_KEYS = {
     "incremental_passes": ("contacts", "incremental_passes"),
     "energy_guard": ("contacts", "energy_guard"),
     "energy_slack": ("contacts", "energy_slack"),
+    "friction_cone": ("contacts", "friction_cone"),
 }
 
 
