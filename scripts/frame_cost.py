@@ -7,7 +7,8 @@ then ``crossover.frames`` frames), one scene at a time on one thread, the runs t
 ``--rounds`` rounds. Printed per size: each run's median ms per frame, its ratio to the first
 run's (the median of the rounds' ratios), the graph builds and network passes per frame, and the
 1-minute load average before and after. A rebuild on a pass's velocities that keeps every
-allowance reuses the last build's candidates; one that widens one counts as a whole build too.
+allowance reuses the last build's candidates; one that widens one searches pairs for the grown
+spheres only (a whole build only off the CPU's k-d tree, where it counts as one).
 
 ``--parts`` also splits each run's frame into its parts, ms per frame over all rounds: builds,
 rebuilds (``extend``, a whole build within it counted here), the first network pass of the frame

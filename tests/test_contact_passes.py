@@ -69,9 +69,18 @@ def test_a_rebuild_on_provisional_velocities_links_every_pair_that_touches_under
         assert edges_of(builder(state)) <= edges_of(graph)  # a rebuild only adds
 
 
+def accepted(basis):
+    """The candidate pairs and plane edges a basis's masks accept."""
+    src, dst, plane, sphere = basis.candidates
+    pp, ps = basis.masks
+    pairs = set(zip(src[pp].tolist(), dst[pp].tolist(), strict=True))
+    return pairs, set(zip(plane[ps].tolist(), sphere[ps].tolist(), strict=True))
+
+
 def test_a_rebuild_from_the_last_builds_candidates_is_the_whole_builds_graph():
-    """extend reuses the candidates and earlier masks where the allowance holds, and builds
-    anew where a faster velocity widens it: the graph is the whole build's, edge for edge."""
+    """extend reuses the candidates and earlier masks where the allowance holds, and searches
+    pairs for the grown spheres only where a faster velocity widens it: the graph is the whole
+    build's, edge for edge."""
     builders = [GraphBuilder(), GraphBuilder(fixed_capacity=True)] * 3
     for seed, builder in zip(range(6), builders, strict=True):
         state = random_supported_state(seed)
@@ -85,7 +94,9 @@ def test_a_rebuild_from_the_last_builds_candidates_is_the_whole_builds_graph():
             whole, whole_basis = builder.build(state, velocities)
             for field in ("pp_index", "pp_attr", "ps_index", "ps_attr", "allowance", "pp_mask"):
                 assert_close(getattr(graph, field), getattr(whole, field), rtol=0, atol=0)
-            assert_close(extended.masks, whole_basis.masks, rtol=0, atol=0)
+            assert accepted(extended) == accepted(whole_basis)
+            if velocities[-1] is not faster or builder.fixed_capacity:
+                assert_close(extended.masks, whole_basis.masks, rtol=0, atol=0)
 
 
 def test_a_sphere_falling_onto_a_resting_one_is_linked_once_the_resting_one_stops():
@@ -250,3 +261,21 @@ def test_contact_memory_keeps_a_contact_of_the_last_frame_in_reach_for_one_frame
         graph = memory.graph_builder(state, memory.recalled(state))
         assert (graph.pp_index.shape[1] > 0) == linked
         assert plain.graph_builder(state).pp_index.shape[1] == 0
+
+
+def test_a_rebuild_that_widens_an_allowance_makes_no_whole_build(monkeypatch):
+    builder = GraphBuilder()
+    state = random_supported_state(1)
+    ballistic = ballistic_velocity(state)
+    faster = ballistic.clone()
+    faster[:3] = 4 * faster[:3] + 2  # three allowances widen
+    _, basis = builder.build(state, [ballistic])
+    whole = builder.build(state, [ballistic, faster])[0]
+
+    def no_whole_build(*args, **kwargs):
+        raise AssertionError("a whole build within extend")
+
+    monkeypatch.setattr(builder, "build", no_whole_build)
+    graph, _ = builder.extend(state, basis, [ballistic, faster])
+    for field in ("pp_index", "pp_attr", "ps_index", "ps_attr", "allowance"):
+        assert_close(getattr(graph, field), getattr(whole, field), rtol=0, atol=0)

@@ -41,7 +41,7 @@ from physgnn.data.state import host_sizes, scene_of_sphere
 from physgnn.graph.candidates import compact, scene_counts, scene_pairs, scene_plane_pairs
 from physgnn.graph.edges import Graph, paired_edges, ps_features
 from physgnn.graph.neighbors import BACKENDS, radius_pairs, resolve_backend
-from physgnn.graph.rebuild import Basis, union_allowance, union_masks, widened
+from physgnn.graph.rebuild import Basis, grown_pairs, union_allowance, union_masks, widened
 from physgnn.graph.rules import GRAVITY, SURFACE_CONTACT, ConnectivityRules, check_length
 from physgnn.physics.scene import GROUND
 
@@ -114,9 +114,28 @@ class GraphBuilder(ConnectivityRules):
         if self.fixed_capacity or resolve_backend(self.backend, state.pos) != "kdtree":
             return self.build(state, provisional)
         wider = widened(self, state, basis, provisional[-1])
-        if wider is None:  # a wider reach: other candidates
-            return self.build(state, provisional)
+        if wider is None:  # a wider reach: the candidates of the spheres it widened, added
+            wider = self._regrown(state, basis, provisional)
         return self._compacted(state, wider), wider
+
+    def _regrown(self, state, basis: Basis, provisional: Sequence[torch.Tensor]) -> Basis:
+        """``basis`` under one more provisional velocity that widens some allowances: the pairs
+        within the wider reach of a sphere whose allowance grew join the basis's candidates (a
+        pair of two others needs no more reach than the basis's search had), and the masks of
+        every velocity are taken anew under the wider allowance. The graph is the whole
+        build's, edge for edge; the pair search covers the grown spheres only."""
+        velocity = self.rule_velocity(state)
+        allowance = union_allowance(self, state, velocity, provisional)
+        src, dst, plane, sphere = basis.candidates
+        if not basis.layout:  # the layout's candidates are every pair already
+            grew = torch.nonzero(allowance > basis.allowance)[:, 0]  # a read-back, on the CPU
+            reach = self._pair_reach(state, allowance)
+            src, dst = grown_pairs(state, scene_of_sphere(state), grew, reach, (src, dst))
+        candidates = (src, dst, plane, sphere)
+        pp_mask, ps_mask, offset = union_masks(
+            self, state, velocity, allowance, candidates, provisional
+        )
+        return Basis(allowance, candidates, (pp_mask, ps_mask), offset, basis.layout)
 
     def layout_candidates(self, state, spheres: tuple[int, ...]) -> bool:
         """True when the pp candidates are every same-scene pair of the layout (module doc),
@@ -136,10 +155,14 @@ class GraphBuilder(ConnectivityRules):
         :func:`~physgnn.graph.neighbors.radius_pairs`); the same edges either way."""
         if layout:
             return scene_pairs(spheres, batch, counts)
+        pairs = radius_pairs(state.pos, self._pair_reach(state, allowance), batch, self.backend)
+        return pairs[0], pairs[1]
+
+    def _pair_reach(self, state, allowance: torch.Tensor) -> float:
+        """The radius search's reach (m): no pair farther apart can touch within the frame."""
         radius = state.radius.to(torch.float64)
         reach = 2 * float(radius.max()) + 2 * float(allowance.max()) + self.epsilon
-        pairs = radius_pairs(state.pos, reach * (1 + 1e-9), batch, self.backend)
-        return pairs[0], pairs[1]
+        return reach * (1 + 1e-9)
 
     def _compacted(self, state, basis: Basis) -> Graph:
         """The graph of the candidates ``basis`` accepts (module doc, "Counted or fixed

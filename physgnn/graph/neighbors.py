@@ -75,7 +75,7 @@ def radius_pairs(
         i, j = _kdtree_candidates(pos, batch, r)
     else:
         i, j = _cluster_candidates(pos, batch, r)
-    return _exact_filter(pos, batch, r, i, j)
+    return exact_pairs(pos, batch, r, i, j)
 
 
 def _check(pos, batch, r) -> tuple[torch.Tensor, torch.Tensor, float]:
@@ -105,8 +105,10 @@ def _auto_backend(pos: torch.Tensor) -> str:
     return "kdtree"
 
 
-def _exact_filter(pos, batch, r, i, j) -> torch.Tensor:
-    """Keep candidate pairs that satisfy the module's exact rule; orient, dedupe, sort."""
+def exact_pairs(pos, batch, r, i, j) -> torch.Tensor:
+    """``[2, P]``: the candidate pairs ``(i [Q], j [Q])`` that satisfy the module's exact rule
+    (same scene, distinct, centres at most ``r`` apart), oriented ``i < j``, deduplicated and
+    sorted lexicographically."""
     i, j = torch.minimum(i, j), torch.maximum(i, j)
     keep = (i != j) & (batch[i] == batch[j])
     i, j = i[keep], j[keep]

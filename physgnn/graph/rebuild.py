@@ -13,7 +13,9 @@ a rebuild adds edges (:class:`~physgnn.models.learned.LearnedSimulator`, ``conta
 
 A rebuild with one more velocity (:meth:`~physgnn.graph.builder.GraphBuilder.extend`) reuses
 the last build's :class:`Basis` where that velocity widens no allowance (:func:`widened`; on
-the CPU: 1.11–1.14× faster frames of the default model, the same graph edge for edge).
+the CPU: 1.11–1.14× faster frames of the default model, the same graph edge for edge); where it
+widens some, it searches pairs for the grown spheres only (:func:`grown_pairs`) and judges the
+candidates anew: a frame makes one whole build.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from dataclasses import dataclass
 
 import torch
 
+from physgnn.graph.neighbors import BallIndex, exact_pairs, extent_span
 from physgnn.graph.rules import ConnectivityRules
 
 
@@ -67,10 +70,23 @@ def union_masks(
 
 def widened(rules: ConnectivityRules, state, basis: Basis, velocity) -> Basis | None:
     """``basis`` with the masks of one more provisional ``velocity [N, 3]`` added, or None
-    where that velocity widens an allowance (other candidates: a whole build)."""
+    where that velocity widens an allowance (other candidates: :func:`grown_pairs`)."""
     allowance = torch.maximum(basis.allowance, rules.allowance(state, velocity=velocity))
     if not torch.equal(allowance, basis.allowance):
         return None
     pp_mask, ps_mask, _ = rules.rules(state, velocity, allowance, *basis.candidates, velocity)
     masks = (basis.masks[0] | pp_mask, basis.masks[1] | ps_mask)
     return dataclasses.replace(basis, masks=masks)
+
+
+def grown_pairs(state, batch, grown: torch.Tensor, reach: float, pairs: tuple) -> tuple:
+    """``(src, dst)``: the candidate ``pairs`` (``i < j``, sorted) with every same-scene pair
+    within ``reach`` (m) of a sphere of ``grown [G]`` (indices) added, sorted the same way: the
+    radius search of a whole build, asked of the grown spheres only (CPU k-d tree)."""
+    pos, n = state.pos, state.pos.shape[0]
+    span = extent_span(pos, 2.0 * reach)
+    search = torch.full((grown.shape[0],), reach, dtype=torch.float64)
+    rows, cols = BallIndex(pos, batch, span).near(pos[grown], batch[grown], search)
+    found = exact_pairs(pos, batch, reach, grown[rows], cols)
+    key = torch.unique(torch.cat([pairs[0] * n + pairs[1], found[0] * n + found[1]]))
+    return key // n, key % n
