@@ -609,6 +609,14 @@ def test_the_default_bench_keeps_to_medium_sizes_and_large_adds_the_rest():
     assert merged_config(_cfg("quick=true", "crossover=null")).crossover is None
 
 
+def test_a_key_set_alone_on_the_command_line_wins_over_the_quick_settings():
+    given = ["quick=true", "run=pretrained", "sizes=[154]", "crossover.draws=1"]
+    cfg = merged_config(_cfg(*given), given)
+    assert cfg.run == "pretrained" and list(cfg.sizes) == [154] and cfg.crossover.draws == 1
+    assert list(cfg.crossover.sizes) == [10]  # the rest of the quick settings stay
+    assert merged_config(_cfg("quick=true")).run is None  # quick alone: random weights
+
+
 # ------------------------------------------------------------------- pybullet's bench curve
 def test_bench_curve_points_pair_each_substep_count_with_its_rate(tmp_path):
     bench = {"pybullet": [{"n_spheres": 154, "substeps": s, "fps": 50.0 * s} for s in (1, 5)]}

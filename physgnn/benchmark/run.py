@@ -23,10 +23,12 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import torch
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.benchmark import activity, machine, profile, scenes
@@ -45,7 +47,7 @@ from physgnn.report.pareto import bench_figure
 
 def bench(cfg: DictConfig) -> dict:
     """Run every measurement of ``cfg`` (see ``conf/bench.yaml``); returns bench.json's dict."""
-    cfg = merged_config(cfg)
+    cfg = merged_config(cfg, command_line())
     if int(cfg.threads) < 1:
         raise BenchError(f"threads must be >= 1 (got {cfg.threads})")
     unknown = [c for c in cfg.interleaved.configs if c not in cfg.learned.configs]
@@ -131,12 +133,28 @@ def measure(cfg: DictConfig, rng: np.random.Generator, matmul: float, phases: di
 REPLACED = ("learned.configs", "crossover.learned_settings")
 
 
-def merged_config(cfg: DictConfig) -> DictConfig:
+def merged_config(cfg: DictConfig, given: Sequence[str] = ()) -> DictConfig:
     """``cfg`` with ``large_settings`` merged over it key by key when ``large`` is true, then
-    :func:`quick_config` when ``quick`` is true."""
+    :func:`quick_config` when ``quick`` is true; then the command line's own ``key=value``
+    settings ``given`` once more, so that a key set alone wins over the blocks
+    (``quick=true run=pretrained`` runs the shipped weights)."""
+    merged = cfg
     if cfg.get("large"):
-        cfg = settings_merged(cfg, cfg.large_settings, replaced=())
-    return quick_config(cfg) if cfg.quick else cfg
+        merged = settings_merged(merged, cfg.large_settings, replaced=())
+    if cfg.quick:
+        merged = quick_config(merged)
+    if merged is cfg:
+        return cfg
+    alone = [g for g in given if g.split("=")[0] not in ("quick", "large") and g[:1] not in "+~"]
+    return OmegaConf.merge(merged, OmegaConf.from_dotlist(alone)) if alone else merged
+
+
+def command_line() -> list[str]:
+    """The ``key=value`` settings of the command line that composed the config (none outside
+    a Hydra command)."""
+    if not HydraConfig.initialized():
+        return []
+    return list(HydraConfig.get().overrides.task)
 
 
 def quick_config(cfg: DictConfig) -> DictConfig:
