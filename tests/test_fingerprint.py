@@ -61,6 +61,7 @@ CONFIG = [
     # the rollout guards (default since; rollouts only): off as when pinned
     "model.contacts.energy_guard=false",
     "model.contacts.friction_cone=false",
+    "model.contacts.rest_consistent=false",
     # the recipe: noise, push-forward (from step 2 of 4), contact terms, Adam, schedule
     "lit.noise.std=0.03",
     "lit.pushforward.steps=2",

@@ -34,7 +34,7 @@ IGNORED = {"seed", "data_dir", "dir", "preset", "name"}
 # How a run executes, not what it trains: how the network is compiled, whether graphs have a
 # fixed capacity (the same edges, masked; model keys in the flat layout), whether passes after
 # a rebuild recompute only what changed (the same numbers), the rollout guards (the energy
-# guard and the friction cone: rollouts only, the training steps are the same)
+# guard, the friction cone, a consistent rest: rollouts only, the training steps are the same)
 # and how much the validation rollouts (which choose best.ckpt, like the callbacks) roll out.
 EXECUTION = (
     "lit.compile_mode",
@@ -44,6 +44,7 @@ EXECUTION = (
     "model.energy_guard",
     "model.energy_slack",
     "model.friction_cone",
+    "model.rest_consistent",
     "data.val_rollout.",
 )
 # Keys added since the study's records began, left out of the fingerprint while they hold the

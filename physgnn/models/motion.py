@@ -37,7 +37,9 @@ def physical_motion(
     graph) fly ballistically: ``v + g·dt`` and, with the engine state, the mean
     ``v + s·g·dt``, ``s`` the engine's own share
     (:func:`~physgnn.models.contact_inputs.gravity_share`). The rest decision stops spheres
-    that are ``supported [N]`` (None: those in ``reach``). With
+    that are ``supported [N]`` (None: those in ``reach``; with ``rest_consistent``, outside
+    training, only those whose own answer is still along the ground:
+    :func:`~physgnn.models.rest.still_along_the_ground`). With
     ``energy_guard``, outside training, the frame's contacts add no energy
     (:mod:`physgnn.models.energy_guard`); given the step's ``graph``, the planes' floor then
     holds the move out of the planes again."""
@@ -59,6 +61,8 @@ def physical_motion(
         rest_now = rest.at_rest(
             out.take(pred, "rest")[:, 0], reach if supported is None else supported
         )
+        if sim.contacts.rest_consistent and not sim.training:
+            rest_now = rest_now & rest.still_along_the_ground(state, moves[0])
         moves = [torch.where(rest_now[:, None], torch.zeros_like(m), m) for m in moves]
     rotating = sim.rotating(state)[:, None]
     moves[1::2] = [torch.where(rotating, m, angvel_t) for m in moves[1::2]]

@@ -69,7 +69,9 @@ class ContactHandling:
     metres of its weight (its contact changes scaled by one factor per group: momentum kept;
     :mod:`physgnn.models.energy_guard`); ``friction_cone``: outside training, the node
     decoder's own change along a plane that presses the sphere at most ``μ`` times the plane's
-    push (Coulomb; :mod:`physgnn.models.friction`)."""
+    push (Coulomb; :mod:`physgnn.models.friction`); ``rest_consistent``: outside training,
+    the rest decision stops only spheres whose own answer moves along the ground slower than
+    ``½·g·dt`` (:func:`physgnn.models.rest.still_along_the_ground`)."""
 
     NODE: ClassVar[str] = "model.contacts"
     gravity_prior: bool = True
@@ -86,6 +88,7 @@ class ContactHandling:
     energy_guard: bool = True
     energy_slack: float = ranged(number(0, what="m of the scene's weight"), default=0.0)
     friction_cone: bool = True
+    rest_consistent: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import torch
 
+from physgnn.physics.energy import G
+
 
 def rest_target(state, rest_speed: float) -> torch.Tensor:
     """``[N]`` bool: spheres whose target next motion is rest, ``|v_{t+1}| < rest_speed`` and
@@ -19,6 +21,17 @@ def rest_target(state, rest_speed: float) -> torch.Tensor:
     still = torch.linalg.vector_norm(state.target_vel, dim=1) < rest_speed
     spin = torch.linalg.vector_norm(state.target_angvel, dim=1) * state.radius
     return still & (spin < rest_speed)
+
+
+def still_along_the_ground(state, vel: torch.Tensor) -> torch.Tensor:
+    """``[N]`` bool: spheres whose own answer ``vel [N, 3]`` (the end velocity before the rest
+    decision) moves along the ground slower than half a frame of gravity, ``|v_xy| < ½·g·dt``.
+    Vertically a sphere at rest may be answered up to a frame of gravity (the regression leaves
+    support to the rest decision); along the ground nothing pulls it, so a faster answer is one
+    the logit disagrees with: the shipped model stopped a sphere leaving a frictionless head-on
+    at 1.46 m/s, and the pair's momentum went with it."""
+    horizontal = torch.linalg.vector_norm(vel[:, :2], dim=1)
+    return horizontal < 0.5 * G * state.scene_dt
 
 
 def at_rest(logit: torch.Tensor, reach=None) -> torch.Tensor:

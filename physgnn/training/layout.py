@@ -100,6 +100,7 @@ FLAT_KEYS = {
     "energy_guard": ("contacts", "energy_guard"),
     "energy_slack": ("contacts", "energy_slack"),
     "friction_cone": ("contacts", "friction_cone"),
+    "rest_consistent": ("contacts", "rest_consistent"),
 }
 
 
