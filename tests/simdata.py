@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from functools import partial
 
 import numpy as np
@@ -113,3 +114,18 @@ def trajectory(
 def batch(trajs: list[Trajectory], t: int = 3, H: int = 2):
     """A PyG batch of the states at frame ``t`` of several trajectories."""
     return Batch.from_data_list([TrajectoryFrames(tr).state(t, H) for tr in trajs])
+
+
+def sliding(speed: float = 4.0, frames: int = 3) -> Trajectory:
+    """One sphere of :func:`trajectory` resting on the ground and sliding along x at ``speed``
+    (m/s) without spin."""
+    traj = trajectory(1, frames=frames, seed=0)
+    t = np.arange(frames)[:, None, None] * traj.dt
+    pos = np.array([[0.0, 0.0, float(traj.radius[0])]]) + np.array([[speed, 0, 0]]) * t
+    vel = np.broadcast_to(np.array([[speed, 0, 0]]), pos.shape)
+    return dataclasses.replace(
+        traj,
+        pos=pos.astype(np.float32),
+        vel=np.ascontiguousarray(vel, dtype=np.float32),
+        angvel=np.zeros_like(traj.angvel),
+    )

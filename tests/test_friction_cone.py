@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import torch
-from simdata import STATS, batch, learned, trajectory
+from simdata import STATS, batch, learned, sliding
 
 from physgnn.models.friction import friction_cone, sphere_friction
 from physgnn.models.protocol import motion_of
@@ -53,19 +53,9 @@ def test_a_spheres_friction_is_its_own_times_the_planes_over_the_planes_it_reach
 
 @torch.no_grad()
 def test_with_any_weights_a_frictionless_sphere_slides_on_at_its_speed():
-    traj = trajectory(1, frames=3, seed=0)
-    frames = np.arange(3)[:, None, None] * 0.1
-    pos = np.array([[0.0, 0.0, float(traj.radius[0])]]) + np.array([[4.0, 0, 0]]) * frames
-    vel = np.broadcast_to(np.array([[4.0, 0, 0]]), pos.shape)
     frictionless = np.array([[0.7, 0.0, 0.0, 0.0]], dtype=np.float32)
-    traj = dataclasses.replace(
-        traj,
-        pos=pos.astype(np.float32),
-        vel=np.ascontiguousarray(vel, dtype=np.float32),
-        angvel=np.zeros_like(traj.angvel),
-        materials=frictionless,
-        plane_materials=np.tile(np.array([[1.0, 0.0, 0.0, 0.0]], dtype=np.float32), (5, 1)),
-    )
+    plane = np.tile(np.array([[1.0, 0.0, 0.0, 0.0]], dtype=np.float32), (5, 1))
+    traj = dataclasses.replace(sliding(), materials=frictionless, plane_materials=plane)
     state = batch([traj], t=0, H=0)
     # the rest decision off (its logit, random here, would stop the sphere) and the energy
     # guard (it cuts this answer too): the cone alone

@@ -4,9 +4,8 @@ decision stops no sphere whose own answer slides along the ground."""
 import dataclasses
 from types import SimpleNamespace
 
-import numpy as np
 import torch
-from simdata import STATS, batch, learned, trajectory
+from simdata import STATS, batch, learned, sliding
 
 from physgnn.models.protocol import motion_of
 from physgnn.models.rest import still_along_the_ground
@@ -24,16 +23,7 @@ def test_the_rest_decision_stops_no_sphere_whose_answer_slides():
 
 @torch.no_grad()
 def test_with_a_rest_logit_that_disagrees_a_sliding_sphere_keeps_its_answer():
-    traj = trajectory(1, frames=3, seed=0)
-    frames = np.arange(3)[:, None, None] * 0.1
-    pos = np.array([[0.0, 0.0, float(traj.radius[0])]]) + np.array([[4.0, 0, 0]]) * frames
-    vel = np.broadcast_to(np.array([[4.0, 0, 0]]), pos.shape)
-    traj = dataclasses.replace(
-        traj,
-        pos=pos.astype(np.float32),
-        vel=np.ascontiguousarray(vel, dtype=np.float32),
-        angvel=np.zeros_like(traj.angvel),
-    )
+    traj = sliding()
     state = batch([traj], t=0, H=0)
     keys = dict(H=0, M=1, hidden=8, contact_passes=0, engine_state=True, energy_guard=False)
     torch.manual_seed(0)
@@ -41,7 +31,7 @@ def test_with_a_rest_logit_that_disagrees_a_sliding_sphere_keeps_its_answer():
     last = [m for m in sim.network.decoder.modules() if isinstance(m, torch.nn.Linear)][-1]
     rest = sim.outputs.slice("rest").start
     last.bias[rest] = 50.0  # the logit: at rest, whatever the inputs
-    sliding = motion_of(sim(state))[0][0][0]
-    assert float(sliding[:2].norm()) > 3.0  # its answer kept: it slides on
+    answer = motion_of(sim(state))[0][0][0]
+    assert float(answer[:2].norm()) > 3.0  # its answer kept: it slides on
     sim.contacts = dataclasses.replace(sim.contacts, rest_consistent=False)
     torch.testing.assert_close(motion_of(sim(state))[0][0][0], torch.zeros(3))  # stopped
