@@ -61,12 +61,15 @@ def _draw(ax, points: list[Point], title: str, ylabel: str) -> None:
     if on_front:
         ax.step(*_xy(on_front), where="post", color="black", lw=1.0, label="Pareto frontier")
         ax.scatter(*_xy(on_front), s=80, facecolors="none", edgecolors="black")
-    for p in points:
+    # a learned setting is named by its knob alone (its model is the learned point's); labels
+    # of points close together are staggered upwards so that they do not print over each other
+    for rank, p in enumerate(sorted(points, key=lambda q: (q.error, q.ms_per_frame))):
+        name = p.label.split(" · ")[-1] if p.kind == SETTING else p.label
         ax.annotate(
-            p.label,
+            name,
             (p.ms_per_frame, p.error),
             fontsize=5,
-            xytext=(3, 2),
+            xytext=(3, 2 + 6 * (rank % 3)),
             textcoords="offset points",
         )
     _axes(ax, points, title, ylabel)
