@@ -31,6 +31,16 @@ def test_the_collision_is_one_to_eight_and_starts_apart():
     assert hit.materials[0, 1:].tolist() == [0.0, 0.0, 0.0]  # frictionless
 
 
+def test_the_ground_collision_slides_on_the_ground_and_starts_apart():
+    hit = inv.ground_collision()
+    assert hit.mass[1] / hit.mass[0] == pytest.approx(8.0)
+    np.testing.assert_allclose(hit.pos[:, :, 2], np.tile(hit.radius, (hit.n_frames, 1)))
+    gap = np.linalg.norm(hit.pos[2, 1] - hit.pos[2, 0]) - hit.radius.sum()
+    assert gap > 0  # the seed frames are before the impact
+    assert hit.materials[0, 1:].tolist() == [0.0, 0.0, 0.0]  # frictionless
+    np.testing.assert_allclose(hit.vel[:, :, 0] @ hit.mass, hit.vel[0, :, 0] @ hit.mass)
+
+
 def test_resting_grids_touch_and_weigh_what_they_say():
     heavy, light = inv.resting_grid(None, 6), inv.resting_grid(1.0, 6)
     assert np.all(light.mass == 1.0) and heavy.mass[0] == pytest.approx(inv.sphere_mass(0.75))
@@ -46,6 +56,7 @@ def test_an_untrained_default_keeps_the_block_and_every_row_is_there():
     kinds = [r["kind"] for r in rows]
     assert kinds.count("flying_block") == 1 and kinds.count("collision") == 1
     assert kinds.count("resting_grid") == 2 and kinds.count("sliding_row") == 1
+    assert kinds.count("ground_collision") == 1
     assert kinds.count("bounce") == len(inv.BOUNCE_MATERIALS) * len(inv.BOUNCE_MASSES)
     block = rows[0]
     # no pp edge between spheres moving as one, no plane in reach: the gravity prior, exact to

@@ -20,6 +20,10 @@ passed. Checks (``kind`` of a row):
 - ``collision``: a frictionless head-on collision in the air of spheres of radius 0.5 and
   1.0 m (mass ratio 1 : 8), closing at 5 m/s: the momentum along the impact line (x) must be
   kept. ``value``: ``|P_x(end) − P_x(0)| / Σ m |v_x(0)|`` (limit 1 %).
+- ``ground_collision``: the same pair on a frictionless ground, sliding towards each other
+  (their centres at their own heights, so the impact pushes the small one down and the big one
+  up): the ground pushes only along z, so the momentum along x must be kept across the impact
+  and the slide. ``value`` as ``collision``'s, over 20 frames (limit 1 %).
 - ``bounce``: rows of :func:`physgnn.evaluation.bounce.bounce_rows` for restitutions 0.1–0.9
   at one friction and masses 1 kg, the training density's and 10 t: ``value`` the apex over
   ``e²·H`` (limit: within 10 % of 1).
@@ -88,6 +92,17 @@ def collision(frames: int = 12, dt: float = 0.1) -> Trajectory:
     )
 
 
+def ground_collision(frames: int = 20, dt: float = 0.1) -> Trajectory:
+    """The ``ground_collision`` scene: the ``collision`` pair resting on a frictionless ground,
+    radius 0.5 at x = 0 sliding +4 m/s, radius 1.0 at 1.5 m of gap sliding −1 m/s (exact
+    frames: uniform sliding, until the impact)."""
+    radius = np.array([0.5, 1.0])
+    pos0 = np.array([[0.0, 0.0, 0.5], [0.5 + 1.0 + 1.5, 0.0, 1.0]])
+    vel0 = np.array([[4.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    mass, material = sphere_mass(radius), (0.5, 0.0, 0.0, 0.0)
+    return ballistic("ground_collision", pos0, vel0, radius, mass, material, frames, dt, fall=False)
+
+
 def sliding_row(frames: int = 50, dt: float = 0.1) -> Trajectory:
     """The ``sliding_row`` scene of the module doc (exact frames: uniform sliding)."""
     r = 0.75
@@ -122,12 +137,13 @@ def block_errors(pred, truth: Trajectory) -> tuple[float, float]:
 def invariance_rows(name: str, simulator, rest_frames: int = 2000, **kwargs) -> list[dict]:
     """Every check of the module doc for one learned run (keyword arguments go to
     :func:`physgnn.rollout.rollout`); ``rest_frames``: the resting grids' length."""
-    block, hit, row = flying_block(), collision(), sliding_row()
+    block, hit, row, ground = flying_block(), collision(), sliding_row(), ground_collision()
     grids = [resting_grid(None, rest_frames), resting_grid(1.0, rest_frames)]
-    preds = rollout(simulator, [block, hit, row, *grids], **kwargs)
+    preds = rollout(simulator, [block, hit, row, ground, *grids], **kwargs)
     rows = [_block_row(name, preds[0], block), _collision_row(name, preds[1], hit)]
     rows += [_row_row(name, preds[2], row)]
-    rows += [_rest_row(name, p, g) for p, g in zip(preds[3:], grids, strict=True)]
+    rows += [_collision_row(name, preds[3], ground, "ground_collision", "on a frictionless ground")]
+    rows += [_rest_row(name, p, g) for p, g in zip(preds[4:], grids, strict=True)]
     for mass in BOUNCE_MASSES:
         bounces = bounce_rows(name, simulator, BOUNCE_MATERIALS, 10.0, 0.1, 0.75, mass, **kwargs)
         rows += [_bounce_row(b) for b in bounces]
@@ -163,15 +179,15 @@ def _block_row(name, pred, truth) -> dict:
     )
 
 
-def _collision_row(name, pred, truth) -> dict:
+def _collision_row(name, pred, truth, kind: str = "collision", where: str = "in the air") -> dict:
     vel = _velocities(pred.pos, truth.dt)[..., 0]
     momentum = vel @ truth.mass
     scale = float(np.abs(truth.vel[0, :, 0]) @ truth.mass)
     error = abs(momentum[-1] - momentum[0]) / scale if pred.diverged_at is None else np.nan
     return _row(
         name,
-        "collision",
-        "radii 0.5 / 1.0 (mass 1 : 8), frictionless",
+        kind,
+        f"radii 0.5 / 1.0 (mass 1 : 8), frictionless, {where}",
         float(error),
         MOMENTUM_LIMIT,
         error <= MOMENTUM_LIMIT,

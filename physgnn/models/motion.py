@@ -62,7 +62,8 @@ def physical_motion(
             out.take(pred, "rest")[:, 0], reach if supported is None else supported
         )
         if sim.contacts.rest_consistent and not sim.training:
-            rest_now = rest_now & rest.still_along_the_ground(state, moves[0])
+            still = rest.still_along_the_ground(state, moves[0], sim.contacts.rest_speed)
+            rest_now = rest_now & still
         moves = [torch.where(rest_now[:, None], torch.zeros_like(m), m) for m in moves]
     rotating = sim.rotating(state)[:, None]
     moves[1::2] = [torch.where(rotating, m, angvel_t) for m in moves[1::2]]

@@ -71,7 +71,7 @@ class ContactHandling:
     decoder's own change along a plane that presses the sphere at most ``μ`` times the plane's
     push (Coulomb; :mod:`physgnn.models.friction`); ``rest_consistent``: outside training,
     the rest decision stops only spheres whose own answer moves along the ground slower than
-    ``½·g·dt`` (:func:`physgnn.models.rest.still_along_the_ground`)."""
+    friction could stop in a frame (:func:`physgnn.models.rest.still_along_the_ground`)."""
 
     NODE: ClassVar[str] = "model.contacts"
     gravity_prior: bool = True

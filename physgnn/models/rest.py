@@ -23,15 +23,19 @@ def rest_target(state, rest_speed: float) -> torch.Tensor:
     return still & (spin < rest_speed)
 
 
-def still_along_the_ground(state, vel: torch.Tensor) -> torch.Tensor:
+def still_along_the_ground(state, vel: torch.Tensor, rest_speed: float) -> torch.Tensor:
     """``[N]`` bool: spheres whose own answer ``vel [N, 3]`` (the end velocity before the rest
-    decision) moves along the ground slower than half a frame of gravity, ``|v_xy| < ½·g·dt``.
-    Vertically a sphere at rest may be answered up to a frame of gravity (the regression leaves
-    support to the rest decision); along the ground nothing pulls it, so a faster answer is one
-    the logit disagrees with: the shipped model stopped a sphere leaving a frictionless head-on
-    at 1.46 m/s, and the pair's momentum went with it."""
+    decision) moves along the ground slowly enough that friction could stop it within the
+    frame: ``|v_xy| < max(rest_speed, min(½, μ)·g·dt)``, ``μ`` the sphere's lateral friction
+    (the most any contact of it can have: the engine multiplies it by the other side's, at most
+    1). Vertically a sphere at rest may be answered up to a frame of gravity (the regression
+    leaves support to the rest decision); along the ground only friction can take its speed, so
+    a faster answer is one the logit disagrees with. The shipped model stopped a sphere leaving
+    a frictionless head-on at 1.46 m/s, and a pair sliding apart on a frictionless ground, and
+    their momentum went with them."""
     horizontal = torch.linalg.vector_norm(vel[:, :2], dim=1)
-    return horizontal < 0.5 * G * state.scene_dt
+    friction = state.material_params[:, 1].clamp(max=0.5)
+    return horizontal < torch.clamp(friction * G * state.scene_dt, min=rest_speed)
 
 
 def at_rest(logit: torch.Tensor, reach=None) -> torch.Tensor:

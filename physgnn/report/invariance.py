@@ -13,6 +13,7 @@ _WHAT = {
     "resting_grid": "largest drift (radii)",
     "sliding_row": "largest neighbour distance change (radii)",
     "collision": "momentum change along the impact / Σ m|v|",
+    "ground_collision": "momentum change along the impact / Σ m|v|",
     "bounce": "apex / e²H (|1 − x| within the limit)",
 }
 
