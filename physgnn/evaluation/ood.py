@@ -34,9 +34,11 @@ def training_ranges(cfg) -> dict[str, tuple[float, float]]:
         return {}
     r0, r1, rho = float(family.radius_min), float(family.radius_max), float(family.density)
     fall = math.sqrt(2 * 9.81 * float(family.get("h_max", 0.0)))
-    ranges = {"radius (m)": (r0, r1), "mass (kg)": (_ball_mass(r0, rho), _ball_mass(r1, rho))}
+    ranges = {}
     if "n_min" in family and "n_max" in family:
-        ranges = {"spheres": (float(family.n_min), float(family.n_max))} | ranges
+        ranges["spheres"] = (float(family.n_min), float(family.n_max))
+    ranges["radius (m)"] = (r0, r1)
+    ranges["mass (kg)"] = (_ball_mass(r0, rho), _ball_mass(r1, rho))
     ranges["speed (m/s)"] = (0.0, float(family.get("max_speed0", 0.0)) + fall)
     ranges["dt (s)"] = (float(family.dt), float(family.dt))
     drawn = family.get("material_ranges") or {}

@@ -53,7 +53,13 @@ PARTED = 0.01
 
 
 def guarded(
-    state, free: tuple, moves: tuple, fixed: torch.Tensor | None, slack: float, graph=None
+    state,
+    free: tuple,
+    moves: tuple,
+    fixed: torch.Tensor | None,
+    slack: float,
+    graph=None,
+    contacts: tuple[torch.Tensor, torch.Tensor] | None = None,
 ) -> tuple:
     """``moves`` ``(v, ω, ū, ω̄)`` ``[N, 3]`` each, after the guard (module doc).
 
@@ -61,7 +67,8 @@ def guarded(
     moves stay as they are (those the rest decision stopped); ``slack`` (m): the energy a
     frame may add, as a height of the weight; ``graph``: the step's, whose contact groups each
     take their own factor and whose overlaps may be parted (:func:`contact_groups`,
-    :func:`parting_energy`; None: one factor per scene, no overlap)."""
+    :func:`parting_energy`; None: one factor per scene, no overlap); ``contacts``: its ps
+    edges' :func:`~physgnn.models.floor.contact_directions`, where the caller has them."""
     delta = [m - f for m, f in zip(moves, free, strict=True)]
     base = list(free)
     if fixed is not None:
@@ -70,12 +77,15 @@ def guarded(
         delta = [torch.where(keep, torch.zeros_like(d), d) for d in delta]
     scene = scene_of_sphere(state)
     scenes = state.num_graphs if hasattr(state, "num_graphs") else 1
-    parting = None if graph is None else parting_energy(state, graph)
-    terms = energy_terms(state, base, delta, slack, parting)
-    alpha = factor(terms, scene, scenes)[scene]
+    parting, group, groups = None, scene, scenes
     if graph is not None:
+        parting = parting_energy(state, graph, contacts)
         group, whole = contact_groups(graph, scene, scenes)
-        alpha = torch.where(whole[scene], factor(terms, group, scene.shape[0])[group], alpha)
+        # a scene whose groups the rounds did not settle is one group (ids after the spheres')
+        n = scene.shape[0]
+        group, groups = torch.where(whole[scene], group, n + scene), n + scenes
+    terms = energy_terms(state, base, delta, slack, parting)
+    alpha = factor(terms, group, groups)[group]
     return tuple(b + alpha[:, None] * d for b, d in zip(base, delta, strict=True))
 
 
@@ -99,10 +109,11 @@ def contact_groups(graph, scene: torch.Tensor, scenes: int, rounds: int = ROUNDS
     return label, apart == 0
 
 
-def parting_energy(state, graph) -> torch.Tensor:
+def parting_energy(state, graph, contacts=None) -> torch.Tensor:
     """``[N]`` (J): the kinetic energy that parts every overlap of ``graph`` in one frame,
     ``½·μ·(o/dt)²`` for a pp pair overlapping by ``o`` (``μ`` the reduced mass; on its target
-    sphere) and ``½·m·(o/dt)²`` for a sphere ``o`` inside a plane."""
+    sphere) and ``½·m·(o/dt)²`` for a sphere ``o`` inside a plane (``contacts``: the ps edges'
+    :func:`~physgnn.models.floor.contact_directions`, None: taken here)."""
     mass, radius, pos, dt = state.mass, state.radius, state.pos, state.scene_dt
     half = graph.pp_index.shape[1] // 2
     src, dst = graph.pp_index[:, :half]
@@ -112,7 +123,8 @@ def parting_energy(state, graph) -> torch.Tensor:
     weight = graph.pp_weight(pairs)
     pairs = pairs if weight is None else pairs * weight[:half]
     sphere = graph.ps_index[1]
-    inside = torch.relu(-contact_directions(graph, radius)[1]).clamp_max(PARTED)
+    clearance = (contacts or contact_directions(graph, radius))[1]
+    inside = torch.relu(-clearance).clamp_max(PARTED)
     planes = 0.5 * mass[sphere] * (inside / dt[sphere]).square()
     weight = graph.ps_weight(planes)
     planes = planes if weight is None else planes * weight

@@ -24,7 +24,7 @@ import torch
 
 from physgnn.models import contact_inputs, rest
 from physgnn.models.energy_guard import guarded
-from physgnn.models.floor import plane_floor
+from physgnn.models.floor import contact_directions, plane_floor
 
 
 def physical_motion(
@@ -70,21 +70,23 @@ def physical_motion(
     moves = tuple(moves) if sim.inputs.engine_state else (*moves, *moves)
     if sim.contacts.energy_guard and not sim.training:
         free = free if sim.inputs.engine_state else (*free, *free)
-        moves = guarded(state, free, moves, rest_now, sim.contacts.energy_slack, graph)
+        contacts = None if graph is None else contact_directions(graph, state.radius)
+        slack = sim.contacts.energy_slack
+        moves = guarded(state, free, moves, rest_now, slack, graph, contacts)
         if graph is not None and sim.contacts.plane_floor:
-            moves = floored_move(state, graph, moves, sim.inputs.engine_state)
+            moves = floored_move(state, graph, moves, sim.inputs.engine_state, contacts)
     return moves
 
 
-def floored_move(state, graph, moves: tuple, engine_state: bool) -> tuple:
+def floored_move(state, graph, moves: tuple, engine_state: bool, contacts=None) -> tuple:
     """``moves`` ``(v, ω, ū, ω̄)`` after the planes' floor of ``graph``
-    (:func:`~physgnn.models.floor.plane_floor`): the move ``ū`` held out of every plane and,
-    where that acted, the end velocity ``v`` no longer approaching it; a finite-difference
-    state's velocity is its move."""
+    (:func:`~physgnn.models.floor.plane_floor`; ``contacts``: its ps edges' directions, where
+    the caller has them): the move ``ū`` held out of every plane and, where that acted, the end
+    velocity ``v`` no longer approaching it; a finite-difference state's velocity is its move."""
     if engine_state:
-        mean, end = plane_floor(state, graph, moves[2], moves[0])
+        mean, end = plane_floor(state, graph, moves[2], moves[0], contacts=contacts)
         return end, moves[1], mean, moves[3]
-    mean = plane_floor(state, graph, moves[2])[0]
+    mean = plane_floor(state, graph, moves[2], contacts=contacts)[0]
     return mean, moves[1], mean, moves[3]
 
 
