@@ -129,3 +129,16 @@ def sliding(speed: float = 4.0, frames: int = 3) -> Trajectory:
         vel=np.ascontiguousarray(vel, dtype=np.float32),
         angvel=np.zeros_like(traj.angvel),
     )
+
+
+def head_on(gap: float = 0.1, speed: float = 4.0, frames: int = 4, dt: float = 0.1) -> Trajectory:
+    """Two spheres of :func:`trajectory` 50 m up (no plane in reach) closing head-on at
+    ``speed`` m/s each, ``gap`` m apart at frame 0, in free flight (the engine's velocities)."""
+    traj = trajectory(2, frames=frames, seed=0, dt=dt)
+    t = np.arange(frames)[:, None, None] * dt
+    reach = float(traj.radius.sum()) + gap
+    p0 = np.array([[-reach / 2, 0, 50], [reach / 2, 0, 50]])
+    v0 = np.array([[speed, 0, 0], [-speed, 0, 0]])
+    pos = p0 + v0 * t + 0.5 * np.array([0, 0, -9.81]) * t**2
+    vel = v0 + np.array([0, 0, -9.81]) * t
+    return dataclasses.replace(traj, pos=pos.astype(np.float32), vel=vel.astype(np.float32))

@@ -1,12 +1,10 @@
 """The pairs' floor (physgnn/models/pair_floor.py): no pair's move closes its gap past contact,
 momentum kept, for hand-built pairs and for a simulator with random weights."""
 
-import dataclasses
 from types import SimpleNamespace
 
-import numpy as np
 import torch
-from simdata import STATS, batch, learned, trajectory
+from simdata import STATS, batch, head_on, learned
 
 from physgnn.models.pair_floor import pair_floor
 from physgnn.models.protocol import motion_of
@@ -72,18 +70,6 @@ def test_a_row_pressed_from_both_ends_stops_overlapping_after_its_iterations():
     assert (unfloored[1:] - unfloored[:-1]).min() < (four[1:] - four[:-1]).min() < 1.0
     mass = state.mass[:, None]
     torch.testing.assert_close((mass * after).sum(0), (mass * mean).sum(0))
-
-
-def head_on(gap: float = 0.1, speed: float = 4.0, frames: int = 4):
-    """Two spheres 50 m up (no plane in reach) closing head-on at ``speed`` m/s each."""
-    traj = trajectory(2, frames=frames, seed=0)
-    t = np.arange(frames)[:, None, None] * DT
-    reach = float(traj.radius.sum()) + gap
-    p0 = np.array([[-reach / 2, 0, 50], [reach / 2, 0, 50]])
-    v0 = np.array([[speed, 0, 0], [-speed, 0, 0]])
-    pos = p0 + v0 * t + 0.5 * np.array([0, 0, -9.81]) * t**2
-    vel = v0 + np.array([0, 0, -9.81]) * t
-    return dataclasses.replace(traj, pos=pos.astype(np.float32), vel=vel.astype(np.float32))
 
 
 def test_a_simulator_with_the_pair_floor_stops_a_collision_at_contact_with_random_weights():

@@ -54,6 +54,7 @@ ADDED_AT_EARLIER_VALUE = {
     "model.plane_floor": False,
     "model.plane_newton": False,
     "model.pair_floor": False,
+    "model.pair_newton": False,
     "lit.loss.event_share": 0.0,
     "lit.loss.event_speed": 0.05,
 }

@@ -30,6 +30,7 @@ from physgnn.models.floor import contact_directions, plane_floor, pressed
 from physgnn.models.friction import friction_cone, sphere_friction
 from physgnn.models.outputs import PAIR, regression
 from physgnn.models.pair_floor import pair_floor
+from physgnn.models.pair_newton import pair_bounces
 
 INERTIA_FACTOR = 0.4  # I = 2/5 m r² of a solid sphere
 
@@ -72,7 +73,9 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
     sim.outputs.width]`` and ``pair_out [E'/2, sim.pair_outputs.width]`` (the graph's pairs
     first; padding after): the pair impulses (:func:`pair_changes`), gravity, and the node
     decoder's own change for spheres ``on_plane [N]`` only (with ``plane_floor``, after the
-    planes' floor: :mod:`physgnn.models.floor`); then the rest logit as it is. With
+    planes' floor: :mod:`physgnn.models.floor`); with ``pair_newton`` (the engine state) the
+    closed-form meetings of pairs away from the planes added to the pair impulses
+    (:mod:`physgnn.models.pair_newton`); then the rest logit as it is. With
     the engine state the frame's mean motion likewise, from its own pair impulses and the
     engine's share of gravity (``sim.gravity_share``): over an isolated group,
     ``Σ m Δp = M·(dt·v̄ + s·g·dt²)`` for any weights."""
@@ -89,6 +92,10 @@ def normalised_changes(sim, state, graph, node_out, pair_out, on_plane) -> torch
         columns = slice(pairs.slice(prefix + "impulse").start, pairs.slice(prefix + "couple").stop)
         dvel, dang = pair_changes(state, graph.pp_index, pair_out[:half, columns], *scales, weight)
         changes.append([dvel + share * fall, dang])
+    if sim.contacts.pair_newton and sim.inputs.engine_state:  # pairs meeting in free flight
+        bounces = pair_bounces(state, graph.pp_index, ~on_plane, weight)
+        for change, bounce in zip(changes, bounces, strict=True):
+            change[0] = change[0] + bounce
     newton = sim.contacts.plane_floor and sim.contacts.plane_newton
     # the ps edges' contact directions and clearances, once for every floor of the pass
     contacts = contact_directions(graph, state.radius) if sim.contacts.plane_floor else None

@@ -61,7 +61,10 @@ class ContactHandling:
     :func:`physgnn.models.floor.free_bounce`), and after that change the move still may not
     cross a plane; ``pair_floor`` (opt-in): after the pair impulses and the node decoder's
     change, no pp pair's move closes its gap past contact, momentum kept
-    (:mod:`physgnn.models.pair_floor`); ``incremental_passes``: a pass after a rebuild
+    (:mod:`physgnn.models.pair_floor`); ``pair_newton`` (opt-in, the engine state): a pp
+    pair away from the planes that meets within the frame in free flight takes Newton's
+    restitution impulse in closed form, the network's pair impulses on top
+    (:mod:`physgnn.models.pair_newton`); ``incremental_passes``: a pass after a rebuild
     recomputes the network only within M hops of what the rebuild changed, the rest kept from
     the pass before (the same numbers up to float rounding, faster; false: whole passes;
     :mod:`physgnn.models.passes`); ``energy_guard``: outside training, a frame's contacts
@@ -84,6 +87,7 @@ class ContactHandling:
     plane_floor: bool = True
     plane_newton: bool = True
     pair_floor: bool = False
+    pair_newton: bool = False
     incremental_passes: bool = True
     energy_guard: bool = True
     energy_slack: float = ranged(number(0, what="m of the scene's weight"), default=0.0)

@@ -45,11 +45,16 @@ PREVIOUS_MODEL = {
     "plane_materials": False,
     "contact_memory": False,
 }
-# Keys that runs before the engine state, the planes by Newton's law or the pairs' floor lack,
-# per node, with the value their model had.
+# Keys that runs before the engine state, the planes by Newton's law, the pairs' floor or the
+# pairs by Newton's law lack, per node, with the value their model had.
 BEFORE_ENGINE_STATE = {
     "inputs": {"engine_state": False},
-    "contacts": {"plane_floor": False, "plane_newton": False, "pair_floor": False},
+    "contacts": {
+        "plane_floor": False,
+        "plane_newton": False,
+        "pair_floor": False,
+        "pair_newton": False,
+    },
 }
 LEARNED = "physgnn.models.learned.LearnedSimulator"
 # The nodes of today's layout, with the Hydra keys that build them.
@@ -96,6 +101,7 @@ FLAT_KEYS = {
     "plane_floor": ("contacts", "plane_floor"),
     "plane_newton": ("contacts", "plane_newton"),
     "pair_floor": ("contacts", "pair_floor"),
+    "pair_newton": ("contacts", "pair_newton"),
     "incremental_passes": ("contacts", "incremental_passes"),
     "energy_guard": ("contacts", "energy_guard"),
     "energy_slack": ("contacts", "energy_slack"),
