@@ -169,3 +169,20 @@ def test_make_eval_puts_the_settings_on_the_same_work_table(tiny_run, tiny_datas
     assert [label.rsplit(" · ", 1)[1] for label in labels] == ["as_trained", "passes0"]
     for label in labels:  # in the same-work tables only, test and OOD
         assert text.count(f"| {label} |") == 2
+
+
+def test_where_no_learned_point_is_on_the_front_the_report_says_how_far_the_nearest_is():
+    # the run: 4 ms at 0.5; pybullet-5 (2 ms at 0.1) beats it on both, pybullet-1 is 1 ms at 1.0:
+    # at its error it needs more than 4 / 2 = 2× its frames/s, at its cost an error below 0.1
+    rows = [row("runs/a", 0.5, 250.0), engine(1, 1.0, 1000.0), engine(5, 0.1, 500.0)]
+    pts = same_work.points(rows, "test", "mse20")
+    (speed, faster), (accuracy, better) = same_work.lacks(pts, pts[0])
+    assert (speed, faster.label, accuracy, better.label) == (2.0, "pybullet-5", 5.0, "pybullet-5")
+    assert same_work.distance_to_front(rows, "test") == (
+        "Nearest to test's mse20 front: `baseline: default` (mse20 0.5 at 250 frames/s) needs "
+        "more than 2× its frames/s (`pybullet-5`: 0.1 at 500); `baseline: default` needs, at its "
+        "frames/s, an mse20 below 0.1, 5× lower than its 0.5 (`pybullet-5`)."
+    )
+    assert same_work.distance_to_front(rows, "test") in same_work.section(rows)
+    on_it = [row("runs/a", 0.05, 250.0), *rows[1:]]  # the most accurate point: on the front
+    assert same_work.distance_to_front(on_it, "test") == ""

@@ -154,14 +154,72 @@ def settings_on_front(rows: list[dict], split: str) -> str:
     )
 
 
+def lacks(pts: list[Point], p: Point) -> tuple[tuple | None, tuple | None]:
+    """What ``p`` lacks to be on the front of ``pts``: ``(speed, accuracy)``, each
+    ``(factor, the point in its way)`` or None where nothing is in its way. ``speed``: at its
+    own error, ``p`` joins the front above ``factor`` × its frames/s (faster than the fastest
+    valid point at least as accurate); ``accuracy``: at its own cost, below its error divided by
+    ``factor`` (more accurate than the most accurate valid point at least as fast)."""
+    others = [q for q in pts if q.valid and q is not p]
+    accurate = [q for q in others if q.error <= p.error]
+    fast = [q for q in others if q.ms_per_frame <= p.ms_per_frame]
+    speed = accuracy = None
+    if accurate:
+        q = min(accurate, key=lambda q: q.ms_per_frame)
+        speed = (p.ms_per_frame / q.ms_per_frame, q)
+    if fast:
+        q = min(fast, key=lambda q: q.error)
+        accuracy = (p.error / q.error if q.error > 0 else math.inf, q)
+    return speed, accuracy
+
+
+def distance_to_front(rows: list[dict], split: str) -> str:
+    """Where no learned point (a run as trained or at a setting) is on ``split``'s
+    :data:`FRONT_METRIC` front, one line: the learned point nearest to it in frames/s and the
+    one nearest in accuracy, by :func:`lacks` ("" when one is on it, or none is there)."""
+    pts = points(rows, split, FRONT_METRIC)
+    learned = [p for p in pts if p.kind != ENGINE and p.valid]
+    on = {p.label for p in front(pts)}
+    if not learned or any(p.label in on for p in learned):
+        return ""
+    needs = [(p, lacks(pts, p)) for p in learned]
+    parts = []
+    speed, accuracy = (_nearest(needs, which) for which in (0, 1))
+    if speed:
+        factor, q, p = speed
+        parts.append(
+            f"`{p.label}` ({FRONT_METRIC} {fmt(p.error)} at {fmt(1000.0 / p.ms_per_frame)} "
+            f"frames/s) needs more than {factor:.3g}× its frames/s (`{q.label}`: {fmt(q.error)} "
+            f"at {fmt(1000.0 / q.ms_per_frame)})"
+        )
+    if accuracy:
+        factor, q, p = accuracy
+        parts.append(
+            f"`{p.label}` needs, at its frames/s, an {FRONT_METRIC} below {fmt(q.error)}, "
+            f"{factor:.3g}× lower than its {fmt(p.error)} (`{q.label}`)"
+        )
+    return f"Nearest to {split}'s {FRONT_METRIC} front: " + "; ".join(parts) + "." if parts else ""
+
+
+def _nearest(needs: list[tuple], which: int) -> tuple | None:
+    """``(factor, the point in its way, the learned point)`` of the smallest factor of
+    :func:`lacks`'s ``which`` (0: speed, 1: accuracy) over ``needs`` ``[(point, lacks)]``."""
+    found = [(lack[which], p) for p, lack in needs if lack[which] is not None]
+    if not found:
+        return None
+    (factor, q), p = min(found, key=lambda item: item[0][0])
+    return factor, q, p
+
+
 def section(rows: list[dict]) -> str:
     """report.md's same-work section: one table per split, each with the line of the learned
-    settings on its front, or why there is none."""
+    settings on its front, or why there is none, and where no learned point is on it, how far
+    the nearest are (:func:`distance_to_front`)."""
     if not engine_groups(rows):
         return "No pybullet rows (no learned run was evaluated, or the eval's `pybullet` is null)."
     parts = []
     for split in SPLITS:
         if select(rows, split):
-            line = settings_on_front(rows, split)
-            parts += [f"**{split}**", split_table(rows, split), *([line] if line else [])]
+            lines = [settings_on_front(rows, split), distance_to_front(rows, split)]
+            parts += [f"**{split}**", split_table(rows, split), *[ln for ln in lines if ln]]
     return "\n\n".join(parts)
