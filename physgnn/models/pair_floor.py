@@ -58,16 +58,16 @@ def pair_floor(state, pp_index, mean, end=None, weight=None, iterations: int = 4
         acted = torch.maximum(acted, active)
         count = mean.new_zeros(n).index_add_(0, dst, active).index_add_(0, src, active)
         deficit = deficit / torch.maximum(count[dst], count[src]).clamp_min(1)
-        mean = _shared(mean, src, dst, normal, deficit, share_dst, share_src)
+        mean = shared(mean, src, dst, normal, deficit, share_dst, share_src)
     if end is None:
         return mean, None
     approach = torch.relu(-((end[dst] - end[src]) * normal).sum(1)) * acted
     count = end.new_zeros(n).index_add_(0, dst, acted).index_add_(0, src, acted)
     approach = approach / torch.maximum(count[dst], count[src]).clamp_min(1)
-    return mean, _shared(end, src, dst, normal, approach, share_dst, share_src)
+    return mean, shared(end, src, dst, normal, approach, share_dst, share_src)
 
 
-def _shared(vel, src, dst, normal, speed, share_dst, share_src):
+def shared(vel, src, dst, normal, speed, share_dst, share_src):
     """``vel [N, 3]`` with each pair's relative ``speed [P]`` along ``normal`` added, dst taking
     ``share_dst`` of it and src ``−share_src`` (momentum kept)."""
     push = speed[:, None] * normal

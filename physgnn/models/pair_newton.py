@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import torch
 
+from physgnn.models.pair_floor import shared
+
 TINY = 1e-12  # (m/s)²: a relative speed below its root is no approach
 
 
@@ -61,16 +63,8 @@ def pair_bounces(state, pp_index, free, weight=None) -> tuple[torch.Tensor, torc
     if weight is not None:
         change = change * weight
     m_i, m_j = state.mass[dst], state.mass[src]
-    push = change[:, None] * n
-    end = _shared(vel, src, dst, push, m_j / (m_i + m_j), m_i / (m_i + m_j))
-    after = ((dt - tau) / dt).clamp(0, 1)[:, None]
-    mean = _shared(vel, src, dst, push * after, m_j / (m_i + m_j), m_i / (m_i + m_j))
-    return end, mean
-
-
-def _shared(like, src, dst, push, share_dst, share_src) -> torch.Tensor:
-    """``[N, 3]``: each pair's relative change ``push [P, 3]``, dst taking ``share_dst`` of it and
-    src ``−share_src`` (momentum kept)."""
-    out = torch.zeros_like(like)
-    out.index_add_(0, dst, share_dst[:, None] * push)
-    return out.index_add_(0, src, -share_src[:, None] * push)
+    shares = m_j / (m_i + m_j), m_i / (m_i + m_j)
+    zero = torch.zeros_like(vel)
+    after = ((dt - tau) / dt).clamp(0, 1)
+    end = shared(zero, src, dst, n, change, *shares)
+    return end, shared(zero, src, dst, n, change * after, *shares)
