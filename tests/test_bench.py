@@ -536,18 +536,18 @@ def test_the_learned_settings_set_their_knobs_on_copies():
                 "as_trained": {},
                 "passes0": {"contact_passes": 0},
                 "constraints3": {"constraints": 3},
-                "threads1": {"threads": 1},
+                "threads2": {"threads": 2},
             }
         }
     )
-    settings = {s.name: s for s in crossover.learned_settings(c, source, threads=2)}
+    settings = {s.name: s for s in crossover.learned_settings(c, source, threads=1)}
     knobs = {name: s.knobs for name, s in settings.items()}
-    base = {"contact_passes": own, "constraints": 0, "compile": False, "threads": 2}
+    base = {"contact_passes": own, "constraints": 0, "compile": False, "threads": 1}
     assert knobs == {
         "as_trained": base,
         "passes0": base | {"contact_passes": 0},
         "constraints3": base | {"constraints": 3},
-        "threads1": base | {"threads": 1},
+        "threads2": base | {"threads": 2},
     }
     assert settings["passes0"].sim.contacts.contact_passes == 0
     assert source.trained.contacts.contact_passes == own  # the trained model itself unchanged

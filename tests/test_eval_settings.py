@@ -17,7 +17,7 @@ from physgnn.data.dataset import read_split
 from physgnn.errors import ConfigError
 from physgnn.evaluation import evaluate as ev
 from physgnn.evaluation import learned_settings as ls
-from physgnn.evaluation.rollouts import Collected, roll_all
+from physgnn.evaluation.rollouts import Collected, roll_all, rollout_threads
 from physgnn.evaluation.runs import RunInfo
 from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.report import same_work
@@ -132,6 +132,8 @@ def test_a_setting_rolls_out_from_the_runs_starts_and_as_trained_scores_as_the_r
     trained = roll_all([run], data, Collected(set(), [], 0.0)).rows
     rows = ls.setting_rows(jobs, data, 0.0, None, batch_scenes=True)
     assert torch.get_num_threads() == 1  # passes0's two threads only while it ran
+    assert {r["threads"] for r in trained} == {1}
+    assert [r["threads"] for r in rows] == [1] * len(trained) + [2] * len(trained)
     assert [r["setting"] for r in rows] == ["own"] * len(trained) + ["passes0"] * len(trained)
     for name in ("own", "passes0"):
         mine = [r for r in rows if r["setting"] == name]
@@ -152,7 +154,7 @@ def test_make_eval_puts_the_settings_on_the_same_work_table(tiny_run, tiny_datas
         *("videos=false", "stability=false", "invariance=null", "onestep=null"),
         *("sleeping_compare=false", "pybullet.substeps=[1]", "pybullet.processes=1"),
         "learned_settings=null",  # then a list of its own, not merged into the default one
-        "learned_settings={as_trained: {}, passes0: {contact_passes: 0}}",
+        "learned_settings={as_trained: {}, passes0: {contact_passes: 0, threads: 2}}",
     ]
     with initialize_config_dir(CONF_DIR, version_base="1.3"):
         cfg = compose("eval", overrides)
@@ -169,6 +171,17 @@ def test_make_eval_puts_the_settings_on_the_same_work_table(tiny_run, tiny_datas
     assert [label.rsplit(" · ", 1)[1] for label in labels] == ["as_trained", "passes0"]
     for label in labels:  # in the same-work tables only, test and OOD
         assert text.count(f"| {label} |") == 2
+    # every learned rollout on rollout.threads (1) unless its setting names its own
+    threads = {
+        r["run"].split(" · ")[-1]: r["threads"] for r in rows if r["experiment"] != "pybullet"
+    }
+    assert {k: v for k, v in threads.items() if k in ("as_trained", "passes0")} == {
+        "as_trained": 1,
+        "passes0": 2,
+    }
+    assert {r["threads"] for r in run} == {1}
+    assert {r["threads"] for r in rows if r["experiment"] == "pybullet"} == {None}
+    assert "| threads |" in text
 
 
 def test_where_no_learned_point_is_on_the_front_the_report_says_how_far_the_nearest_is():
@@ -186,3 +199,28 @@ def test_where_no_learned_point_is_on_the_front_the_report_says_how_far_the_near
     assert same_work.distance_to_front(rows, "test") in same_work.section(rows)
     on_it = [row("runs/a", 0.05, 250.0), *rows[1:]]  # the most accurate point: on the front
     assert same_work.distance_to_front(on_it, "test") == ""
+
+
+def test_the_learned_rollouts_run_on_the_evals_threads_and_their_rows_say_so(
+    tiny_run, tiny_dataset, one_thread
+):
+    sim = load_run(tiny_run)[0].eval()
+    run = RunInfo("runs/t", "baseline", run_dir=tiny_run, dataset=tiny_dataset, simulator=sim)
+    truth = RunInfo("ground_truth", "ground_truth", dataset=tiny_dataset)
+    data = _tiny(tiny_dataset)
+    rows = roll_all([truth, run], data, Collected(set(), [], 0.0), threads=2).rows
+    assert torch.get_num_threads() == 1  # two threads only while the run rolled out
+    assert {r["threads"] for r in rows if r["run"] == "runs/t"} == {2}
+    assert {r["threads"] for r in rows if r["run"] == "ground_truth"} == {None}
+    assert same_work.threads_cell(rows) == "2"
+    assert same_work.threads_cell([row("pybullet-1", 1.0, 10.0)]) == "–"
+
+
+@pytest.mark.parametrize("value", [0, 1.5, "two"])
+def test_rollout_threads_is_refused_in_one_line_naming_the_key(value):
+    cfg = OmegaConf.create({"rollout": {"threads": value}})
+    with pytest.raises(ConfigError, match=r"^rollout\.threads") as caught:
+        rollout_threads(cfg)
+    assert "\n" not in str(caught.value)
+    assert rollout_threads(OmegaConf.create({"rollout": {"threads": None}})) is None
+    assert rollout_threads(OmegaConf.create({"rollout": {"threads": 1}})) == 1

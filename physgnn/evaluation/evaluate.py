@@ -34,6 +34,7 @@ from physgnn.evaluation.rollouts import (
     rest_tol,
     roll_all,
     rollout_settings,
+    rollout_threads,
     sleep_settings,
     sleeping_rows,
 )
@@ -126,13 +127,15 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
     batched = bool(OmegaConf.select(cfg, "rollout.batch_scenes", default=True))
     collected = Collected(keep, filmed, cfg.tol, stab, rest_tol(cfg))
     collected.saved = {} if cfg.get("save_rollouts") else None
-    out = roll_all(jobs, data, collected, settings, batch_scenes=batched)
+    threads = rollout_threads(cfg)
+    out = roll_all(jobs, data, collected, settings, batched, threads)
     out.rows += learned_settings.eval_rows(cfg, runs, data, settings, batched)
     out.rows += engine_rows(cfg, runs, data, batched)
     if out.saved:
         write_rollouts(report_dir / "rollouts", out.saved)
     if film is not None and cfg.sleeping_compare and settings["sleep"] is False:
-        out.rows += sleeping_rows(film, data[film.dataset]["ood"], cfg.tol, sleep_settings(cfg))
+        ood = data[film.dataset]["ood"]
+        out.rows += sleeping_rows(film, ood, cfg.tol, sleep_settings(cfg), threads)
     table.write_csv(report_dir / "metrics.csv", out.rows)
     onestep_report.write_csv(report_dir / "onestep.csv", onestep_rows(cfg, runs, data))
     if stab is not None:

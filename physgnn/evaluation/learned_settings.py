@@ -8,7 +8,7 @@ A setting (``learned_settings`` of conf/eval.yaml: name → knobs of
 every test and OOD trajectory of the run's dataset from its first H+1 truth frames, as the
 run itself does: the same start states, the same rollout settings and timing (batched scenes
 or one at a time), under its own torch threads. Absent knobs: the run's own contact passes, no
-constraint stage, the eval's ``compile`` and the process's torch threads.
+constraint stage, the eval's ``compile`` and ``rollout.threads`` (null: the process's).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError
-from physgnn.evaluation.rollouts import Collected, roll_all
+from physgnn.evaluation.rollouts import Collected, roll_all, rollout_threads
 from physgnn.evaluation.runs import RunInfo
 from physgnn.models.settings import check_knobs, torch_threads, with_knobs
 from physgnn.training import runs as training_runs
@@ -43,15 +43,20 @@ def check_settings(settings) -> dict[str, dict]:
 
 
 def setting_jobs(
-    runs: list[RunInfo], settings: dict[str, dict], compile: bool = False, cache_dir=None
+    runs: list[RunInfo],
+    settings: dict[str, dict],
+    compile: bool = False,
+    cache_dir=None,
+    threads: int | None = None,
 ) -> list[RunInfo]:
     """Every trained run of ``runs`` (a run folder, not a constrained variant) at each setting
     of ``settings`` (:func:`check_settings`'s): named ``<run> · <setting>``, its experiment,
     overrides, seed and dataset the run's; ``extra``: ``setting`` (the name) and ``knobs``
     (every knob as it runs). ``compile``, ``cache_dir``: the eval's (the default of
-    ``compile``)."""
+    ``compile``); ``threads``: the default of the knob (the eval's ``rollout.threads``; None:
+    the process's)."""
     trained = [r for r in runs if r.run_dir is not None and "constraints" not in r.extra]
-    threads = torch.get_num_threads()
+    threads = threads or torch.get_num_threads()
     jobs = []
     for run in trained:
         for name, knobs in settings.items():
@@ -87,11 +92,11 @@ def setting_rows(
 def eval_rows(cfg: DictConfig, runs: list[RunInfo], data: dict, settings: dict, batched: bool):
     """The rows of every trained run of ``runs`` at each of ``cfg.learned_settings``
     (:func:`setting_jobs`, :func:`setting_rows`); ``settings``: the rollout's keyword
-    arguments, ``batched``: ``rollout.batch_scenes``. None with ``learned_settings`` null or
-    ``{}``."""
+    arguments, ``batched``: ``rollout.batch_scenes``; threads: ``rollout.threads`` unless a
+    setting names its own. None with ``learned_settings`` null or ``{}``."""
     chosen = check_settings(cfg.get(KEY))
     if not chosen:
         return []
     cache = OmegaConf.select(cfg, "paths.compile_cache")
-    jobs = setting_jobs(runs, chosen, bool(cfg.get("compile")), cache)
+    jobs = setting_jobs(runs, chosen, bool(cfg.get("compile")), cache, rollout_threads(cfg))
     return setting_rows(jobs, data, float(cfg.tol), settings, batched)

@@ -9,13 +9,16 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
+import torch
 from omegaconf import DictConfig, OmegaConf
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from physgnn import metrics
+from physgnn.errors import ConfigError
 from physgnn.evaluation import stability
 from physgnn.evaluation.runs import SPLITS, RunInfo
 from physgnn.groundtruth.hard import hard_split
+from physgnn.models.settings import ALLOWED, torch_threads
 from physgnn.physics.trajectory import Trajectory
 from physgnn.report.table import COLUMNS, SLEEP_SCENE, SLEEP_SUFFIX
 from physgnn.rollout import rollout
@@ -33,6 +36,13 @@ def rollout_settings(cfg: DictConfig) -> dict:
     ``sleeping`` is on, else False."""
     r = cfg.get("rollout") or {}
     return {"sleep": sleep_settings(cfg) if r.get("sleeping", False) else False}
+
+
+def rollout_threads(cfg: DictConfig) -> int | None:
+    """``cfg.rollout.threads``: the torch threads of every learned rollout (None: the
+    process's). Refused in one line naming the key: not a whole number from 1, nor null."""
+    r = cfg.get("rollout") or {}
+    return ALLOWED["threads"].check("rollout.threads", r.get("threads"), error=ConfigError)
 
 
 def predict(job: RunInfo, traj: Trajectory, settings: dict | None = None) -> Trajectory:
@@ -59,6 +69,8 @@ def metrics_row(info: RunInfo, split: str, traj: Trajectory, pred: Trajectory, t
         n_frames=pred.n_frames,
         diverged_at=pred.diverged_at,
         fps=pred.fps,
+        # the rollout just ran in this thread context (roll_all's)
+        threads=torch.get_num_threads() if info.simulator is not None else None,
     )
     return row
 
@@ -130,25 +142,33 @@ def roll_all(
     out: Collected,
     settings: dict | None = None,
     batch_scenes: bool = True,
+    threads: int | None = None,
 ):
     """Every job on every test and OOD trajectory of its dataset, with a progress bar; what is
     measured goes to ``out``. ``settings``: keyword arguments of every rollout;
     ``batch_scenes``: a split's scenes in one rollout call (:func:`predict_split`), else one
-    rollout per trajectory."""
+    rollout per trajectory; ``threads``: torch threads of the jobs that roll out in torch
+    (the learned runs, static and gravity_only; None: the process's)."""
     total = sum(len(data[j.dataset][s]) for j in jobs for s in SPLITS)
     with progress() as bar:
         task = bar.add_task("evaluating", total=total)
         for job in jobs:
-            warm_up(job, data[job.dataset])
-            for split in SPLITS:
-                trajs = data[job.dataset][split]
-                for group in [trajs] if batch_scenes else [[t] for t in trajs]:
-                    names = group[0].name if len(group) == 1 else f"{split} ({len(group)} scenes)"
-                    bar.update(task, description=f"{job.name} · {names}")
-                    for traj, pred in zip(group, predict_split(job, group, settings), strict=True):
-                        out.add(job, split, traj, pred)
-                    bar.advance(task, len(group))
+            with torch_threads(threads if job.simulator is not None else None):
+                _roll_job(job, data, out, settings, batch_scenes, bar, task)
     return out
+
+
+def _roll_job(job: RunInfo, data: dict, out: Collected, settings, batch_scenes, bar, task):
+    """One job of :func:`roll_all` on every test and OOD trajectory of its dataset."""
+    warm_up(job, data[job.dataset])
+    for split in SPLITS:
+        trajs = data[job.dataset][split]
+        for group in [trajs] if batch_scenes else [[t] for t in trajs]:
+            names = group[0].name if len(group) == 1 else f"{split} ({len(group)} scenes)"
+            bar.update(task, description=f"{job.name} · {names}")
+            for traj, pred in zip(group, predict_split(job, group, settings), strict=True):
+                out.add(job, split, traj, pred)
+            bar.advance(task, len(group))
 
 
 def rest_tol(cfg: DictConfig) -> float:
@@ -183,21 +203,26 @@ def hard_rows(runs: list[RunInfo], cfg: DictConfig) -> list[dict]:
 
 
 def sleeping_rows(
-    film: RunInfo, ood: list[Trajectory], tol: float, sleep: dict | None = None
+    film: RunInfo,
+    ood: list[Trajectory],
+    tol: float,
+    sleep: dict | None = None,
+    threads: int | None = None,
 ) -> list[dict]:
-    """OOD (c) rolled out again with sleeping spheres (settings ``sleep``), as the run
-    ``<name>+sleeping``."""
+    """OOD (c) rolled out again with sleeping spheres (settings ``sleep``) on ``threads``
+    torch threads (None: the process's), as the run ``<name>+sleeping``."""
     info = dataclasses.replace(
         film,
         name=film.name + SLEEP_SUFFIX,
         overrides=(film.overrides + " rollout.sleeping=true").strip(),
     )
     settings = {"sleep": sleep if sleep is not None else True}
-    return [
-        metrics_row(info, "ood", traj, predict(film, traj, settings), tol)
-        for traj in ood
-        if traj.name == SLEEP_SCENE
-    ]
+    with torch_threads(threads):
+        return [
+            metrics_row(info, "ood", traj, predict(film, traj, settings), tol)
+            for traj in ood
+            if traj.name == SLEEP_SCENE
+        ]
 
 
 def progress() -> Progress:

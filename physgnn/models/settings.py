@@ -87,10 +87,11 @@ def with_knobs(sim, knobs: dict, threads: int, compile: bool = False, cache_dir=
 
 
 @contextlib.contextmanager
-def torch_threads(n: int):
-    """torch's intra-op threads set to ``n`` inside the block, restored after it."""
+def torch_threads(n: int | None):
+    """torch's intra-op threads set to ``n`` inside the block, restored after it; None: left
+    as they are."""
     before = torch.get_num_threads()
-    torch.set_num_threads(int(n))
+    torch.set_num_threads(int(n) if n is not None else before)
     try:
         yield
     finally:

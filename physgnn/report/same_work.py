@@ -111,9 +111,16 @@ def front(pts: list[Point]) -> list[Point]:
     ]
 
 
+def threads_cell(rows: list[dict]) -> str:
+    """The torch threads ``rows`` (learned rollouts) ran on, e.g. ``"1"`` or ``"1, 2"``;
+    "–" where no row says (pybullet's, metrics.csv files written before the column)."""
+    counts = sorted({int(r["threads"]) for r in rows if r.get("threads") is not None})
+    return ", ".join(map(str, counts)) or "–"
+
+
 def split_table(rows: list[dict], split: str) -> str:
-    """Every simulator on ``split``: the metrics, frames per second, ms per frame and whether
-    it is on the :data:`FRONT_METRIC` front."""
+    """Every simulator on ``split``: the metrics, frames per second, ms per frame, the torch
+    threads of a learned one and whether it is on the :data:`FRONT_METRIC` front."""
     on_front = {p.label for p in front(points(rows, split, FRONT_METRIC))}
     groups = [(f"{e}: {c}", select(g, split)) for (e, c), g in group_rows(rows).items()]
     groups += [(name, select(g, split)) for name, g in setting_groups(rows).items()]
@@ -127,12 +134,14 @@ def split_table(rows: list[dict], split: str) -> str:
         cells = [fmt(s[0] if s else None) for s in means]
         ms = fmt(1000.0 / fps) if fps else "–"
         note = diverged_note(sel)
-        body.append([name, *cells, ms, "✓" if name in on_front else "", note or ""])
+        on = "✓" if name in on_front else ""
+        body.append([name, *cells, ms, threads_cell(sel), on, note or ""])
     header = [
         "simulator",
         *PARETO,
         "frames/s",
         "ms/frame",
+        "threads",
         f"on the {FRONT_METRIC} front",
         "diverged",
     ]

@@ -20,13 +20,14 @@ from physgnn.report.format import fmt_stat
 # metrics.csv: identification columns, then the metrics (:data:`physgnn.metrics.names.TABLE`:
 # the divergence step and the speed last; ``substeps``: pybullet's, on its rows
 # ``pybullet-<k>``; ``setting``: the learned setting of a trained run at its own knobs, on its
-# rows ``<run> · <setting>`` (physgnn.evaluation.learned_settings); each empty on the others).
+# rows ``<run> · <setting>`` (physgnn.evaluation.learned_settings); each empty on the others;
+# ``threads``: the torch threads a rollout ran on, empty on the ground truth's and pybullet's).
 COLUMNS = [
     *("run", "experiment", "overrides", "seed", "split", "trajectory", "n_spheres", "n_frames"),
-    *("substeps", "setting"),
+    *("substeps", "setting", "threads"),
     *TABLE,
 ]
-INTS = ["n_spheres", "n_frames", "diverged_at", "seed", "substeps"]
+INTS = ["n_spheres", "n_frames", "diverged_at", "seed", "substeps", "threads"]
 FLOATS = [name for name in TABLE if name not in INTS]
 REFERENCES = ("ground_truth", "static", "gravity_only")
 # The experiment of pybullet's rows on the learned runs' own work (physgnn.evaluation.same_work)
