@@ -199,6 +199,12 @@ def test_where_no_learned_point_is_on_the_front_the_report_says_how_far_the_near
     assert same_work.distance_to_front(rows, "test") in same_work.section(rows)
     on_it = [row("runs/a", 0.05, 250.0), *rows[1:]]  # the most accurate point: on the front
     assert same_work.distance_to_front(on_it, "test") == ""
+    # the truth's own setting: exact and faster than the run, so no error at its cost will do
+    exact = [*rows, engine(40, 0.0, 300.0)]
+    assert same_work.distance_to_front(exact, "test").endswith(
+        "; no mse20 puts `baseline: default` on it at its frames/s (`pybullet-40` is exact and "
+        "at least as fast)."
+    )
 
 
 def test_the_learned_rollouts_run_on_the_evals_threads_and_their_rows_say_so(

@@ -206,6 +206,9 @@ def distance_to_front(rows: list[dict], split: str) -> str:
         parts.append(
             f"`{p.label}` needs, at its frames/s, an {FRONT_METRIC} below {fmt(q.error)}, "
             f"{factor:.3g}× lower than its {fmt(p.error)} (`{q.label}`)"
+            if math.isfinite(factor)
+            else f"no {FRONT_METRIC} puts `{p.label}` on it at its frames/s (`{q.label}` is exact "
+            f"and at least as fast)"
         )
     return f"Nearest to {split}'s {FRONT_METRIC} front: " + "; ".join(parts) + "." if parts else ""
 
