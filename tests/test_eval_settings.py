@@ -230,3 +230,30 @@ def test_rollout_threads_is_refused_in_one_line_naming_the_key(value):
     assert "\n" not in str(caught.value)
     assert rollout_threads(OmegaConf.create({"rollout": {"threads": None}})) is None
     assert rollout_threads(OmegaConf.create({"rollout": {"threads": 1}})) == 1
+
+
+@pytest.mark.parametrize("batch_scenes", [True, False])
+def test_a_compiled_step_is_warmed_on_every_rollout_it_will_time(monkeypatch, batch_scenes):
+    """The compiles of the shapes a compiled step meets happen before the timing, not in it;
+    an eager step warms up on one short rollout only."""
+    from simdata import learned, trajectory
+
+    from physgnn.evaluation import rollouts
+    from physgnn.models.capture import compile_in_place, is_compiled
+    from physgnn.models.constrained import ConstrainedSimulator
+
+    calls = []
+    monkeypatch.setattr(rollouts, "rollout", lambda sim, trajs: calls.append(trajs))
+    splits = {"test": [trajectory(2, frames=9, seed=0), trajectory(3, frames=9, seed=1)]}
+    splits["ood"] = [trajectory(4, frames=9, seed=2)]
+    sim = learned(H=1, M=1, hidden=8, neighbor_backend="torch").eval()
+    rollouts.warm_up(RunInfo("eager", "baseline", simulator=sim), splits, batch_scenes)
+    assert [[t.n_frames for t in group] for group in calls] == [[int(sim.H) + 3]]
+    compile_in_place(sim, "default", True, 4, method="head")  # lazy: nothing compiles here
+    assert is_compiled(sim) and is_compiled(ConstrainedSimulator(sim, 1))
+    calls.clear()
+    rollouts.warm_up(RunInfo("compiled", "baseline", simulator=sim), splits, batch_scenes)
+    expected = [splits["test"], splits["ood"]]
+    if not batch_scenes:
+        expected = [[t] for group in expected for t in group]
+    assert calls == expected

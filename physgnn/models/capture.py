@@ -68,6 +68,13 @@ def use_cache_dir(path) -> Path:
     return path
 
 
+def is_compiled(simulator) -> bool:
+    """Whether ``simulator``'s step (or that of the simulator a wrapper holds, such as the
+    constraint stage's ``simulator``) runs compiled (:func:`compile_simulator`)."""
+    inner = getattr(simulator, "simulator", simulator)
+    return isinstance(getattr(inner, "head", None), ShapeBoundCall)
+
+
 def compiled_graphs() -> int:
     """How many graphs dynamo has compiled in this process so far (a compile, or a load from
     the on-disk cache, for a new shape or guard)."""
