@@ -55,8 +55,16 @@ def predict(job: RunInfo, traj: Trajectory, settings: dict | None = None) -> Tra
     return rollout(job.simulator, [traj], **(settings or {}))[0]
 
 
-def metrics_row(info: RunInfo, split: str, traj: Trajectory, pred: Trajectory, tol: float) -> dict:
-    """One metrics.csv row (columns of :data:`physgnn.report.table.COLUMNS`)."""
+def metrics_row(
+    info: RunInfo,
+    split: str,
+    traj: Trajectory,
+    pred: Trajectory,
+    tol: float,
+    threads: int | None = None,
+) -> dict:
+    """One metrics.csv row (columns of :data:`physgnn.report.table.COLUMNS`); ``threads``: the
+    torch threads the rollout ran on (None: not a rollout in torch)."""
     m = metrics.trajectory_metrics(pred, traj, tol=tol, horizon=20)
     row = {k: m.get(k) for k in COLUMNS}
     row.update(
@@ -70,8 +78,7 @@ def metrics_row(info: RunInfo, split: str, traj: Trajectory, pred: Trajectory, t
         n_frames=pred.n_frames,
         diverged_at=pred.diverged_at,
         fps=pred.fps,
-        # the rollout just ran in this thread context (roll_all's)
-        threads=torch.get_num_threads() if info.simulator is not None else None,
+        threads=threads,
     )
     return row
 
@@ -122,8 +129,10 @@ class Collected:
     films: dict = field(default_factory=dict)
     saved: dict | None = None
 
-    def add(self, job: RunInfo, split: str, traj: Trajectory, pred: Trajectory) -> None:
-        self.rows.append(metrics_row(job, split, traj, pred, self.tol))
+    def add(
+        self, job: RunInfo, split: str, traj: Trajectory, pred: Trajectory, threads=None
+    ) -> None:
+        self.rows.append(metrics_row(job, split, traj, pred, self.tol, threads))
         if self.saved is not None and job.run_dir is not None:
             self.saved.setdefault((job.name, split), []).append(pred)
         if split != "ood":
@@ -177,12 +186,13 @@ def roll_all(
 def _roll_job(job: RunInfo, data: dict, out: Collected, settings, batch_scenes, bar, task):
     """One job of :func:`roll_all` on every test and OOD trajectory of its dataset."""
     warm_up(job, data[job.dataset], batch_scenes)
+    threads = torch.get_num_threads() if job.simulator is not None else None
     for split in SPLITS:
         for group in _groups(data[job.dataset][split], batch_scenes):
             names = group[0].name if len(group) == 1 else f"{split} ({len(group)} scenes)"
             bar.update(task, description=f"{job.name} · {names}")
             for traj, pred in zip(group, predict_split(job, group, settings), strict=True):
-                out.add(job, split, traj, pred)
+                out.add(job, split, traj, pred, threads)
             bar.advance(task, len(group))
 
 
@@ -233,8 +243,9 @@ def sleeping_rows(
     )
     settings = {"sleep": sleep if sleep is not None else True}
     with torch_threads(threads):
+        ran_on = torch.get_num_threads()
         return [
-            metrics_row(info, "ood", traj, predict(film, traj, settings), tol)
+            metrics_row(info, "ood", traj, predict(film, traj, settings), tol, ran_on)
             for traj in ood
             if traj.name == SLEEP_SCENE
         ]
