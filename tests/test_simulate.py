@@ -56,7 +56,7 @@ def test_learned_rollout_from_the_same_start(scene_file, tmp_path, monkeypatch):
     monkeypatch.setattr(
         S,
         "learned",
-        lambda run, truth, steps, cache: (
+        lambda run, truth, steps, cache, threads: (
             simulate_learned.rollout_prediction(sim, truth),
             {"run": run},
         ),
@@ -118,6 +118,7 @@ def test_default_out_follows_paths_outputs_as_every_command(scene_file, tmp_path
         (["scene_file=/nonexistent.yaml"], "does not exist"),
         (["scene_file=x.yaml", "constraints=-1"], "constraints must be a whole number >= 0"),
         (["scene=ood_spaced_drop", "seed=-1"], "seed must be a whole number >= 0"),
+        (["scene=throw", "threads=0"], "threads must be a whole number >= 1"),
     ],
 )
 def test_errors_are_one_line(argv, message, capsys):

@@ -28,6 +28,7 @@ def test_the_prediction_says_what_made_it_and_how_fast(tiny_run, tmp_path):
     main([f"scene_file={scene}", f"run={tiny_run}", f"out={out}", "video=false", "constraints=2"])
     result = json.loads((out / "metrics.json").read_text())
     assert result["ms_per_frame"]["pybullet"] > 0 and result["ms_per_frame"]["learned"] > 0
+    assert result["threads"] == 1  # the learned rollout's (conf/simulate.yaml: threads)
     with h5py.File(out / "simulate.h5") as f:
         pred, truth = dict(f["prediction"].attrs), dict(f["truth"].attrs)
     assert pred["made_by"] == "physgnn learned simulator" and number(pred["H"]) == 0
@@ -50,7 +51,7 @@ def test_a_scene_far_outside_training_is_named_in_one_warning_line(tiny_run, tmp
 def test_a_diverged_prediction_reports_no_metrics(tmp_path, monkeypatch, capsys):
     scene = write(tmp_path, SCENE)
 
-    def diverged(run, truth, steps, cache):
+    def diverged(run, truth, steps, cache, threads):
         cut = dataclasses.replace(truth.truncated(3), diverged_at=3)
         return cut, {"checkpoint": "ck", "run": "r", "H": 1, "constraints": 0}
 

@@ -127,7 +127,8 @@ def _simulate_into(options: SimulateOptions, scenario: Scenario, folders: Folder
     truth = simulated_truth(scenario)
     pred, source = (None, {})
     if options.run:
-        pred, source = learned(str(options.run), truth, options.constraints, options.cache)
+        run = str(options.run)
+        pred, source = learned(run, truth, options.constraints, options.cache, options.threads)
     warnings = outside(scene, source.get("cfg")) if pred is not None else []
     if warnings:
         print(f"warning: {warning_text(scene.name, warnings)}", file=sys.stderr)
@@ -140,6 +141,7 @@ def _simulate_into(options: SimulateOptions, scenario: Scenario, folders: Folder
         "run": source.get("checkpoint"),
         "constraints": options.constraints,
         "compile_s": source.get("compile_s"),
+        "threads": source.get("threads"),
         "warnings": warnings,
         "ms_per_frame": {
             "pybullet": truth.attrs["ms_per_frame"],

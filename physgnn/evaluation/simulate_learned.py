@@ -11,11 +11,14 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+import torch
+
 from physgnn.errors import PhysgnnError, disk_problem, one_line
 from physgnn.evaluation.simulate_options import SimulateError
 from physgnn.files import portable
 from physgnn.models.capture import compile_simulator, compiled_graphs
 from physgnn.models.constrained import ConstrainedSimulator
+from physgnn.models.settings import torch_threads
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
 from physgnn.training.runs import load_run, resolve_run
@@ -30,12 +33,17 @@ def rollout_prediction(simulator, truth: Trajectory) -> Trajectory:
 
 
 def learned(
-    run_dir: str, truth: Trajectory, constraints: int = 0, compile_cache: str | None = None
+    run_dir: str,
+    truth: Trajectory,
+    constraints: int = 0,
+    compile_cache: str | None = None,
+    threads: int | None = None,
 ) -> tuple[Trajectory, dict]:
     """Roll the run's simulator out on ``truth`` (with ``constraints`` > 0, followed by the
     constraint stage, :mod:`physgnn.models.constrained`; with a ``compile_cache`` folder,
-    compiled, :func:`compile_ahead`); returns the prediction and where it came from:
-    ``{"checkpoint", "run", "H", "constraints", "ms_per_frame", "compile_s", "cfg"}``."""
+    compiled, :func:`compile_ahead`) on ``threads`` torch threads (None: the process's);
+    returns the prediction and where it came from: ``{"checkpoint", "run", "H",
+    "constraints", "threads", "ms_per_frame", "compile_s", "cfg"}``."""
     folder = resolve_run(run_dir)
     if not folder.is_dir():
         raise SimulateError(f"run folder {run_dir} does not exist")
@@ -43,7 +51,8 @@ def learned(
     history = int(simulator.H)
     fresh = compile_cache is not None and not any(Path(compile_cache).glob("*"))
     compile_s = None
-    with compile_guard(compile_cache):
+    with compile_guard(compile_cache), torch_threads(threads):
+        ran_on = torch.get_num_threads()
         if compile_cache is not None:
             compile_s = compile_ahead(simulator, truth, compile_cache)
         if constraints > 0:
@@ -69,6 +78,7 @@ def learned(
         )
     source = {"checkpoint": str(info.get("checkpoint", run_dir)), "run": portable(folder)}
     source |= {"H": history, "constraints": constraints, "cfg": cfg, "compile_s": compile_s}
+    source["threads"] = ran_on
     source["ms_per_frame"] = 1000 * (time.perf_counter() - start) / steps
     return pred, source
 

@@ -11,11 +11,13 @@ from omegaconf import DictConfig
 
 from physgnn.errors import PhysgnnError
 from physgnn.metrics import TOLERANCE
+from physgnn.models.settings import ALLOWED
 from physgnn.ranges import FLAG, check_fields, ranged, whole
 
 # The values of the options the notebook API takes as well (physgnn.api)
 FRAMES = whole(2, what="the first frame is the start", example=100)
 CONSTRAINTS = whole(0, what="iterations of the constraint stage; 0: the learned model alone")
+THREADS = ALLOWED["threads"]  # a learned setting's knob of the same name
 # The keys of paths (conf/paths/default.yaml) a simulate reads
 PATHS = ("outputs", "compile_cache")
 
@@ -32,7 +34,8 @@ class SimulateOptions:
     training run folder or ``pretrained`` (None: the truth only); ``constraints``: iterations
     of the constraint stage after each learned step; ``tol``: the penetration tolerance;
     ``video``, ``rerun`` (a ``.rrd`` file or None), ``compile`` (the learned step compiled,
-    its code kept in ``compile_cache``); ``out`` (None: under ``outputs``), ``overwrite``."""
+    its code kept in ``compile_cache``), ``threads`` (torch threads of the learned rollout;
+    None: the process's); ``out`` (None: under ``outputs``), ``overwrite``."""
 
     NODE: ClassVar[str] = ""
     constraints: int = ranged(CONSTRAINTS)
@@ -40,6 +43,7 @@ class SimulateOptions:
     video: bool = ranged(FLAG)
     overwrite: bool = ranged(FLAG)
     compile: bool = ranged(FLAG)
+    threads: int | None = ranged(THREADS)
     seed: int = ranged(whole(0, what="the draw of a scene family", example=0))
     frames: int | None = ranged(replace(FRAMES, also=(None,)))
     scene: Any = None
