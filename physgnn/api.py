@@ -38,12 +38,13 @@ from physgnn.data import exports, hdf5_export, interchange, vtk
 from physgnn.errors import PhysgnnError
 from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.simulate import scene_metrics
-from physgnn.evaluation.simulate_options import CONSTRAINTS, FRAMES
+from physgnn.evaluation.simulate_options import CONSTRAINTS, FRAMES, THREADS
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.groundtruth import scene_values, scenefile
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.metrics import check_tolerance
 from physgnn.models.constrained import ConstrainedSimulator
+from physgnn.models.settings import torch_threads
 from physgnn.physics.scene import Scene, SceneError
 from physgnn.physics.trajectory import Trajectory, scene_at
 from physgnn.ranges import whole
@@ -149,21 +150,27 @@ def simulate(scene: Scene, frames: int | None = None) -> Trajectory:
     return engine_simulate(scene)
 
 
-def roll_out(model: Model, truth: Trajectory, constraints: int = 0) -> Trajectory:
+def roll_out(
+    model: Model, truth: Trajectory, constraints: int = 0, threads: int | None = 1
+) -> Trajectory:
     """The model's rollout of ``truth`` from its first H+1 frames (its finite prefix if it
     diverged: ``diverged_at``); with ``constraints`` > 0, each learned step is followed by that
-    many iterations of the constraint stage. Warns (:class:`OutOfDistributionWarning`) when
-    ``truth`` starts outside the model's training ranges."""
+    many iterations of the constraint stage; on ``threads`` torch threads (None: the
+    process's; 1, as ``simulate``: on a 2-core machine a second made rollouts slower). Warns
+    (:class:`OutOfDistributionWarning`) when ``truth`` starts outside the model's training
+    ranges."""
     _of_type("model", model, Model, "a Model: load_model('pretrained') or load_model(run_dir)")
     _of_type("truth", truth, Trajectory, "a Trajectory: simulate(scene) gives a scene's truth")
     constraints = CONSTRAINTS.check("constraints", constraints, error=ArgumentError)
+    threads = THREADS.check("threads", threads, error=ArgumentError)
     found = outside(scene_of(truth), model.cfg)
     if found:
         warnings.warn(warning_text(truth.name, found), OutOfDistributionWarning, stacklevel=2)
     simulator = model.simulator
     if constraints > 0:
         simulator = ConstrainedSimulator(simulator, constraints)
-    return rollout(simulator, [truth])[0]
+    with torch_threads(threads):
+        return rollout(simulator, [truth])[0]
 
 
 def score(pred: Trajectory | None, truth: Trajectory, tol: float = 0.0) -> dict:

@@ -11,6 +11,7 @@ import subprocess
 
 import numpy as np
 import pytest
+import torch
 from simdata import trajectory
 
 import physgnn.api as pg
@@ -53,6 +54,27 @@ def test_roll_out_refuses_constraints_simulate_refuses(model, truth, constraints
         f"constraints must be a whole number >= 0 (iterations of the constraint stage; 0: the "
         f"learned model alone), got {constraints!r}"
     )
+
+
+@pytest.mark.parametrize("threads", [0, 1.5, "2"])
+def test_roll_out_refuses_threads_simulate_refuses(model, truth, threads):
+    with pytest.raises(pg.ArgumentError) as err:
+        pg.roll_out(model, truth, threads=threads)
+    assert one_line(err).startswith(
+        f"threads must be a whole number >= 1 or null (torch threads), got {threads!r}"
+    )
+
+
+def test_roll_out_runs_on_its_threads_and_gives_the_process_its_own_back(model, truth, monkeypatch):
+    seen, real = [], pg.rollout
+    monkeypatch.setattr(
+        pg, "rollout", lambda sim, trajs: seen.append(torch.get_num_threads()) or real(sim, trajs)
+    )
+    before = torch.get_num_threads()
+    for threads in (1, 2, None):
+        pg.roll_out(model, truth, threads=threads)
+    pg.roll_out(model, truth)
+    assert seen == [1, 2, before, 1] and torch.get_num_threads() == before
 
 
 @pytest.mark.parametrize("frames", [2.7, 1, 0, "10"])
