@@ -37,6 +37,7 @@ def test_the_cache_folder_is_made_and_named_for_inductor(tmp_path, monkeypatch):
     assert path.is_absolute()
 
 
+@pytest.mark.slow  # ~40 s of tracing; the compiled rollout itself: test_compiled_regions.py
 def test_simulate_compiled_rolls_out_as_eager_and_says_what_compiling_cost(
     tiny_run, tmp_path, monkeypatch
 ):
