@@ -22,7 +22,7 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn.errors import ConfigError
 from physgnn.evaluation.rollouts import Collected, roll_all, rollout_threads
 from physgnn.evaluation.runs import RunInfo
-from physgnn.models.settings import check_knobs, torch_threads, with_knobs
+from physgnn.models.settings import check_knobs, with_knobs
 from physgnn.training import runs as training_runs
 
 KEY = "learned_settings"
@@ -83,8 +83,7 @@ def setting_rows(
     rows = []
     for job in jobs:
         out = Collected(keep=set(), film=[], tol=tol)
-        with torch_threads(job.extra["knobs"]["threads"]):
-            roll_all([job], data, out, settings, batch_scenes=batch_scenes)
+        roll_all([job], data, out, settings, batch_scenes, job.extra["knobs"]["threads"])
         rows += [row | {"setting": job.extra["setting"]} for row in out.rows]
     return rows
 

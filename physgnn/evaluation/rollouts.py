@@ -9,7 +9,6 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 from omegaconf import DictConfig, OmegaConf
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -130,7 +129,12 @@ class Collected:
     saved: dict | None = None
 
     def add(
-        self, job: RunInfo, split: str, traj: Trajectory, pred: Trajectory, threads=None
+        self,
+        job: RunInfo,
+        split: str,
+        traj: Trajectory,
+        pred: Trajectory,
+        threads: int | None = None,
     ) -> None:
         self.rows.append(metrics_row(job, split, traj, pred, self.tol, threads))
         if self.saved is not None and job.run_dir is not None:
@@ -172,21 +176,23 @@ def roll_all(
     """Every job on every test and OOD trajectory of its dataset, with a progress bar; what is
     measured goes to ``out``. ``settings``: keyword arguments of every rollout;
     ``batch_scenes``: a split's scenes in one rollout call (:func:`predict_split`), else one
-    rollout per trajectory; ``threads``: torch threads of the jobs that roll out in torch
-    (the learned runs, static and gravity_only; None: the process's)."""
+    rollout per trajectory; ``threads``: torch threads of every job (None: the process's;
+    the rows of those that roll out in torch, the learned runs, static and gravity_only, say
+    how many)."""
     total = sum(len(data[j.dataset][s]) for j in jobs for s in SPLITS)
     with progress() as bar:
         task = bar.add_task("evaluating", total=total)
         for job in jobs:
-            with torch_threads(threads if job.simulator is not None else None):
-                _roll_job(job, data, out, settings, batch_scenes, bar, task)
+            with torch_threads(threads) as ran_on:
+                _roll_job(job, data, out, settings, batch_scenes, bar, task, ran_on)
     return out
 
 
-def _roll_job(job: RunInfo, data: dict, out: Collected, settings, batch_scenes, bar, task):
-    """One job of :func:`roll_all` on every test and OOD trajectory of its dataset."""
+def _roll_job(job: RunInfo, data: dict, out: Collected, settings, batch_scenes, bar, task, ran_on):
+    """One job of :func:`roll_all` on every test and OOD trajectory of its dataset, on
+    ``ran_on`` torch threads (its rows say so where the job rolls out in torch)."""
     warm_up(job, data[job.dataset], batch_scenes)
-    threads = torch.get_num_threads() if job.simulator is not None else None
+    threads = ran_on if job.simulator is not None else None
     for split in SPLITS:
         for group in _groups(data[job.dataset][split], batch_scenes):
             names = group[0].name if len(group) == 1 else f"{split} ({len(group)} scenes)"
@@ -242,8 +248,7 @@ def sleeping_rows(
         overrides=(film.overrides + " rollout.sleeping=true").strip(),
     )
     settings = {"sleep": sleep if sleep is not None else True}
-    with torch_threads(threads):
-        ran_on = torch.get_num_threads()
+    with torch_threads(threads) as ran_on:
         return [
             metrics_row(info, "ood", traj, predict(film, traj, settings), tol, ran_on)
             for traj in ood

@@ -11,8 +11,6 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-import torch
-
 from physgnn.errors import PhysgnnError, disk_problem, one_line
 from physgnn.evaluation.simulate_options import SimulateError
 from physgnn.files import portable
@@ -51,8 +49,7 @@ def learned(
     history = int(simulator.H)
     fresh = compile_cache is not None and not any(Path(compile_cache).glob("*"))
     compile_s = None
-    with compile_guard(compile_cache), torch_threads(threads):
-        ran_on = torch.get_num_threads()
+    with compile_guard(compile_cache), torch_threads(threads) as ran_on:
         if compile_cache is not None:
             compile_s = compile_ahead(simulator, truth, compile_cache)
         if constraints > 0:

@@ -89,10 +89,10 @@ def with_knobs(sim, knobs: dict, threads: int, compile: bool = False, cache_dir=
 @contextlib.contextmanager
 def torch_threads(n: int | None):
     """torch's intra-op threads set to ``n`` inside the block, restored after it; None: left
-    as they are."""
+    as they are. Gives the block the count it runs on (``with torch_threads(n) as ran_on``)."""
     before = torch.get_num_threads()
     torch.set_num_threads(int(n) if n is not None else before)
     try:
-        yield
+        yield torch.get_num_threads()
     finally:
         torch.set_num_threads(before)
