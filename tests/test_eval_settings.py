@@ -152,7 +152,7 @@ def test_make_eval_puts_the_settings_on_the_same_work_table(tiny_run, tiny_datas
         f"paths.outputs={tmp_path}",
         f"report_dir={tmp_path / 'report'}",
         *("videos=false", "stability=false", "invariance=null", "onestep=null"),
-        *("sleeping_compare=false", "pybullet.substeps=[1]", "pybullet.processes=1"),
+        *("sleeping_compare=false", "pybullet.substeps=[1]"),
         "learned_settings=null",  # then a list of its own, not merged into the default one
         "learned_settings={as_trained: {}, passes0: {contact_passes: 0, threads: 2}}",
     ]
@@ -180,7 +180,8 @@ def test_make_eval_puts_the_settings_on_the_same_work_table(tiny_run, tiny_datas
         "passes0": 2,
     }
     assert {r["threads"] for r in run} == {1}
-    assert {r["threads"] for r in rows if r["experiment"] == "pybullet"} == {None}
+    # pybullet in as many processes as the learned rollouts' threads (rollout.threads: 1)
+    assert {r["threads"] for r in rows if r["experiment"] == "pybullet"} == {1}
     assert "| threads |" in text
 
 
@@ -219,7 +220,7 @@ def test_the_learned_rollouts_run_on_the_evals_threads_and_their_rows_say_so(
     assert {r["threads"] for r in rows if r["run"] == "runs/t"} == {2}
     assert {r["threads"] for r in rows if r["run"] == "ground_truth"} == {None}
     assert same_work.threads_cell(rows) == "2"
-    assert same_work.threads_cell([row("pybullet-1", 1.0, 10.0)]) == "–"
+    assert same_work.threads_cell([row("pybullet-1", 1.0, 10.0)]) == "–"  # a csv before the column
 
 
 @pytest.mark.parametrize("value", [0, 1.5, "two"])

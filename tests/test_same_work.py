@@ -129,20 +129,37 @@ def test_pybullet_starts_where_the_learned_run_starts(tiny, tiny_dataset):
     """From frame H: the first H+1 frames are the truth's, the rest the engine's, and the rows
     of a split run in two processes score as one at a time (each row the split's rate)."""
     truth = tiny[tiny_dataset]["ood"][1]
-    [pred] = engine_work.engine_split([truth], 2, 1, processes=1)
+    [pred] = engine_work.engine_split([truth], 2, 1, processes=None)
     assert (pred.start, pred.n_frames, pred.diverged_at) == (2, truth.n_frames, None)
     for key in ("pos", "quat"):
         np.testing.assert_array_equal(getattr(pred, key)[:3], getattr(truth, key)[:3])
     assert not np.array_equal(pred.pos[3:], truth.pos[3:])  # 1 substep, not 40
     np.testing.assert_allclose(pred.vel[3], (pred.pos[3] - pred.pos[2]) / truth.dt, rtol=1e-5)
     jobs = engine_work.engine_jobs([learned_run(tiny_dataset, 2)], several=False)
-    alone = engine_work.engine_rows(jobs, tiny, [1], processes=1, tol=0.0)
+    alone = engine_work.engine_rows(jobs, tiny, [1], processes=None, tol=0.0)
     pooled = engine_work.engine_rows(jobs, tiny, [1], processes=2, tol=0.0)
     for a, b in zip(alone, pooled, strict=True):
         assert {k: a[k] for k in ("mse", "chamfer", "energy_gain")} == {
             k: b[k] for k in ("mse", "chamfer", "energy_gain")
         }
     assert len({r["fps"] for r in pooled if r["split"] == "ood"}) == 1
+    assert {r["threads"] for r in alone} == {1} and {r["threads"] for r in pooled} == {2}
+
+
+@pytest.mark.parametrize("processes", [None, 1])
+def test_one_process_gives_the_split_its_rate_and_one_at_a_time_each_its_own(
+    tiny, tiny_dataset, monkeypatch, processes
+):
+    """A clock that reads 0, 0, 1, 1, 4, 4: the first scene takes 1 s, the second 3 s. One at a
+    time (None), each row its own frames/s; the split in one process, every row the split's
+    scene-frames per wall-clock second (as a batched learned rollout on one thread)."""
+    trajs = tiny[tiny_dataset]["ood"][:2]
+    clock = iter([0.0, 0.0, 1.0, 1.0, 4.0, 4.0])
+    monkeypatch.setattr(engine_work.time, "perf_counter", lambda: next(clock))
+    preds = engine_work.engine_split(trajs, 0, 1, processes=processes)
+    frames = [t.n_frames - 1 for t in trajs]
+    expected = [frames[0] / 1.0, frames[1] / 3.0] if processes is None else [sum(frames) / 4.0] * 2
+    assert [p.fps for p in preds] == pytest.approx(expected, rel=1e-12)
 
 
 def test_engine_settings_come_from_the_truth_with_the_substeps_replaced(tiny, tiny_dataset):

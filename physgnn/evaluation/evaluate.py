@@ -159,14 +159,15 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
 def engine_rows(cfg: DictConfig, runs: list[RunInfo], data: dict, batched: bool) -> list[dict]:
     """pybullet at ``cfg.pybullet.substeps`` on the learned runs' own work
     (:mod:`physgnn.evaluation.same_work`), timed as the learned rollouts are: with
-    ``batched``, each split's scenes at once in ``cfg.pybullet.processes`` processes, else
-    one scene at a time here. None without a ``pybullet`` config."""
+    ``batched``, each split's scenes at once in ``cfg.pybullet.processes`` processes (the
+    split's rate), else one scene at a time here (each its own). None without a ``pybullet``
+    config."""
     settings = same_work.check_settings(cfg.get("pybullet"))
     if settings is None:
         return []
     substeps, processes = settings
     jobs = same_work.engine_jobs(runs, len(data) > 1)
-    return same_work.engine_rows(jobs, data, substeps, processes if batched else 1, cfg.tol)
+    return same_work.engine_rows(jobs, data, substeps, processes if batched else None, cfg.tol)
 
 
 def onestep_rows(cfg: DictConfig, runs: list[RunInfo], data: dict) -> list[dict]:

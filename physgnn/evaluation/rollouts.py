@@ -63,7 +63,8 @@ def metrics_row(
     threads: int | None = None,
 ) -> dict:
     """One metrics.csv row (columns of :data:`physgnn.report.table.COLUMNS`); ``threads``: the
-    torch threads the rollout ran on (None: not a rollout in torch)."""
+    cores the rollout ran on (a learned rollout's torch threads, pybullet's processes; None: not
+    timed against another)."""
     m = metrics.trajectory_metrics(pred, traj, tol=tol, horizon=20)
     row = {k: m.get(k) for k in COLUMNS}
     row.update(

@@ -7,9 +7,11 @@ before it copied from the truth as a rollout's are), runs at the truth's other s
 same metrics against the same truth (:func:`physgnn.evaluation.rollouts.metrics_row`).
 
 Timing is the learned rollouts': one scene at a time in this process (``batch_scenes`` off:
-each row its own frames per second), or every scene of a split at once in as many processes as
-cores (``batch_scenes`` on: every row the split's scene-frames per second, as the batched
-learned rollout's). Both times include creating the bodies (a few ms per scene).
+each row its own frames per second), or every scene of a split at once in ``pybullet.processes``
+processes (``batch_scenes`` on: every row the split's scene-frames per wall-clock second, as the
+batched learned rollout's). By default as many processes as the learned rollouts have threads
+(``rollout.threads``, 1), so that both sides of a same-work row use as many cores; the rows'
+``threads`` column says how many. Both times include creating the bodies (a few ms per scene).
 """
 
 from __future__ import annotations
@@ -47,25 +49,29 @@ def timed_run(job: tuple[Trajectory, int, int]) -> tuple[Trajectory, float]:
     return run, time.perf_counter() - t0
 
 
-def engine_split(trajs: list[Trajectory], H: int, substeps: int, processes: int):
+def engine_split(trajs: list[Trajectory], H: int, substeps: int, processes: int | None):
     """Every trajectory's engine run from frame ``H`` as a prediction with its ``fps``:
-    ``processes`` 1, one at a time here (each its own rate); more, at once in that many
-    processes (every one the split's scene-frames per wall-clock second)."""
+    ``processes`` None, one at a time here, each its own rate (the learned rollouts' one by
+    one); a number, the split at once in that many processes, 1 here one after another, every
+    row the split's scene-frames per wall-clock second (the batched learned rollout's rate on
+    as many cores)."""
     jobs = [(t, H, substeps) for t in trajs]
-    if processes <= 1:
-        runs = [timed_run(job) for job in jobs]
-        return [
-            continued(t, run, H, (run.n_frames - 1) / s)
-            for t, (run, s) in zip(trajs, runs, strict=True)
-        ]
-    with mp.get_context("fork").Pool(processes, initializer=forked_worker) as pool:
+    if processes is None or processes == 1:
         t0 = time.perf_counter()
-        runs = pool.map(timed_run, jobs, chunksize=1)
+        runs = [timed_run(job) for job in jobs]
         wall = time.perf_counter() - t0
-        pool.close()
-        pool.join()  # the workers end on their own, not by the pool's SIGTERM
-    fps = sum(run.n_frames - 1 for run, _ in runs) / wall
-    return [continued(t, run, H, fps) for t, (run, _) in zip(trajs, runs, strict=True)]
+    else:
+        with mp.get_context("fork").Pool(processes, initializer=forked_worker) as pool:
+            t0 = time.perf_counter()  # the workers' start is not timed
+            runs = pool.map(timed_run, jobs, chunksize=1)
+            wall = time.perf_counter() - t0
+            pool.close()
+            pool.join()  # the workers end on their own, not by the pool's SIGTERM
+    split_fps = sum(run.n_frames - 1 for run, _ in runs) / wall
+    return [
+        continued(t, run, H, (run.n_frames - 1) / s if processes is None else split_fps)
+        for t, (run, s) in zip(trajs, runs, strict=True)
+    ]
 
 
 def engine_jobs(runs: list[RunInfo], several: bool) -> list[RunInfo]:
@@ -113,11 +119,12 @@ def check_settings(cfg: DictConfig | None) -> tuple[list[int], int] | None:
 
 
 def engine_rows(
-    jobs: list[RunInfo], data: dict, substeps: list[int], processes: int, tol: float
+    jobs: list[RunInfo], data: dict, substeps: list[int], processes: int | None, tol: float
 ) -> list[dict]:
     """Every engine reference of :func:`engine_jobs` at every substep count on the test and
     OOD splits of its dataset: metrics.csv rows ``pybullet-<k><suffix>``, their ``substeps``
-    column set (``tol``: the penetration tolerance of the other rows)."""
+    and ``threads`` (the processes; 1 one at a time) columns set (``processes``:
+    :func:`engine_split`'s; ``tol``: the penetration tolerance of the other rows)."""
     rows = []
     with progress() as bar:
         task = bar.add_task(ENGINE, total=len(jobs) * len(substeps) * len(SPLITS))
@@ -131,6 +138,7 @@ def engine_rows(
                 trajs = [t for t in data[job.dataset][split] if t.n_frames > H + 1]
                 preds = engine_split(trajs, H, k, processes)
                 for truth, pred in zip(trajs, preds, strict=True):
-                    rows.append(metrics_row(info, split, truth, pred, tol) | {"substeps": k})
+                    row = metrics_row(info, split, truth, pred, tol, threads=processes or 1)
+                    rows.append(row | {"substeps": k})
                 bar.advance(task)
     return rows

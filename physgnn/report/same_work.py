@@ -112,15 +112,16 @@ def front(pts: list[Point]) -> list[Point]:
 
 
 def threads_cell(rows: list[dict]) -> str:
-    """The torch threads ``rows`` (learned rollouts) ran on, e.g. ``"1"`` or ``"1, 2"``;
-    "–" where no row says (pybullet's, metrics.csv files written before the column)."""
+    """The cores ``rows`` ran on (a learned rollout's torch threads, pybullet's processes), e.g.
+    ``"1"`` or ``"1, 2"``; "–" where no row says (metrics.csv files written before the
+    column)."""
     counts = sorted({int(r["threads"]) for r in rows if r.get("threads") is not None})
     return ", ".join(map(str, counts)) or "–"
 
 
 def split_table(rows: list[dict], split: str) -> str:
-    """Every simulator on ``split``: the metrics, frames per second, ms per frame, the torch
-    threads of a learned one and whether it is on the :data:`FRONT_METRIC` front."""
+    """Every simulator on ``split``: the metrics, frames per second, ms per frame, the cores it
+    ran on and whether it is on the :data:`FRONT_METRIC` front."""
     on_front = {p.label for p in front(points(rows, split, FRONT_METRIC))}
     groups = [(f"{e}: {c}", select(g, split)) for (e, c), g in group_rows(rows).items()]
     groups += [(name, select(g, split)) for name, g in setting_groups(rows).items()]
