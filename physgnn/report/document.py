@@ -29,9 +29,10 @@ def pareto_section(rows: list[dict], fig_dir: Path, root: Path) -> str:
             "frames; pybullet restarts from frame H at the truth's other settings), scored with "
             "the same metrics against the same truth; means over the rollouts. frames/s: as the "
             "learned rollouts were timed (batched scenes: pybullet runs each split's scenes in "
-            "as many processes as cores, every row the split's scene-frames per second; one "
-            "scene at a time: both in one process); threads: the torch threads a learned "
-            "rollout ran on (the eval's rollout.threads, or its setting's). pybullet's own "
+            "pybullet.processes processes, as many as the learned rollouts' threads unless "
+            "set, every row the split's scene-frames per second; one scene at a time: both in "
+            "one process); threads: the cores a row ran on (a learned rollout's torch threads, "
+            "the eval's rollout.threads or its setting's; pybullet's processes). pybullet's own "
             "curve on the bench pile is in the bench report (bench.md).",
             same_work.section(rows),
             *(f"![{p.stem}]({rel(p, root)})" for p in paths),
