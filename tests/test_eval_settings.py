@@ -152,7 +152,7 @@ def test_make_eval_puts_the_settings_on_the_same_work_table(tiny_run, tiny_datas
         f"paths.outputs={tmp_path}",
         f"report_dir={tmp_path / 'report'}",
         *("videos=false", "stability=false", "invariance=null", "onestep=null"),
-        *("sleeping_compare=false", "pybullet.substeps=[1]"),
+        *("sleeping_compare=false", "pybullet.substeps=[1]", "freefall=null", "bounce=null"),
         "learned_settings=null",  # then a list of its own, not merged into the default one
         "learned_settings={as_trained: {}, passes0: {contact_passes: 0, threads: 2}}",
     ]
@@ -183,6 +183,7 @@ def test_make_eval_puts_the_settings_on_the_same_work_table(tiny_run, tiny_datas
     # pybullet in as many processes as the learned rollouts' threads (rollout.threads: 1)
     assert {r["threads"] for r in rows if r["experiment"] == "pybullet"} == {1}
     assert "| threads |" in text
+    assert "No free-fall measurements" in text and "No bounce measurements" in text
 
 
 def test_where_no_learned_point_is_on_the_front_the_report_says_how_far_the_nearest_is():

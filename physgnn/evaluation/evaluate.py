@@ -142,7 +142,7 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
         stability.write_csv(report_dir / "stability.csv", stab + hard_rows(runs, cfg))
     else:
         (report_dir / "stability.csv").unlink(missing_ok=True)  # no stale section
-    freefall.write_csv(report_dir / "freefall.csv", _freefall(runs, cfg.freefall, settings))
+    freefall.write_csv(report_dir / "freefall.csv", _freefall(runs, cfg.get("freefall"), settings))
     bounce.write_csv(report_dir / "bounce.csv", _bounce(runs, cfg.get("bounce"), settings))
     invariance.write_csv(report_dir / "invariance.csv", _invariance(runs, cfg, settings))
     if out.energies:
@@ -182,8 +182,11 @@ def onestep_rows(cfg: DictConfig, runs: list[RunInfo], data: dict) -> list[dict]
     return onestep.onestep_rows(runs, data, settings, substeps, len(data) > 1)
 
 
-def _freefall(runs: list[RunInfo], cfg: DictConfig, settings: dict) -> list[dict]:
-    """Every learned run dropped from ``cfg.heights`` (:mod:`physgnn.evaluation.freefall`)."""
+def _freefall(runs: list[RunInfo], cfg: DictConfig | None, settings: dict) -> list[dict]:
+    """Every learned run dropped from ``cfg.heights`` (:mod:`physgnn.evaluation.freefall`);
+    none without a ``freefall`` config."""
+    if cfg is None:
+        return []
     args = list(cfg.heights), float(cfg.seconds), float(cfg.dt), float(cfg.floor)
     rows = []
     for run in runs:
