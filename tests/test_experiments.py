@@ -19,7 +19,7 @@ from physgnn.training.layout import dotted_model, key_of_today
 
 CONF = Path(CONF_DIR)
 # Experiments of one run (not sweeps), with their optimiser-step budget.
-SINGLE = {"long": 22_500, "engine_state": 2_250}
+SINGLE = {"long": 22_500, "engine_state": 2_250, "narrow": 2_250}
 EXPERIMENTS = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml") if p.stem not in SINGLE)
 RUNS = {
     "ablation_H": 15,
@@ -67,6 +67,21 @@ def test_the_long_run_is_ten_default_budgets_with_milestones(tiny_dataset, tmp_p
     _, _, trainer = build(cfg)
     kept = [c for c in trainer.callbacks if getattr(c, "dirpath", "").endswith("milestones")]
     assert len(kept) == 1 and kept[0]._every_n_train_steps == 2250 and kept[0].save_top_k == -1
+
+
+def test_the_narrow_network_is_the_default_model_with_64_wide_layers_and_3_blocks(
+    tiny_dataset, tmp_path
+):
+    base = ["data=tiny", f"paths.outputs={Path(tiny_dataset).parents[1]}", f"run_dir={tmp_path}"]
+    cfg, default = compose_train(["+experiment=narrow", *base]), compose_train(base)
+    steps = cfg.trainer.max_epochs * cfg.datamodule.pairs_per_epoch // cfg.datamodule.batch_size
+    assert cfg.experiment_name == "narrow" and steps == SINGLE["narrow"]
+    model, base_model = OmegaConf.to_container(cfg.model), OmegaConf.to_container(default.model)
+    assert model.pop("network") == base_model.pop("network") | {"hidden": 64, "M": 3}
+    assert model == base_model  # the rest of the model is the default's
+    _, lit, _ = build(cfg)
+    network = lit.simulator.network
+    assert len(network.blocks) == 3 and network.node_encoder.lin1.out_features == 64
 
 
 @pytest.mark.parametrize("name", EXPERIMENTS)
