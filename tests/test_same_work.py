@@ -18,7 +18,7 @@ from physgnn.evaluation import same_work as engine_work
 from physgnn.evaluation.runs import RunInfo
 from physgnn.physics.trajectory import FRAME_KEYS
 from physgnn.report import same_work
-from physgnn.report.table import COLUMNS
+from physgnn.report.table import COLUMNS, frame_rate
 
 
 def row(run, experiment, mse20, fps, split="test", substeps=None, trajectory="t0"):
@@ -79,6 +79,22 @@ def test_a_fake_learned_run_lands_where_its_cost_and_error_put_it():
         "pybullet-5": "✓",
         "pybullet-20": "✓",
     }
+
+
+def test_a_groups_rate_is_its_frames_over_its_seconds():
+    """One scene at a time each row has its own rate: 100 frames at 10 frames/s (10 s) and 50
+    at 50 (1 s) are 150 frames in 11 s, not the mean of the rates (30); rows of one batch share
+    one rate and give it."""
+    alone = [
+        row("runs/a", "baseline", 0.5, 10.0) | {"n_frames": 100},
+        row("runs/a", "baseline", 0.5, 50.0, trajectory="t1") | {"n_frames": 50},
+    ]
+    assert frame_rate(alone) == pytest.approx(150 / 11)
+    [point] = same_work.points(alone, "test", "mse20")
+    assert point.ms_per_frame == pytest.approx(1000 * 11 / 150)
+    batch = [r | {"fps": 40.0} for r in alone]
+    assert frame_rate(batch) == pytest.approx(40.0)
+    assert frame_rate([row("runs/a", "baseline", 0.5, None)]) is None
 
 
 def test_a_diverged_learned_run_is_never_on_the_front():

@@ -19,6 +19,7 @@ from physgnn.report.table import (
     SPLITS,
     config_label,
     diverged_note,
+    frame_rate,
     group_rows,
     select,
     stat,
@@ -80,10 +81,10 @@ def setting_groups(rows: list[dict]) -> dict[str, list[dict]]:
 
 
 def _point(label: str, rows: list[dict], metric: str, kind: str) -> Point | None:
-    err, fps = stat(rows, metric), stat(rows, "fps")
-    if err is None or fps is None or fps[0] <= 0:
+    err, fps = stat(rows, metric), frame_rate(rows)
+    if err is None or fps is None:
         return None
-    return Point(label, 1000.0 / fps[0], err[0], kind, not diverged_note(rows))
+    return Point(label, 1000.0 / fps, err[0], kind, not diverged_note(rows))
 
 
 def points(rows: list[dict], split: str, metric: str) -> list[Point]:
@@ -130,9 +131,9 @@ def split_table(rows: list[dict], split: str) -> str:
     for name, sel in groups:
         if not sel:
             continue
-        means = [stat(sel, m) for m in (*PARETO, "fps")]
-        fps = means[-1][0] if means[-1] else None
-        cells = [fmt(s[0] if s else None) for s in means]
+        means = [stat(sel, m) for m in PARETO]
+        fps = frame_rate(sel)
+        cells = [*(fmt(s[0] if s else None) for s in means), fmt(fps)]
         ms = fmt(1000.0 / fps) if fps else "–"
         note = diverged_note(sel)
         on = "✓" if name in on_front else ""

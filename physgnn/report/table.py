@@ -113,6 +113,17 @@ def stat(rows: list[dict], metric: str) -> tuple[float, float, int] | None:
     return mean, std, len(vals)
 
 
+def frame_rate(rows: list[dict]) -> float | None:
+    """Frames per second of ``rows`` together: their frames over their seconds (a row's seconds:
+    ``n_frames / fps``; a row without ``n_frames`` weighs one frame), so that ``1 / rate`` is the
+    mean cost of a frame; rows of one batch (one rate) give that rate. None if none is timed."""
+    timed = [r for r in rows if r["fps"] is not None and math.isfinite(r["fps"]) and r["fps"] > 0]
+    if not timed:
+        return None
+    frames = [r.get("n_frames") or 1 for r in timed]
+    return sum(frames) / sum(n / r["fps"] for n, r in zip(frames, timed, strict=True))
+
+
 def diverged_note(rows: list[dict]) -> str:
     """``"diverged at step k (m/n)"`` with k the earliest step, or "" when none diverged."""
     steps = [r["diverged_at"] for r in rows if r["diverged_at"] is not None]
