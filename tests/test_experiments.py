@@ -50,6 +50,11 @@ def sweep_jobs(params) -> list[list[str]]:
     return [list(job) for job in itertools.product(*axes)]
 
 
+def optimiser_steps(cfg) -> int:
+    """The optimiser steps of a composed training config's budget."""
+    return cfg.trainer.max_epochs * cfg.datamodule.pairs_per_epoch // cfg.datamodule.batch_size
+
+
 def test_every_experiment_is_listed():
     files = sorted(p.stem for p in (CONF / "experiment").glob("*.yaml"))
     assert files == sorted([*RUNS, *SINGLE])
@@ -59,7 +64,7 @@ def test_the_long_run_is_ten_default_budgets_with_milestones(tiny_dataset, tmp_p
     base = ["data=tiny", f"paths.outputs={Path(tiny_dataset).parents[1]}", f"run_dir={tmp_path}"]
     cfg = compose_train(["+experiment=long", "model.network.hidden=8", *base])
     assert cfg.hydra.mode != RunMode.MULTIRUN and cfg.experiment_name == "long"
-    steps = cfg.trainer.max_epochs * cfg.datamodule.pairs_per_epoch // cfg.datamodule.batch_size
+    steps = optimiser_steps(cfg)
     assert steps == SINGLE["long"] == 10 * 2250
     # the default's decay over 90 epochs (0.97^90), spread over the 900
     decay = cfg.lit.scheduler
@@ -74,7 +79,7 @@ def test_the_narrow_network_is_the_default_model_with_64_wide_layers_and_3_block
 ):
     base = ["data=tiny", f"paths.outputs={Path(tiny_dataset).parents[1]}", f"run_dir={tmp_path}"]
     cfg, default = compose_train(["+experiment=narrow", *base]), compose_train(base)
-    steps = cfg.trainer.max_epochs * cfg.datamodule.pairs_per_epoch // cfg.datamodule.batch_size
+    steps = optimiser_steps(cfg)
     assert cfg.experiment_name == "narrow" and steps == SINGLE["narrow"]
     model, base_model = OmegaConf.to_container(cfg.model), OmegaConf.to_container(default.model)
     assert model.pop("network") == base_model.pop("network") | {"hidden": 64, "M": 3}

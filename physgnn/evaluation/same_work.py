@@ -56,7 +56,7 @@ def engine_split(trajs: list[Trajectory], H: int, substeps: int, processes: int 
     row the split's scene-frames per wall-clock second (the batched learned rollout's rate on
     as many cores)."""
     jobs = [(t, H, substeps) for t in trajs]
-    if processes is None or processes == 1:
+    if processes in (None, 1):
         t0 = time.perf_counter()
         runs = [timed_run(job) for job in jobs]
         wall = time.perf_counter() - t0
@@ -67,11 +67,13 @@ def engine_split(trajs: list[Trajectory], H: int, substeps: int, processes: int 
             wall = time.perf_counter() - t0
             pool.close()
             pool.join()  # the workers end on their own, not by the pool's SIGTERM
-    split_fps = sum(run.n_frames - 1 for run, _ in runs) / wall
-    return [
-        continued(t, run, H, (run.n_frames - 1) / s if processes is None else split_fps)
-        for t, (run, s) in zip(trajs, runs, strict=True)
-    ]
+    if processes is None:
+        return [
+            continued(t, run, H, (run.n_frames - 1) / s)
+            for t, (run, s) in zip(trajs, runs, strict=True)
+        ]
+    fps = sum(run.n_frames - 1 for run, _ in runs) / wall
+    return [continued(t, run, H, fps) for t, (run, _) in zip(trajs, runs, strict=True)]
 
 
 def engine_jobs(runs: list[RunInfo], several: bool) -> list[RunInfo]:
