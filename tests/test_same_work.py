@@ -18,7 +18,9 @@ from physgnn.evaluation import same_work as engine_work
 from physgnn.evaluation.runs import RunInfo
 from physgnn.physics.trajectory import FRAME_KEYS
 from physgnn.report import same_work
-from physgnn.report.table import COLUMNS, frame_rate
+from physgnn.report.format import fmt_stat
+from physgnn.report.sections import group_table
+from physgnn.report.table import COLUMNS, frame_rate, group_rows, run_frame_rates
 
 
 def row(run, experiment, mse20, fps, split="test", substeps=None, trajectory="t0"):
@@ -95,6 +97,23 @@ def test_a_groups_rate_is_its_frames_over_its_seconds():
     batch = [r | {"fps": 40.0} for r in alone]
     assert frame_rate(batch) == pytest.approx(40.0)
     assert frame_rate([row("runs/a", "baseline", 0.5, None)]) is None
+
+
+def test_a_configurations_rate_is_each_seeds_frames_over_its_seconds_then_their_mean():
+    """The overview's frames/s (test) and its figure: seed a runs 150 frames in 11 s, seed b
+    one batch at 40 frames/s; mean and population std over the two seeds, not over rows."""
+    seed_a = [
+        row("runs/a", "baseline", 0.5, 10.0) | {"n_frames": 100},
+        row("runs/a", "baseline", 0.5, 50.0, trajectory="t1") | {"n_frames": 50},
+    ]
+    seed_b = [r | {"run": "runs/b", "fps": 40.0} for r in seed_a]
+    a, b = 150 / 11, 40.0
+    mean, std, count = run_frame_rates(seed_a + seed_b)
+    assert (mean, std, count) == (pytest.approx((a + b) / 2), pytest.approx(abs(a - b) / 2), 2)
+    overview = group_table(group_rows(seed_a + seed_b), splits=("test",))
+    assert overview.splitlines()[0].endswith("| frames/s (test) | diverged |")
+    assert f"| {fmt_stat((mean, std, 2))} | no |" in overview
+    assert run_frame_rates([row("runs/a", "baseline", 0.5, None)]) is None
 
 
 def test_a_diverged_learned_run_is_never_on_the_front():

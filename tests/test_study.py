@@ -232,6 +232,21 @@ def test_a_diverged_rollout_makes_its_seed_infinite_never_a_prefix_average():
     assert aggregate.truth_floor(records, "ood") == pytest.approx(0.05)
 
 
+def test_a_seeds_frames_per_second_is_its_frames_over_its_seconds():
+    """100 frames at 10 frames/s and 50 at 50 are 150 frames in 11 s (not the mean rate 30);
+    over seeds, mean and sample std."""
+    fast, slow = rec("x", 0, [(1.0, None)] * 2), rec("x", 1, [(1.0, None)] * 2)
+    for row, (fps, frames) in zip(fast["splits"]["test"], [(10.0, 100), (50.0, 50)], strict=True):
+        row.update(fps=fps, frames=frames)
+    for row in slow["splits"]["test"]:
+        row.update(fps=20.0, frames=100)
+    stat = aggregate.mean_fps([fast, slow])
+    a, b = 150 / 11, 20.0
+    assert stat.seeds == 2 and stat.mean == pytest.approx((a + b) / 2)
+    assert stat.std == pytest.approx(abs(a - b) / math.sqrt(2))
+    assert aggregate.mean_fps([rec("x", 0, [])]).mean is None
+
+
 def test_verdicts_follow_their_stated_rules():
     base = [rec("baseline", s, [(2.0 + 0.1 * s, None), (2.0, None)]) for s in range(3)]
     many = [rec("m", s, [(1.0, 5), (1.0, 7 if s else None)]) for s in range(3)]  # 5 of 6

@@ -15,6 +15,7 @@ import numpy as np
 
 from physgnn.ablation.registry import DONE
 from physgnn.report.format import fmt
+from physgnn.report.table import frame_rate
 
 
 @dataclass
@@ -89,11 +90,17 @@ def mean_logged(records: list[dict], name: str) -> float | None:
 
 
 def mean_fps(records: list[dict], split: str = "test") -> Stat:
+    """Frames/s over seeds: each seed's frames over its seconds on ``split`` (its rollouts one
+    scene at a time, :func:`~physgnn.report.table.frame_rate`), then mean ± sample std."""
     per_seed = []
     for r in records:
-        fps = [row["fps"] for row in (r.get("splits") or {}).get(split) or [] if row.get("fps")]
-        if fps:
-            per_seed.append(float(np.mean(fps)))
+        rows = [
+            {"fps": row.get("fps"), "n_frames": row.get("frames")}
+            for row in (r.get("splits") or {}).get(split) or []
+        ]
+        rate = frame_rate(rows)
+        if rate is not None:
+            per_seed.append(rate)
     if not per_seed:
         return Stat(None, None, 0, 0)
     std = float(np.std(per_seed, ddof=1)) if len(per_seed) > 1 else 0.0

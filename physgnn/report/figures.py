@@ -97,9 +97,10 @@ def plot_fps(
     labels: list[str],
     means: list[float],
     stds: list[float],
-    title: str = "Rollout FPS per configuration (test split)",
+    title: str = "Rollout frames/s per configuration (test split), mean ± std over seeds",
 ) -> Path:
-    """Horizontal bars of frames per second, mean ± std (the report's Figure 18)."""
+    """Horizontal bars of frames per second, mean ± std (the report's Figure 18): each seed's
+    frames over its seconds, then over seeds."""
     fig, ax = plt.subplots(figsize=(6.5, 0.35 * len(labels) + 1.2))
     y = np.arange(len(labels))
     ax.barh(y, means, xerr=stds, color="tab:blue", ecolor="tab:red", capsize=3)

@@ -14,6 +14,7 @@ from physgnn.report.table import (
     diverged_note,
     group_rows,
     n_seeds,
+    run_frame_rates,
     select,
     stat,
 )
@@ -136,7 +137,7 @@ def group_table(
     metrics=("mse", "chamfer", "energy_gain"),
 ) -> str:
     header = ["configuration", "runs"] + [f"{s} {m}" for s in splits for m in metrics]
-    header += ["fps (test)", "diverged"]
+    header += ["frames/s (test)", "diverged"]
     body = []
     for (_, label), g in groups.items():
         line = [label, str(n_seeds(g))]
@@ -144,7 +145,7 @@ def group_table(
         notes = [
             f"{s}: {diverged_note(select(g, s))}" for s in splits if diverged_note(select(g, s))
         ]
-        line += [fmt_stat(stat(select(g, "test"), "fps")), "; ".join(notes) or "no"]
+        line += [fmt_stat(run_frame_rates(select(g, "test"))), "; ".join(notes) or "no"]
         body.append(line)
     return md_table(header, body)
 

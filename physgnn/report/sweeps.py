@@ -7,7 +7,15 @@ from pathlib import Path
 
 from physgnn.report import figures
 from physgnn.report.sections import group_table
-from physgnn.report.table import COMPONENTS, SPLITS, diverged_note, group_rows, select, stat
+from physgnn.report.table import (
+    COMPONENTS,
+    SPLITS,
+    diverged_note,
+    group_rows,
+    run_frame_rates,
+    select,
+    stat,
+)
 
 SWEEP_METRICS = ["mse", "chamfer", "energy_gain", "depth_sphere"]
 REPORT_FIGURES = {
@@ -53,7 +61,7 @@ def sweep_figure(path: Path, experiment: str, groups: dict) -> Path:
 
 
 def fps_figure(path: Path, groups: dict) -> Path | None:
-    items = [(f"{e}: {c}", stat(select(g, "test"), "fps")) for (e, c), g in groups.items()]
+    items = [(f"{e}: {c}", run_frame_rates(select(g, "test"))) for (e, c), g in groups.items()]
     items = [(k, s) for k, s in items if s is not None]
     if not items:
         return None

@@ -124,6 +124,18 @@ def frame_rate(rows: list[dict]) -> float | None:
     return sum(frames) / sum(n / r["fps"] for n, r in zip(frames, timed, strict=True))
 
 
+def run_frame_rates(rows: list[dict]) -> tuple[float, float, int] | None:
+    """Mean, std (population) and count over the runs of ``rows`` (their ``run``) of each
+    run's :func:`frame_rate`: a configuration's frames/s and its spread over seeds, each seed's
+    rate its frames over its seconds (the mean of its rows' rates overstates a run rolled out
+    one scene at a time, whose small scenes run at many frames/s). None if none is timed."""
+    by_run: dict[str, list[dict]] = defaultdict(list)
+    for row in rows:
+        by_run[row["run"]].append(row)
+    rates = [{"rate": frame_rate(g)} for g in by_run.values()]
+    return stat(rates, "rate")
+
+
 def diverged_note(rows: list[dict]) -> str:
     """``"diverged at step k (m/n)"`` with k the earliest step, or "" when none diverged."""
     steps = [r["diverged_at"] for r in rows if r["diverged_at"] is not None]
