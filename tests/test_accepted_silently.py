@@ -15,6 +15,7 @@ from hydra import compose, initialize_config_dir
 
 from physgnn import CONF_DIR
 from physgnn import simulate as simulate_command
+from physgnn.cli.overrides import check_composes
 from physgnn.data.dataset import DatasetError, read_split
 from physgnn.errors import ConfigError
 from physgnn.evaluation.evaluate import evaluate
@@ -90,6 +91,22 @@ def test_an_added_key_nothing_reads_is_refused(
     assert exit_info.value.code == 2 and len(err.splitlines()) == 1
     assert err.startswith(f"error: {message}")
     assert not (tmp_path / "runs").exists() and not (tmp_path / "data").exists()
+
+
+def test_a_new_setting_in_a_mapping_with_fixed_keys_names_the_fix():
+    """A mapping on the command line is merged into the config's: a setting it lacks was
+    called "not a key of the eval config"; the line now names the keys and the null-first fix,
+    and that fix composes."""
+    given = "learned_settings={fast: {compile: true}}"
+    with pytest.raises(ConfigError) as refused:
+        check_composes("eval", [given])
+    assert str(refused.value) == (
+        f"{given}: fast is not one of the keys of learned_settings (passes0, passes1, "
+        "constraints5, threads2), and a mapping given on the command line is merged into "
+        f"them: to replace the whole mapping, set it to null first (learned_settings=null "
+        f"'{given}')"
+    )
+    check_composes("eval", ["learned_settings=null", given])
 
 
 # --- values out of range -------------------------------------------------------------------------

@@ -97,7 +97,17 @@ def _not_composed(err: Exception, command: str, overrides: list[str], missing) -
     key = re.match(r"Could not override '([^']+)'", str(err))
     if key:
         given = next((o for o in overrides if o.lstrip("+~").startswith(f"{key[1]}=")), key[1])
-        like = _resembling(compose_config(command), key[1])
+        config = compose_config(command)
+        node = OmegaConf.select(config, key[1])
+        added = re.search(r"full_key: (\S+)", str(err.__cause__))  # the key it lacks
+        if isinstance(node, DictConfig) and added and added[1].startswith(f"{key[1]}."):
+            return (
+                f"{given}: {added[1].removeprefix(key[1] + '.')} is not one of the keys of "
+                f"{key[1]} ({', '.join(map(str, node)) or 'none'}), and a mapping given on the "
+                f"command line is merged into them: to replace the whole mapping, set it to "
+                f"null first ({key[1]}=null '{given}')"
+            )
+        like = _resembling(config, key[1])
         hint = f": did you mean {' or '.join(like)}?" if like else ""
         return f"{given}: {key[1]} is not a key of the {command} config{hint}"
     return str(err).strip().splitlines()[0]
