@@ -704,3 +704,15 @@ def test_cost_linearity_is_judged_between_two_sizes_from_300_spheres():
         "needs two sizes from 300 spheres",
         "not judged",
     ]
+
+
+@pytest.mark.parametrize("phase", ["interleaved", "profile", "rollout_sizes"])
+def test_a_phase_set_to_null_is_refused_in_one_line(tmp_path, phase):
+    """Only the crossover may be left out; another phase set to null was a traceback."""
+    with pytest.raises(BenchError) as refused:
+        bench(_cfg(f"out_dir={tmp_path}", f"{phase}=null"))
+    assert str(refused.value) == (
+        f"{phase}=null: make bench runs this phase every time; only crossover=null leaves a "
+        "phase out (quick=true makes every phase short)"
+    )
+    assert not tmp_path.joinpath("bench.json").exists()

@@ -44,12 +44,33 @@ from physgnn.data.stats import compute_stats
 from physgnn.files import write_json, write_text
 from physgnn.report.pareto import bench_figure
 
+# The sections of conf/bench.yaml that every bench measures (crossover=null leaves its phase out)
+ALWAYS_RUN = (
+    "machine",
+    "learned",
+    "interleaved",
+    "rollout_sizes",
+    "batched",
+    "accuracy",
+    "training",
+    "profile",
+    "gpu_readiness",
+    "gpu",
+    "activity",
+)
+
 
 def bench(cfg: DictConfig) -> dict:
     """Run every measurement of ``cfg`` (see ``conf/bench.yaml``); returns bench.json's dict."""
     cfg = merged_config(cfg, command_line())
     if int(cfg.threads) < 1:
         raise BenchError(f"threads must be >= 1 (got {cfg.threads})")
+    left_out = [key for key in ALWAYS_RUN if cfg.get(key) is None]
+    if left_out:
+        raise BenchError(
+            f"{left_out[0]}=null: make bench runs this phase every time; only crossover=null "
+            "leaves a phase out (quick=true makes every phase short)"
+        )
     unknown = [c for c in cfg.interleaved.configs if c not in cfg.learned.configs]
     if unknown:
         raise BenchError(
