@@ -17,6 +17,10 @@ from torch_geometric.data import Batch
 
 from physgnn.data.pairs import PairDataset
 from physgnn.data.state import SceneState, TrajectoryFrames, has_engine_velocities
+from physgnn.evaluation.rollouts import energy_of, metrics_row
+from physgnn.evaluation.runs import RunInfo
+from physgnn.evaluation.simulate import scene_metrics
+from physgnn.evaluation.stability import measure
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.oracles import sphere_scene
 from physgnn.models.constrained import ConstrainedSimulator
@@ -26,7 +30,7 @@ from physgnn.models.options import ModelInputs
 from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.physics import integrator
 from physgnn.physics import quaternion as Q
-from physgnn.rollout import rollout
+from physgnn.rollout import VELOCITY, rollout
 from physgnn.training.layout import model_of_today
 from physgnn.training.lit import LitSimulator, push_forward
 from physgnn.training.losses import regime_weights
@@ -226,3 +230,24 @@ def test_an_engine_state_rollout_of_positions_only_says_so_in_one_warning(head_o
     sim.effects_trained.fill_(True)
     with pytest.warns(UserWarning, match="hold no engine velocities"):
         rollout(sim, [imported], n_frames=4)
+
+
+def test_every_rows_energy_is_measured_from_finite_differences_whatever_the_models_state(
+    head_on,
+):
+    """An engine-state rollout keeps the model's end-of-frame velocities (and says so), while
+    make eval, simulate and the study measure its energy, as the truth's and pybullet's, from
+    finite differences of the positions: the same rollout with FD velocities scores the same."""
+    [pred] = rollout(engine_model(), [head_on])
+    fd = pred.with_finite_velocities()
+    assert pred.attrs["velocity"] == VELOCITY[True]
+    assert not np.allclose(pred.vel[2:], fd.vel[2:])  # the model's own, not the FD ones
+    run = RunInfo(name="m", experiment="default", overrides="", seed=0)
+    own, alike = (
+        metrics_row(run, "test", head_on, pred, 0.0),
+        metrics_row(run, "test", head_on, fd, 0.0),
+    )
+    assert own["energy_gain"] == alike["energy_gain"]
+    assert_close(energy_of(head_on, pred), energy_of(head_on, fd))
+    assert measure(head_on, pred)["energy_gain"] == measure(head_on, fd)["energy_gain"]
+    assert scene_metrics(head_on, pred, 0.0) == scene_metrics(head_on, fd, 0.0)

@@ -6,7 +6,8 @@ common horizon, each measured alike for the truth and the rollout.
   ``diverged_at`` step is the result, never the average of the prefix it managed (a model
   diverging at step 12 would otherwise score the low error of 12 easy frames).
 - **One energy measure.** Truth and rollout both get finite-difference velocities
-  (:meth:`~physgnn.physics.trajectory.Trajectory.with_finite_velocities`, as a rollout's are):
+  (:meth:`~physgnn.physics.trajectory.Trajectory.with_finite_velocities`, whatever the
+  model's own velocities are):
   ``energy_gain_truth`` is what a perfect model would score, the floor of ``energy_gain``.
 - **Divergence.** A sphere faster than ``speed_factor`` × the truth's fastest (at least
   1 m/s), or a non-finite frame (:func:`physgnn.rollout.rollout`).
@@ -63,7 +64,7 @@ def measure_trajectory(simulator, traj: Trajectory, speed_factor: float) -> dict
     if pred.diverged_at is not None:
         record["diverged_at"] = int(pred.diverged_at) - int(pred.start)
         return record | dict.fromkeys(FIGURES)
-    m = metrics.trajectory_metrics(pred, traj)
+    m = metrics.trajectory_metrics(pred.with_finite_velocities(), traj)
     deepest = max_penetration(pred.pos, traj.radius, traj.planes, traj.plane_kind)
     m |= {
         "energy_error": abs(m["energy_gain"] - truth["energy_gain"]),

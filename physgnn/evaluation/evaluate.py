@@ -55,6 +55,7 @@ from physgnn.ranges import FLAG, whole
 from physgnn.report import bounce, figures, freefall, invariance, stability, table
 from physgnn.report import onestep as onestep_report
 from physgnn.report.document import write_report
+from physgnn.rollout import VELOCITY
 
 # What an eval writes into its report_dir (replaced whole by the next eval).
 # The eval's switches: true or false (``save_rollouts=maybe`` is refused, not taken as true).
@@ -257,7 +258,7 @@ def made_by(pred, run: str) -> dict:
     """A saved rollout's attributes: the run, its first predicted frame - 1 (``start``), where
     it diverged (-1: it did not) and how its velocities were obtained."""
     diverged = -1 if pred.diverged_at is None else int(pred.diverged_at)
-    velocity = "finite differences of the predicted positions"
+    velocity = pred.attrs.get("velocity", VELOCITY[False])
     return {
         "made_by": "physgnn learned simulator",
         "run": run,

@@ -46,9 +46,10 @@ def rollout_threads(cfg: DictConfig) -> int | None:
 
 
 def predict(job: RunInfo, traj: Trajectory, settings: dict | None = None) -> Trajectory:
-    """For the ground truth, ``traj`` with finite-difference velocities (measured as a rollout
-    is: with the engine's velocities its energy gain would be lower than any rollout's could
-    be); else the job's rollout of it (finite prefix)."""
+    """For the ground truth, ``traj`` with finite-difference velocities (every row's energy is
+    measured from them, :func:`metrics_row`: with the engine's velocities the truth's energy
+    gain would be lower than an FD rollout's could be); else the job's rollout of it (finite
+    prefix, the model's own velocities)."""
     if job.simulator is None:
         return traj.with_finite_velocities()
     return rollout(job.simulator, [traj], **(settings or {}))[0]
@@ -65,7 +66,7 @@ def metrics_row(
     """One metrics.csv row (columns of :data:`physgnn.report.table.COLUMNS`); ``threads``: the
     cores the rollout ran on (a learned rollout's torch threads, pybullet's processes; None: not
     timed against another)."""
-    m = metrics.trajectory_metrics(pred, traj, tol=tol, horizon=20)
+    m = metrics.trajectory_metrics(pred.with_finite_velocities(), traj, tol=tol, horizon=20)
     row = {k: m.get(k) for k in COLUMNS}
     row.update(
         run=info.name,
@@ -84,7 +85,9 @@ def metrics_row(
 
 
 def energy_of(traj: Trajectory, pred: Trajectory) -> np.ndarray:
-    return metrics.energy_series(pred.pos, pred.vel, traj.mass, traj.radius)
+    """``[T]``: the energy of ``pred`` from finite-difference velocities, as every row's."""
+    vel = pred.with_finite_velocities().vel
+    return metrics.energy_series(pred.pos, vel, traj.mass, traj.radius)
 
 
 def warm_up(job: RunInfo, splits: dict[str, list[Trajectory]], batch_scenes: bool = True):

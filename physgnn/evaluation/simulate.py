@@ -57,6 +57,7 @@ from physgnn.metrics.checks import frames as checked_frames
 from physgnn.metrics.names import scene_columns
 from physgnn.physics.scene import Scene
 from physgnn.physics.trajectory import Trajectory
+from physgnn.rollout import VELOCITY
 
 # What a simulate writes into its out (replaced whole by the next one).
 SIMULATE_OUTPUTS = ("simulate.h5", "metrics.json", "video.gif", "video.mp4", "video_frame.png")
@@ -81,7 +82,7 @@ def scene_metrics(truth: Trajectory, pred: Trajectory | None, tol: float) -> dic
     prediction has no metrics (None) but ``diverged_at``: its finite prefix would read as a
     good rollout."""
     checked_frames(truth.pos, "truth pos")  # named as the truth's, before a copy of it is measured
-    mine = pred if pred is not None else truth.with_finite_velocities()
+    mine = (pred if pred is not None else truth).with_finite_velocities()  # energy alike
     m = metrics.trajectory_metrics(mine, truth, tol=tol, horizon=20)
     keys = scene_columns(prediction=pred is not None)
     out = {k: m.get(k) for k in keys}
@@ -204,7 +205,7 @@ def with_provenance(pred: Trajectory, truth: Trajectory, source: dict) -> Trajec
         "H": source.get("H", -1),
         "constraints": source.get("constraints", 0),
         "diverged_at": -1 if pred.diverged_at is None else int(pred.diverged_at),
-        "velocity": "finite differences of the predicted positions",
+        "velocity": pred.attrs.get("velocity", VELOCITY[False]),
         "ms_per_frame": source.get("ms_per_frame", -1.0),
     }
     return dataclasses.replace(pred, attrs=attrs)

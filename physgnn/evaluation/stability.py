@@ -30,7 +30,8 @@ from physgnn.rollout import rollout
 def measure(truth: Trajectory, pred: Trajectory, rest_tol: float = 0.01) -> dict:
     """The stability numbers of one rollout ``pred`` of ``truth``'s scene (the columns from
     ``scene`` on); ``pred`` holds the rollout's finite prefix."""
-    energy = metrics.energy_series(pred.pos, pred.vel, truth.mass, truth.radius)
+    vel = pred.with_finite_velocities().vel  # every simulator's energy alike (metrics_row)
+    energy = metrics.energy_series(pred.pos, vel, truth.mass, truth.radius)
     resting = metrics.resting_mask(truth.pos, truth.radius, rest_tol)
     diverged_at, start = pred.diverged_at, int(pred.start)
     scale = metrics.energy_scale(truth.mass, truth.radius)

@@ -82,8 +82,9 @@ class Trajectory:
         return dataclasses.replace(self, **{k: getattr(self, k)[:max_frames] for k in FRAME_KEYS})
 
     def with_finite_velocities(self) -> Trajectory:
-        """The same frames with ``v_k = (p_k − p_{k−1})/dt`` (``v_0`` kept), what a rollout
-        records. At dt = 0.1 s a bounce inside a frame interval makes this kinetic energy dip
+        """The same frames with ``v_k = (p_k − p_{k−1})/dt`` (``v_0`` kept), what a
+        finite-difference rollout records and every simulator's energy is measured from in
+        ``make eval``. At dt = 0.1 s a bounce inside a frame interval makes this kinetic energy dip
         and recover, which the energy gain counts: the gain a perfect rollout would show."""
         vel, _ = finite_difference_velocities(
             _float64(self.pos),

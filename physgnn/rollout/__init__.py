@@ -11,7 +11,9 @@ A scene stops when a frame turns non-finite or runs away (a speed above the boun
 coordinate beyond ``max_pos``: :class:`RolloutBounds`); ``diverged_at`` is the index of that
 first bad frame and the scene's arrays keep only the frames before it. The other scenes of
 the batch continue. Each result is a :class:`~physgnn.physics.trajectory.Trajectory`, the
-container the truth uses.
+container the truth uses; its ``vel`` is the simulator's own (finite differences for a
+finite-difference state, the predicted end-of-frame velocities for the engine state), and its
+attribute ``velocity`` says which (:data:`VELOCITY`).
 The frames are recorded on the rollout's device and reach the host once, at the end.
 """
 
@@ -31,6 +33,12 @@ from physgnn.models.sleeping import SleepingSimulator
 from physgnn.physics.scene import EFFECT_NAMES
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout.batch import FrameRecord, SceneBatch, one_step, start_state
+
+# A rollout's attribute ``velocity``: what its ``vel`` holds, by the simulator's state
+VELOCITY = {
+    False: "finite differences of the predicted positions",
+    True: "the model's predicted end-of-frame velocities (the engine state)",
+}
 
 
 class RolloutError(PhysgnnError, ValueError):
@@ -199,7 +207,7 @@ def _rollout_batch(simulator, trajs, lengths, *, h, bounds, device, dtype, timer
         dataclasses.replace(
             traj,
             **record.frames_of(i, ends[i]),
-            attrs=dict(traj.attrs),
+            attrs=dict(traj.attrs) | {"velocity": VELOCITY[hooks.engine_state]},
             start=h,
             diverged_at=diverged[i],
             fps=fps,
