@@ -100,7 +100,8 @@ def section(rows: list[dict]) -> str:
         "Penetration: the deepest intersection of the rollout over its diameter, and the mean "
         "sphere–sphere one (planes are one-sided: above 0.5 the centre crossed the plane; "
         "tunnelled counts those spheres). Energy gain: normalised cumulative gain of the "
-        "rollout's own energy; energy rise: its largest climb above the initial energy, "
+        "rollout's energy, from finite-difference velocities for every row; energy rise: its "
+        "largest climb above the initial energy, "
         "over the initial energy. Rest drift: largest displacement of the spheres that rest "
         "in the ground truth. A diverged rollout is measured on its finite prefix."
     )
