@@ -11,6 +11,7 @@ from truthkit import SCENE
 
 import physgnn.evaluation.simulate as S
 from physgnn.groundtruth.scenefile import load_scene
+from physgnn.rollout import VELOCITY
 from physgnn.simulate import main
 
 HUGE = SCENE.replace("radius: 0.5", "radius: 500").replace("[1.5, 0, 0.5]", "[1500, 0, 500]")
@@ -34,7 +35,7 @@ def test_the_prediction_says_what_made_it_and_how_fast(tiny_run, tmp_path):
     assert pred["made_by"] == "physgnn learned simulator" and number(pred["H"]) == 0
     assert pred["checkpoint"].startswith("best-") and number(pred["constraints"]) == 2
     assert number(pred["diverged_at"]) == -1 and pred["engine"] == "" and pred["substeps"] == 0
-    assert pred["velocity"].startswith("finite differences") and number(pred["ms_per_frame"]) > 0
+    assert pred["velocity"] == VELOCITY[True] and number(pred["ms_per_frame"]) > 0  # its own
     assert truth["velocity"] == "the engine's (pybullet)" and truth["engine"] != ""
 
 

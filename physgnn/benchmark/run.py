@@ -63,20 +63,7 @@ ALWAYS_RUN = (
 def bench(cfg: DictConfig) -> dict:
     """Run every measurement of ``cfg`` (see ``conf/bench.yaml``); returns bench.json's dict."""
     cfg = merged_config(cfg, command_line())
-    if int(cfg.threads) < 1:
-        raise BenchError(f"threads must be >= 1 (got {cfg.threads})")
-    left_out = [key for key in ALWAYS_RUN if cfg.get(key) is None]
-    if left_out:
-        raise BenchError(
-            f"{left_out[0]}=null: make bench runs this phase every time; only crossover=null "
-            "leaves a phase out (quick=true makes every phase short)"
-        )
-    unknown = [c for c in cfg.interleaved.configs if c not in cfg.learned.configs]
-    if unknown:
-        raise BenchError(
-            f"interleaved.configs names {', '.join(unknown)}, not among learned.configs "
-            f"({', '.join(cfg.learned.configs)})"
-        )
+    check_settings(cfg)
     torch.set_num_threads(int(cfg.threads))
     torch.manual_seed(int(cfg.seed))
     start = time.perf_counter()
@@ -116,6 +103,25 @@ def bench(cfg: DictConfig) -> dict:
     write_outputs(Path(cfg.out_dir), result, extra)
     print(f"bench: {extra['wall_s']:.0f} s; wrote {Path(cfg.out_dir) / 'bench.md'}", flush=True)
     return result
+
+
+def check_settings(cfg: DictConfig) -> None:
+    """Refuse in one line what the bench cannot run: threads below 1, a phase other than the
+    crossover left out, an interleaved configuration that is not a learned one."""
+    if int(cfg.threads) < 1:
+        raise BenchError(f"threads must be >= 1 (got {cfg.threads})")
+    left_out = [key for key in ALWAYS_RUN if cfg.get(key) is None]
+    if left_out:
+        raise BenchError(
+            f"{left_out[0]}=null: make bench runs this phase every time; only crossover=null "
+            "leaves a phase out (quick=true makes every phase short)"
+        )
+    unknown = [c for c in cfg.interleaved.configs if c not in cfg.learned.configs]
+    if unknown:
+        raise BenchError(
+            f"interleaved.configs names {', '.join(unknown)}, not among learned.configs "
+            f"({', '.join(cfg.learned.configs)})"
+        )
 
 
 def measure(cfg: DictConfig, rng: np.random.Generator, matmul: float, phases: dict) -> dict:
