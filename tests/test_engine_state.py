@@ -31,6 +31,7 @@ from physgnn.nn.epd import EncodeProcessDecode
 from physgnn.physics import integrator
 from physgnn.physics import quaternion as Q
 from physgnn.rollout import VELOCITY, rollout
+from physgnn.training.callbacks import RolloutCallback
 from physgnn.training.layout import model_of_today
 from physgnn.training.lit import LitSimulator, push_forward
 from physgnn.training.losses import regime_weights
@@ -251,3 +252,5 @@ def test_every_rows_energy_is_measured_from_finite_differences_whatever_the_mode
     assert_close(energy_of(head_on, pred), energy_of(head_on, fd))
     assert measure(head_on, pred)["energy_gain"] == measure(head_on, fd)["energy_gain"]
     assert scene_metrics(head_on, pred, 0.0) == scene_metrics(head_on, fd, 0.0)
+    [logged], _ = RolloutCallback(ood=False).rollout_metrics(engine_model(), [head_on])
+    assert logged["energy_gain"] == alike["energy_gain"]  # training's val/energy_gain too
