@@ -105,8 +105,8 @@ def data_report(cfg: DictConfig) -> dict:
     console.print(table(summary))
     gains = ", ".join(f"{s} {fmt(**v)}" for s, v in finite.items())
     console.print(
-        f"Energy from the engine's velocities. With finite-difference velocities, as a "
-        f"rollout records them (the gain a perfect rollout would show): {gains}."
+        f"Energy from the engine's velocities. With finite-difference velocities, as make "
+        f"eval measures every row (the gain a perfect rollout would show): {gains}."
     )
     out = write_json(folder / "report.json", summary)
     print(f"wrote {out}")
