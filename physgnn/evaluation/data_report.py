@@ -106,7 +106,7 @@ def data_report(cfg: DictConfig) -> dict:
     gains = ", ".join(f"{s} {fmt(**v)}" for s, v in finite.items())
     console.print(
         f"Energy from the engine's velocities. With finite-difference velocities, as make "
-        f"eval measures every row (the gain a perfect rollout would show): {gains}."
+        f"eval measures every row (a perfect rollout's gain): {gains}."
     )
     out = write_json(folder / "report.json", summary)
     print(f"wrote {out}")
