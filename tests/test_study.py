@@ -18,6 +18,7 @@ import physgnn.ablation.jobs
 from physgnn import CONF_DIR
 from physgnn.ablation import aggregate, verdicts
 from physgnn.ablation.jobs import (
+    Config,
     StudyError,
     budget_overrides,
     defaults_fingerprint,
@@ -29,7 +30,7 @@ from physgnn.ablation.measure import FIGURES, measure_trajectory
 from physgnn.ablation.registry import append_record, done_ids, read_registry
 from physgnn.ablation.report import write_study_report
 from physgnn.ablation.runner import train_command
-from physgnn.ablation.study import run_study
+from physgnn.ablation.study import run_study, unlisted_keys
 from physgnn.cli import compose_config
 from physgnn.metrics import trajectory_metrics
 from physgnn.models.baselines import GravityOnlySimulator
@@ -245,6 +246,19 @@ def test_a_seeds_frames_per_second_is_its_frames_over_its_seconds():
     assert stat.seeds == 2 and stat.mean == pytest.approx((a + b) / 2)
     assert stat.std == pytest.approx(abs(a - b) / math.sqrt(2))
     assert aggregate.mean_fps([rec("x", 0, [])]).mean is None
+
+
+def test_a_report_through_todays_sweeps_names_the_configurations_it_leaves_out():
+    """Records of an earlier default whose configuration today's sweeps no longer list are
+    named (the page would leave them out); those of another budget are not looked at."""
+    budget, other = {"steps": 3}, {"steps": 4}
+    records = [
+        {"key": k, "seed": 0, "budget": b}
+        for k, b in [("baseline", budget), ("model.H=0", budget), ("gone", budget), ("x", other)]
+    ]
+    configs = [Config("baseline", []), Config("model.network.M=1", [])]
+    assert unlisted_keys(records, configs, budget) == ["gone", "model.H=0"]
+    assert unlisted_keys(records, configs, other) == ["x"]
 
 
 def test_verdicts_follow_their_stated_rules():
