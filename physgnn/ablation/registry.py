@@ -76,6 +76,11 @@ def budget_id(budget: dict) -> str:
     return json.dumps(budget, sort_keys=True)
 
 
+def of_budget(records: list[dict], budget: dict) -> list[dict]:
+    """The records run at ``budget``."""
+    return [r for r in records if budget_id(r["budget"]) == budget_id(budget)]
+
+
 def append_record(path: str | Path, record: dict) -> None:
     """Append one line and flush it to disk (a killed study loses no finished run)."""
     path = Path(path)

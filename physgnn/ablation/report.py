@@ -12,7 +12,7 @@ from pathlib import Path
 
 from physgnn.ablation.aggregate import by_config
 from physgnn.ablation.jobs import Config, current_fingerprint, study_budget
-from physgnn.ablation.registry import DONE, budget_id
+from physgnn.ablation.registry import DONE, of_budget
 from physgnn.ablation.sweeps import sweeps_section
 from physgnn.ablation.switches import switches_section
 from physgnn.ablation.tables import configurations_section, table2_section
@@ -40,7 +40,7 @@ def write_study_report(records: list[dict], configs: list[Config], cfg) -> Path:
     """Write README.md and the figures into ``cfg.results_dir`` from ``records``."""
     out = Path(cfg.results_dir)
     budget = study_budget(cfg)
-    mine = [r for r in records if budget_id(r["budget"]) == budget_id(budget)]
+    mine = of_budget(records, budget)
     groups = by_config(mine)
     parts = [
         _header(mine, configs, cfg, budget),

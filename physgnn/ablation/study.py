@@ -13,7 +13,13 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
 from physgnn.ablation.jobs import Job, budget_overrides, study_budget, study_configs, study_jobs
 from physgnn.ablation.launch import launch
-from physgnn.ablation.registry import append_record, budget_id, done_ids, read_registry
+from physgnn.ablation.registry import (
+    append_record,
+    budget_id,
+    done_ids,
+    of_budget,
+    read_registry,
+)
 from physgnn.ablation.report import write_study_report
 from physgnn.cli import compose_config
 from physgnn.data.dataset import is_dataset
@@ -153,9 +159,7 @@ def written(report: Path | None) -> str:
 def unlisted_keys(records: list[dict], configs: list, budget: dict) -> list[str]:
     """The configuration keys of the records of ``budget`` that no configuration of
     ``configs`` has: what a report of them through today's sweeps leaves out."""
-    listed = {c.key for c in configs}
-    mine = [r for r in records if budget_id(r["budget"]) == budget_id(budget)]
-    return sorted({r["key"] for r in mine} - listed)
+    return sorted({r["key"] for r in of_budget(records, budget)} - {c.key for c in configs})
 
 
 def _print_plan(console, specs, pending, records, cfg) -> None:

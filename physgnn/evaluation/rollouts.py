@@ -46,12 +46,12 @@ def rollout_threads(cfg: DictConfig) -> int | None:
 
 
 def predict(job: RunInfo, traj: Trajectory, settings: dict | None = None) -> Trajectory:
-    """For the ground truth, ``traj`` with finite-difference velocities (every row's energy is
-    measured from them, :func:`metrics_row`: with the engine's velocities the truth's energy
-    gain would be lower than an FD rollout's could be); else the job's rollout of it (finite
-    prefix, the model's own velocities)."""
+    """For the ground truth, ``traj`` itself; else the job's rollout of it (finite prefix, the
+    model's own velocities). Every scorer measures energy from finite-difference velocities
+    (:func:`metrics_row`): with the engine's, the truth's energy gain would be lower than an
+    FD rollout's could be."""
     if job.simulator is None:
-        return traj.with_finite_velocities()
+        return traj
     return rollout(job.simulator, [traj], **(settings or {}))[0]
 
 
