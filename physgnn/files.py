@@ -115,8 +115,11 @@ def claim_folder(
     the folder and the fix (``overwrite=true`` only where the command takes it: ``overwrite``
     None says it does not)."""
     folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
+    blocked = file_in_the_way(folder)
+    if blocked == folder:
         raise FileExistsError(f"{key} {folder} is a file: choose another {key}")
+    if blocked is not None:
+        raise FileExistsError(f"{key} {folder} lies in {blocked}, a file: choose another {key}")
     mine = ours or not folder.exists() or (folder / OUTPUT_MARKER).is_file()
     if not mine and any(folder.iterdir()):
         if overwrite:
@@ -128,6 +131,15 @@ def claim_folder(
         )
     write_json(folder / OUTPUT_MARKER, {"physgnn_version": __version__})
     return folder
+
+
+def file_in_the_way(folder: str | Path) -> Path | None:
+    """The file where ``folder`` should be, or where one of the folders it lies in should be
+    (it cannot be made); None where nothing is in the way."""
+    place = Path(folder)
+    while not place.exists() and place != place.parent:
+        place = place.parent
+    return None if place.is_dir() or not place.exists() else place
 
 
 @contextmanager

@@ -38,8 +38,9 @@ def resting_angles(traj, speed: float, gap: float) -> tuple[np.ndarray, np.ndarr
 def summary(name: str, angles: np.ndarray) -> str:
     if angles.size == 0:
         return f"{name}: none"
-    return (f"{name}: {angles.size}, min {angles.min():.1f}°, median {np.median(angles):.1f}°, "
-            f"below 25°: {int(np.sum(angles < 25))}")  # fmt: skip
+    low = int(np.sum(angles < 25))
+    median = np.median(angles)
+    return f"{name}: {angles.size}, min {angles.min():.1f}°, median {median:.1f}°, below 25°: {low}"
 
 
 def main() -> None:

@@ -26,7 +26,7 @@ from physgnn.benchmark.crossover_summary import (
     summary,
 )
 from physgnn.benchmark.gpu import gpu_section
-from physgnn.benchmark.learned import frame_states, time_learned
+from physgnn.benchmark.learned import frame_states, time_cases
 from physgnn.benchmark.profile import step_flops
 from physgnn.benchmark.run import bench, merged_config, quick_config
 from physgnn.benchmark.source import BenchError, Source, learned_source, make_simulator
@@ -265,7 +265,7 @@ def test_step_timer_records_the_size_of_every_graph_it_watched():
     assert timer.sizes == [(12, g.pp_index.shape[1], g.ps_index.shape[1]) for g in graphs]
 
 
-def test_time_learned_counts_the_flops_of_the_graphs_it_ran(tmp_path):
+def test_time_cases_counts_the_flops_of_the_graphs_it_ran(tmp_path):
     cfg = _cfg("quick=true")
     rng = np.random.default_rng(0)
     scene = bench_scenes.bench_scene(cfg.scene, 12, rng, 8.0, 4.0, 5)
@@ -273,7 +273,7 @@ def test_time_learned_counts_the_flops_of_the_graphs_it_ran(tmp_path):
     traj = simulate(scene, {"substeps": 2})
     sim = make_simulator(cfg.model, {"network": {"hidden": 16, "M": 2}}, compute_stats([traj]))
     states = frame_states(traj, sim.H)
-    t = time_learned(sim, states, 2)
+    t = time_cases([(sim, states)], 2)[0]
     expected = 0
     for s in states[:2]:
         g = sim.graph_builder(s)

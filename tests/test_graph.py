@@ -10,7 +10,7 @@ from handmade import WALL_ROW, make_state
 from torch_geometric.data import Batch
 
 from physgnn.data.state import SceneState
-from physgnn.graph.builder import Graph, GraphBuilder, build_graph
+from physgnn.graph.builder import Graph, GraphBuilder
 from physgnn.physics.scene import GROUND, STATIC, WALL, make_plane
 
 
@@ -357,10 +357,10 @@ def test_translation_invariance():
     assert a.num_pairs > 0
 
 
-def test_history_velocity_uses_the_latest_frame_and_build_graph_wrapper():
+def test_history_velocity_uses_the_latest_frame_and_builder_from_a_mapping():
     state = make_state([[3.25, 0, 3]], planes=[WALL_ROW], kinds=[WALL])
     state.vel = torch.tensor([[[0.0, 0, 2], [0, 0, 0], [0, 0, 0]]])  # H = 2, latest first
-    g = build_graph(state, {"connectivity": "vi", "epsilon": 0.0})
+    g = GraphBuilder(**{"connectivity": "vi", "epsilon": 0.0})(state)
     assert ps_of(g) == [(0, 0), (1, 0)]
     torch.testing.assert_close(g.ps_attr[:, :3], torch.tensor([[0.0, 0, 2], [0, 0, 2]]))
 

@@ -1,4 +1,4 @@
-"""Poor messages of issue 37 ("Nothing lost, third round"): each now one line naming the key or
+"""Messages that were poor: each now one line naming the key or
 the file and the fix, before anything is built or launched."""
 
 from __future__ import annotations

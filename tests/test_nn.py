@@ -373,10 +373,13 @@ def test_bad_graph_input_gets_one_clear_error(change, match, monkeypatch):
         model()(**change(graph()))
 
 
-def test_bad_material_input_and_config_errors():
+def test_bad_material_input_and_config_errors(monkeypatch):
     net = model(num_materials=2, material_dim=3)
     with pytest.raises(ValueError, match="pass material"):
         net(**graph())
+    with pytest.raises(IndexError):  # without the checks, the embedding's own error
+        net(**graph(), material=torch.tensor([0, 1, 2, 0, 0]))
+    monkeypatch.setenv("PHYSGNN_CHECKS", "1")  # the range check reads back: debug only
     with pytest.raises(ValueError, match="out of range"):
         net(**graph(), material=torch.tensor([0, 1, 2, 0, 0]))
     with pytest.raises(ValueError, match="material must be"):

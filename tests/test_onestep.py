@@ -118,10 +118,9 @@ class Oracle(torch.nn.Module):
         super().__init__()
         self.inputs = ModelInputs(engine_state=engine_state)
         self.pos = torch.as_tensor(traj.pos)
-        self.mean, self.mean_w = finite_difference_velocities(
-            self.pos, torch.as_tensor(traj.quat), torch.as_tensor(traj.vel[0]),
-            torch.as_tensor(traj.angvel[0]), traj.dt,
-        )  # fmt: skip
+        first = torch.as_tensor(traj.vel[0]), torch.as_tensor(traj.angvel[0])
+        quat = torch.as_tensor(traj.quat)
+        self.mean, self.mean_w = finite_difference_velocities(self.pos, quat, *first, traj.dt)
         self.end, self.end_w = torch.as_tensor(traj.vel), torch.as_tensor(traj.angvel)
 
     def forward(self, state):

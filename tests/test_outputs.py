@@ -11,7 +11,9 @@ from torch.testing import assert_close
 from physgnn.models.outputs import NODE, NODE_REST, PAIR, node_outputs, velocity_changes
 from physgnn.training.lit import LitSimulator
 
-ADAM = lambda params: torch.optim.Adam(params, lr=1e-3)  # noqa: E731
+
+def adam(params):
+    return torch.optim.Adam(params, lr=1e-3)
 
 
 def test_blocks_tile_the_outputs_by_name():
@@ -37,7 +39,7 @@ def test_network_widths_follow_the_contract(model):
 def test_rollout_head_and_training_loss_read_the_same_step(model):
     torch.manual_seed(0)
     sim = learned(H=1, M=1, hidden=8, **model)
-    lit = LitSimulator(sim, ADAM)
+    lit = LitSimulator(sim, adam)
     state = batch([trajectory(10, seed=2), trajectory(6, seed=5)])
     graph = sim.graph_builder(state)
     calls = []

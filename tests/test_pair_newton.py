@@ -68,7 +68,10 @@ def test_an_oblique_meeting_keeps_the_tangential_motion_and_adds_no_energy():
         before_rel - (before_rel @ normal) * normal, after_rel - (after_rel @ normal) * normal
     )
     torch.testing.assert_close(after_rel @ normal, -0.63 * (before_rel @ normal))
-    energy = lambda v: 0.5 * (state.mass[:, None] * v.square()).sum()  # noqa: E731
+
+    def energy(v):
+        return 0.5 * (state.mass[:, None] * v.square()).sum()
+
     assert energy(after) <= energy(state.vel)
 
 

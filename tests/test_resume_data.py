@@ -56,5 +56,7 @@ def test_a_resume_on_another_dataset_is_refused_naming_both(tmp_path):
 def test_a_run_of_an_earlier_physgnn_without_a_hash_resumes(tmp_path):
     data = dataset(tmp_path / "tiny", 0)
     run = interrupted_run(tmp_path / "run", data)
-    (run / "run.json").write_text(json.dumps({"status": "interrupted", "overrides": []}))
-    check_run_dir(config(data), run)
+    earlier = json.dumps({"status": "interrupted", "overrides": []})
+    (run / "run.json").write_text(earlier)
+    check_run_dir(config(data), run)  # no dataset hash to compare: resumed, nothing refused
+    assert (run / "run.json").read_text() == earlier  # and the earlier record left as it was

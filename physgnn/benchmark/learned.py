@@ -115,11 +115,6 @@ def _summary(log: dict, repeats: int) -> dict:
     }
 
 
-def time_learned(sim, states: list, repeats: int) -> dict:
-    """:func:`time_cases` of one case."""
-    return time_cases([(sim, states)], repeats)[0]
-
-
 def repeats_for(n: int, c: DictConfig) -> int:
     return int(min(max(c.sphere_frames // max(n, 1), c.min_repeats), c.max_repeats))
 

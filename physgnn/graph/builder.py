@@ -33,7 +33,7 @@ the ``ALL_PAIRS_*`` limits (a radius search reads sizes back anyway) is built co
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import torch
 
@@ -160,8 +160,9 @@ class GraphBuilder(ConnectivityRules):
 
     def _pair_reach(self, state, allowance: torch.Tensor) -> float:
         """The radius search's reach (m): no pair farther apart can touch within the frame."""
-        radius = state.radius.to(torch.float64)
-        reach = 2 * float(radius.max()) + 2 * float(allowance.max()) + self.epsilon
+        largest = torch.stack([state.radius.to(torch.float64).max(), allowance.max()])
+        radius, allow = largest.tolist()  # one read-back: the search needs a host radius
+        reach = 2 * radius + 2 * allow + self.epsilon
         return reach * (1 + 1e-9)
 
     def _compacted(self, state, basis: Basis) -> Graph:
@@ -180,11 +181,6 @@ class GraphBuilder(ConnectivityRules):
         clip = self.reach(state, basis.allowance) + self.clip_margin
         ps_attr = ps_features(state, ps_index, basis.offset[keep], clip)  # the PS blocks
         return Graph(pp_index, pp_attr, ps_index, ps_attr, basis.allowance, *masks)
-
-
-def build_graph(state, cfg: Mapping) -> Graph:
-    """``GraphBuilder(**cfg)(state)``: cfg holds the builder's arguments (config keys)."""
-    return GraphBuilder(**dict(cfg))(state)
 
 
 def checks_on() -> bool:

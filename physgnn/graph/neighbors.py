@@ -17,6 +17,7 @@ which of them lie within a per-query distance of these other points (candidates 
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import math
 
@@ -84,7 +85,7 @@ def _check(pos, batch, r) -> tuple[torch.Tensor, torch.Tensor, float]:
     r = float(r)
     if not (r >= 0 and math.isfinite(r)):
         raise ValueError(f"radius must be finite and >= 0, got {r}")
-    if not bool(torch.isfinite(pos).all()):
+    if not bool(torch.isfinite(pos).all()):  # a read-back: a search on NaN would lose pairs
         raise ValueError("pos contains NaN or inf")
     if batch is None:
         batch = torch.zeros(pos.shape[0], dtype=torch.long, device=pos.device)
@@ -127,15 +128,16 @@ def _grid_candidates(pos, batch, r) -> tuple[torch.Tensor, torch.Tensor]:
     """Candidate pairs from a cell grid of side ≥ r: each point against 14 half-neighbourhoods."""
     cells = _cell_coords(pos, batch, r)  # [N, 3] long, compressed, ≥ 1
     size = cells.max(dim=0).values + 2
-    if float(size[0]) * float(size[1]) * float(size[2]) > 2.0**62:
-        raise ValueError(f"too many grid cells ({size.tolist()}) for {pos.shape[0]} points")
+    sides = size.tolist()  # a read-back, as the search's own sizes below
+    if float(sides[0]) * sides[1] * sides[2] > 2.0**62:
+        raise ValueError(f"too many grid cells ({sides}) for {pos.shape[0]} points")
     key = (cells[:, 0] * size[1] + cells[:, 1]) * size[2] + cells[:, 2]
     order = torch.argsort(key)
     cell_key, inverse, cell_count = torch.unique_consecutive(
         key[order], return_inverse=True, return_counts=True
     )
     cell_start = torch.cumsum(cell_count, 0) - cell_count
-    offsets = torch.tensor(_HALF_OFFSETS, dtype=torch.long, device=pos.device)  # [14, 3]
+    offsets = _half_offsets(pos.device)  # [14, 3]
     offset_key = (offsets[:, 0] * size[1] + offsets[:, 1]) * size[2] + offsets[:, 2]
     # Neighbour cells looked up once per occupied cell, [C, 14], then read per point, [N, 14].
     query = cell_key[:, None] + offset_key[None, :]
@@ -159,6 +161,12 @@ def _grid_candidates(pos, batch, r) -> tuple[torch.Tensor, torch.Tensor]:
     return i, j
 
 
+@functools.cache
+def _half_offsets(device: torch.device) -> torch.Tensor:
+    """``[14, 3]`` long: :data:`_HALF_OFFSETS` on ``device``, copied there once."""
+    return torch.tensor(_HALF_OFFSETS, dtype=torch.long, device=device)
+
+
 def _cell_coords(pos, batch, r) -> torch.Tensor:
     """Integer cell of each point, ``[N, 3]``; scenes separated along the first axis.
 
@@ -167,10 +175,10 @@ def _cell_coords(pos, batch, r) -> torch.Tensor:
     """
     p = pos.to(torch.float64)
     lo = p.min(dim=0).values
-    extent = float((p.max(dim=0).values - lo).max())
-    side = max(r, extent * _MIN_CELL_FRACTION, 1e-300) * (1 + _MARGIN)
+    extent = (p.max(dim=0).values - lo).max()
+    side = (extent * _MIN_CELL_FRACTION).clamp_min(max(r, 1e-300)) * (1 + _MARGIN)
     cells = torch.floor((p - lo) / side).long()
-    span = int(cells[:, 0].max()) + 3
+    span = cells[:, 0].max() + 3  # on the device: nothing read back
     cells[:, 0] += batch * span  # scenes are at least 2 cells apart on axis 0
     return torch.stack([_compress(cells[:, k]) for k in range(3)], dim=1)
 

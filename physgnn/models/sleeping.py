@@ -23,7 +23,9 @@ rollout. Before each step it
 While no sphere sleeps the wrapped simulator sees the very same state object, so a rollout
 is bit-identical to one without sleeping. Sleeping spheres cost nothing in the network; the
 search for spheres to wake costs O(awake · neighbours): a k-d tree over the sleepers (on CPU),
-built again only when spheres fall asleep.
+built again only when spheres fall asleep. The wrapper is driven from the host by design (which
+spheres sleep, which islands wake): it reads a few values back each frame, so it suits CPU
+rollouts of scenes that come to rest, not a captured GPU step.
 """
 
 from __future__ import annotations
@@ -81,8 +83,9 @@ class SleepingSimulator:
             self._count(state)
         self._fall_asleep(state)
         woken = self._wake(state)
-        self.sleep_frames += int(self.asleep.sum())
-        if not bool(self.asleep.any()):
+        asleep = int(self.asleep.sum())  # a read-back, as every decision of the wrapper
+        self.sleep_frames += asleep
+        if not asleep:
             return self.simulator(state)
         awake = ~self.asleep
         # sleeping spheres answer zeros: 2 tensors, or 4 for a simulator of the engine state

@@ -146,7 +146,8 @@ def _levels(found, pp_index: Tensor, ps_index: Tensor, m: int) -> tuple:
     counts = torch.cat([counts[0][: m + 1], counts[1][:m], counts[2][:m]])
     counts = torch.cat([counts, torch.stack([c.sum() for c in changed])]).tolist()
     nodes, pairs, ps = orders
-    rank = torch.empty_like(nodes).scatter_(0, nodes, torch.arange(nodes.shape[0]).to(nodes))
+    order = torch.arange(nodes.shape[0], device=nodes.device)
+    rank = torch.empty_like(nodes).scatter_(0, nodes, order)
     sub_pp = rank[pp_index[:, pairs]]
     sub_ps = torch.stack([ps_index[0, ps], rank[ps_index[1, ps]]])
     split = (counts[: m + 1], counts[m + 1 : 2 * m + 1], counts[2 * m + 1 : 3 * m + 1])

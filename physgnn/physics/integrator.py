@@ -40,7 +40,10 @@ def move(
 
     Shapes as :func:`euler_step`; ``rotate`` leaves the other spheres' orientation
     bit-identical."""
-    turn = lambda h: Q.normalize(Q.multiply(Q.exp(h * mean_angvel), quat))  # noqa: E731
+
+    def turn(h):
+        return Q.normalize(Q.multiply(Q.exp(h * mean_angvel), quat))
+
     return _advance(pos, quat, mean_vel, dt, rotate, turn)
 
 
