@@ -18,6 +18,8 @@ import math
 import numpy as np
 from omegaconf import OmegaConf
 
+from physgnn.physics.energy import G
+
 MARGIN = 0.1
 MATERIAL_KEYS = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
 
@@ -33,7 +35,7 @@ def training_ranges(cfg) -> dict[str, tuple[float, float]]:
     if family is None or "radius_min" not in family:
         return {}
     r0, r1, rho = float(family.radius_min), float(family.radius_max), float(family.density)
-    fall = math.sqrt(2 * 9.81 * float(family.get("h_max", 0.0)))
+    fall = math.sqrt(2 * G * float(family.get("h_max", 0.0)))
     ranges = {}
     if "n_min" in family and "n_max" in family:
         ranges["spheres"] = (float(family.n_min), float(family.n_max))

@@ -20,9 +20,8 @@ import numpy as np
 
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.settings import EngineSettings
+from physgnn.physics.energy import G
 from physgnn.physics.scene import GROUND, STATIC, Effects, Scene, ground_plane, make_plane
-
-G = 9.81
 
 
 def sphere_scene(

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 
-from physgnn.physics.scene import EFFECT_NAMES, MAX_FRAMES
+from physgnn.physics.scene import EFFECT_NAMES, GRAVITY, MAX_FRAMES
 
 _VEC3 = {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3}
 _QUAT = {
@@ -80,7 +80,7 @@ SCHEMA = {
         "name": {"type": "string"},
         "dt": {**_POS, "default": 0.1, "description": "frame interval (s)"},
         "frames": {"type": "integer", "minimum": 2, "maximum": MAX_FRAMES, "default": 100},
-        "gravity": {**_VEC3, "default": [0.0, 0.0, -9.81]},
+        "gravity": {**_VEC3, "default": list(GRAVITY)},
         "effects": {
             "type": "object",
             "additionalProperties": False,

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import torch
 
-G = 9.81
+from physgnn.physics.scene import GRAVITY
+
+G = -GRAVITY[2]  # m/s², the scenes' default gravity
 
 
 def sphere_energy(
