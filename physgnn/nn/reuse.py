@@ -164,7 +164,9 @@ def _histogram(values: Tensor, bins: int) -> Tensor:
 
 def _compact(mask: Tensor, count: int) -> Tensor:
     """Positions of the ``count`` True entries of ``mask [P]``, in order, ``[count]``
-    (``nonzero`` with its size given: nothing read back)."""
+    (``nonzero`` with its size given: nothing read back). The twin of
+    :func:`physgnn.graph.candidates.compact`, which the network may not import
+    (docs/ARCHITECTURE.md, rule 5)."""
     slot = torch.where(mask, torch.cumsum(mask, 0) - 1, count)  # the rest: a spare slot
     out = torch.empty(count + 1, dtype=torch.long, device=mask.device)
     out.scatter_(0, slot, torch.arange(mask.shape[0], device=mask.device))
