@@ -18,16 +18,10 @@ from physgnn.data.state import SceneState
 from physgnn.errors import ConfigError
 from physgnn.models.capture import ShapeBoundCall
 from physgnn.physics.scene import Effects
-from physgnn.training.lit import (
-    LitSimulator,
-    NonFiniteLossError,
-    add_noise,
-    energy_increase,
-    masked_mse,
-    regime_scale,
-    rest_loss,
-)
-from physgnn.training.noise import noise_seed
+from physgnn.training.finite import NonFiniteLossError
+from physgnn.training.lit import LitSimulator
+from physgnn.training.losses import energy_increase, masked_mse, rest_loss
+from physgnn.training.noise import add_noise, noise_seed, regime_scale
 from physgnn.training.recipe import Compile, InputNoise, LossTerms, PushForward
 
 ADAM = functools.partial(torch.optim.Adam, lr=1e-3)

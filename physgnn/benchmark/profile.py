@@ -16,7 +16,8 @@ from omegaconf import DictConfig
 
 from physgnn.data.pairs import EpochSampler, PairDataset, pair_loader
 from physgnn.models.profiling import StepTimer
-from physgnn.training.lit import add_noise, push_forward
+from physgnn.training.lit import push_forward
+from physgnn.training.noise import add_noise
 
 PARTS = ("data", "noise", "push_forward", "graph", "forward", "backward", "optimiser")
 

@@ -49,7 +49,7 @@ from omegaconf.errors import OmegaConfBaseException
 
 from physgnn import CONF_DIR
 from physgnn.cli.outputs import OWN_FOLDER, check_outputs_env
-from physgnn.cli.overrides import (  # noqa: F401
+from physgnn.cli.overrides import (  # noqa: F401 (compose_config: cli's API)
     check_added_keys,
     check_composes,
     check_quoting,

@@ -52,9 +52,9 @@ from physgnn.models.protocol import motion_of
 from physgnn.physics.integrator import step
 from physgnn.training.contacts import contact_penalty, perturb_contacts
 from physgnn.training.epoch_means import EpochMeans
-from physgnn.training.finite import FiniteWatch, NonFiniteLossError  # noqa: F401 (its home)
+from physgnn.training.finite import FiniteWatch
 from physgnn.training.losses import energy_increase, masked_mse, regime_weights, rest_loss
-from physgnn.training.noise import add_noise, noise_seed, regime_scale  # noqa: F401 (re-exported)
+from physgnn.training.noise import add_noise, noise_seed
 from physgnn.training.recipe import Compile, InputNoise, LossTerms, PushForward
 from physgnn.training.schedule import lr_scheduler
 

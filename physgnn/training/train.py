@@ -29,7 +29,7 @@ from physgnn.files import write_text
 from physgnn.ranges import check_seed
 from physgnn.training.build import build
 from physgnn.training.datamodule import dataset_identity
-from physgnn.training.lit import NonFiniteLossError
+from physgnn.training.finite import NonFiniteLossError
 from physgnn.training.progress import RunProgress, StopOnSignal, StopTraining, save_last
 from physgnn.training.quiet import quiet_lightning
 from physgnn.training.resume_checks import check_checkpoint, check_run_dir, resume_from
