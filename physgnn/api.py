@@ -52,6 +52,7 @@ from physgnn.rollout import rollout
 from physgnn.training.runs import load_run
 
 FORMATS = ("vtk", "gns", "lagrangebench", "hdf5")
+FILM = (".gif", ".mp4", "_frame.png")  # the files animate writes, after its stem
 trajectory_from_arrays = Trajectory.from_arrays
 load_trajectories = hdf5_export.load_trajectories
 
@@ -179,7 +180,18 @@ def score(pred: Trajectory | None, truth: Trajectory, tol: float = 0.0) -> dict:
     ``tol``: the penetration tolerance, a fraction of the diameter."""
     _of_type("pred", pred, (Trajectory, type(None)), "a Trajectory (roll_out's) or None")
     _of_type("truth", truth, Trajectory, "a Trajectory: simulate(scene) gives a scene's truth")
+    _same_scene(pred, truth, "score")
     return scene_metrics(truth, pred, check_tolerance(tol, ArgumentError))
+
+
+def _same_scene(pred: Trajectory | None, truth: Trajectory, verb: str) -> None:
+    """``pred`` (None: none) has ``truth``'s spheres; else one line telling to ``verb`` a
+    prediction of ``truth``'s own scene."""
+    if pred is not None and pred.n_spheres != truth.n_spheres:
+        raise ArgumentError(
+            f"pred has {pred.n_spheres} spheres, truth {truth.n_spheres}: {verb} a prediction "
+            "of truth's own scene (roll_out(model, truth))"
+        )
 
 
 def animate(
@@ -187,17 +199,26 @@ def animate(
     pred: Trajectory | None = None,
     stem: str | Path = "video",
     max_frames: int = 80,
+    *,
+    overwrite: bool = False,
 ) -> dict:
     """The shaded 3-D film of ``truth`` (left) beside ``pred`` (right; the truth again without
-    one): ``stem.gif``, ``stem.mp4`` and ``stem_frame.png``; returns their paths by kind."""
+    one): ``stem.gif``, ``stem.mp4`` and ``stem_frame.png``; returns their paths by kind. An
+    existing file of those names is refused (:class:`FileExistsError`, nothing written)
+    unless ``overwrite=True``."""
     _of_type("truth", truth, Trajectory, "a Trajectory: simulate(scene) gives a scene's truth")
     _of_type("pred", pred, (Trajectory, type(None)), "a Trajectory (roll_out's) or None")
+    _of_type("stem", stem, (str, Path), "a path without suffix (str or Path), e.g. 'film'")
     film = whole(2, what="frames of the film", example=80)
     max_frames = film.check("max_frames", max_frames, error=ArgumentError)
-    if pred is not None and pred.n_spheres != truth.n_spheres:
-        raise ArgumentError(
-            f"pred has {pred.n_spheres} spheres, truth {truth.n_spheres}: animate a prediction "
-            "of truth's own scene (roll_out(model, truth))"
+    _of_type("overwrite", overwrite, bool, "True or False")
+    _same_scene(pred, truth, "animate")
+    there = [f"{stem}{end}" for end in FILM if Path(f"{stem}{end}").exists()]
+    if there and not overwrite:
+        more = f" (and {len(there) - 1} more)" if len(there) > 1 else ""
+        raise FileExistsError(
+            f"animate: {there[0]}{more} is there already: choose another stem, or pass "
+            "overwrite=True to replace it"
         )
     panel = (truth, "ground truth") if pred is None else (pred, "prediction")
     return render_side_by_side(stem, truth, [panel], title=truth.name, max_frames=max_frames)

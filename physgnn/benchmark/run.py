@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from hydra.core.hydra_config import HydraConfig
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from physgnn.benchmark import activity, machine, profile, scenes
 from physgnn.benchmark.crossover import crossover
@@ -41,9 +41,14 @@ from physgnn.benchmark.markdown import ACCURACY_FIGURE, write_markdown
 from physgnn.benchmark.pybullet import accuracy_sweep, pybullet_rows, pybullet_runs
 from physgnn.benchmark.source import BenchError, learned_source
 from physgnn.data.stats import compute_stats
-from physgnn.files import write_json, write_text
+from physgnn.files import claim_folder, write_json, write_text
+from physgnn.ranges import FLAG, whole
 from physgnn.report.pareto import bench_figure
 
+# The bench's switches: true or false (``quick=maybe`` is refused, not taken as true).
+FLAGS = ("quick", "large", "overwrite")
+# A bench scene's size: random_box with exactly this many spheres.
+SIZE = whole(1, what="spheres of a bench scene", example=154, exact=True)
 # The sections of conf/bench.yaml that every bench measures (crossover=null leaves its phase out)
 ALWAYS_RUN = (
     "machine",
@@ -61,9 +66,15 @@ ALWAYS_RUN = (
 
 
 def bench(cfg: DictConfig) -> dict:
-    """Run every measurement of ``cfg`` (see ``conf/bench.yaml``); returns bench.json's dict."""
+    """Run every measurement of ``cfg`` (see ``conf/bench.yaml``); returns bench.json's dict.
+    An ``out_dir`` holding files physgnn did not write is refused unless ``overwrite=true``
+    (:func:`physgnn.files.claim_folder`), before anything is measured."""
+    for key in FLAGS:
+        FLAG.check(key, cfg.get(key), error=BenchError)
     cfg = merged_config(cfg, command_line())
     check_settings(cfg)
+    ours = Path(cfg.out_dir) == Path(cfg.paths.bench_dir)
+    claim_folder(cfg.out_dir, "out_dir", overwrite=bool(cfg.get("overwrite")), ours=ours)
     torch.set_num_threads(int(cfg.threads))
     torch.manual_seed(int(cfg.seed))
     start = time.perf_counter()
@@ -106,10 +117,12 @@ def bench(cfg: DictConfig) -> dict:
 
 
 def check_settings(cfg: DictConfig) -> None:
-    """Refuse in one line what the bench cannot run: threads below 1, a phase other than the
-    crossover left out, an interleaved configuration that is not a learned one."""
+    """Refuse in one line what the bench cannot run: threads below 1, a size that is no whole
+    number of spheres, a phase other than the crossover left out, an interleaved
+    configuration that is not a learned one."""
     if int(cfg.threads) < 1:
         raise BenchError(f"threads must be >= 1 (got {cfg.threads})")
+    check_sizes(cfg.get("sizes"))
     left_out = [key for key in ALWAYS_RUN if cfg.get(key) is None]
     if left_out:
         raise BenchError(
@@ -122,6 +135,17 @@ def check_settings(cfg: DictConfig) -> None:
             f"interleaved.configs names {', '.join(unknown)}, not among learned.configs "
             f"({', '.join(cfg.learned.configs)})"
         )
+
+
+def check_sizes(sizes) -> None:
+    """``sizes`` is a list of scene sizes, each a whole number of spheres (:data:`SIZE`)."""
+    if not isinstance(sizes, ListConfig | list) or not sizes:
+        raise BenchError(
+            f"sizes must be a list of whole numbers >= 1 (spheres of a bench scene), got "
+            f"{sizes!r} (e.g. sizes=[154,1000])"
+        )
+    for i, n in enumerate(sizes):
+        SIZE.check(f"sizes[{i}]", n, "e.g. sizes=[154,1000]", error=BenchError)
 
 
 def measure(cfg: DictConfig, rng: np.random.Generator, matmul: float, phases: dict) -> dict:

@@ -1,14 +1,16 @@
 """The folders a command writes in, checked before Hydra makes its output folder there (else
-Hydra's own traceback): not a file, and writable (a read-only or forbidden ``paths.outputs``
-is one line naming it and the fix)."""
+Hydra's own traceback): not a file nor in one, and writable (a read-only or forbidden
+``paths.outputs`` is one line naming it and the fix)."""
 
 from __future__ import annotations
 
 import os
 import shutil
 import sys
+from pathlib import Path
 
 from physgnn.errors import ConfigError
+from physgnn.files import file_in_the_way
 from physgnn.overrides import given as given_overrides
 
 # Folders Hydra makes (or a command writes under) before any command runs; a mistake in one
@@ -32,9 +34,10 @@ MIN_FREE = 1 << 20  # bytes: less than this free and Hydra's own first writes ma
 
 def check_outputs_env(argv: list[str] | None = None, own: str | None = "paths.outputs") -> None:
     """``PHYSGNN_OUTPUTS``, where set, and ``paths.outputs=`` on the command line are not
-    files; the folders the command writes in may be written (:func:`unwritable`): those of
-    :data:`OUTPUT_KEYS` and ``own`` (the command's own folder, :data:`OWN_FOLDER`) given, else
-    ``paths.outputs`` (or ``PHYSGNN_OUTPUTS``), which may be read-only where one is given.
+    files; the folders the command writes in are no file nor in one (:func:`check_not_a_file`)
+    and may be written (:func:`unwritable`): those of :data:`OUTPUT_KEYS` and ``own`` (the
+    command's own folder, :data:`OWN_FOLDER`) given, else ``paths.outputs`` (or
+    ``PHYSGNN_OUTPUTS``), which may be read-only where one is given.
     Hydra makes its output folder there before any command runs, and would fail with a
     traceback."""
     outputs = os.environ.get("PHYSGNN_OUTPUTS")
@@ -62,12 +65,23 @@ def check_outputs_env(argv: list[str] | None = None, own: str | None = "paths.ou
             else (("PHYSGNN_OUTPUTS", outputs) if outputs else ("paths.outputs", "outputs"))
         )
     for key, (name, folder) in named.items():
+        check_not_a_file(name, folder)
         why = unwritable(folder)
         if why:
             raise ConfigError(
                 f"{name}={folder} cannot be written ({why}): choose a writable "
                 + ("paths.outputs (or PHYSGNN_OUTPUTS)" if key == "paths.outputs" else key)
             )
+
+
+def check_not_a_file(key: str, folder: str) -> None:
+    """``folder``, the value of ``key``, is no file and lies in no file (else Hydra's mkdir
+    fails with its traceback)."""
+    blocked = file_in_the_way(folder)
+    if blocked is None:
+        return
+    where = "is a file" if blocked == Path(folder) else f"lies in {blocked}, a file"
+    raise ConfigError(f"{key}={folder} {where}: choose a folder for {key}")
 
 
 def unwritable(folder: str) -> str | None:
@@ -79,7 +93,7 @@ def unwritable(folder: str) -> str | None:
     while not os.path.exists(place):
         place = os.path.dirname(place)
     if not os.path.isdir(place):
-        return None  # a file in the way: the commands name it themselves
+        return None  # a file in the way: check_not_a_file names it
     if os.access(place, os.W_OK | os.X_OK):
         free = shutil.disk_usage(place).free
         # Hydra writes its config files (tens of kB) before any command can catch an error

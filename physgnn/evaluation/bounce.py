@@ -15,13 +15,62 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from physgnn.errors import ConfigError
 from physgnn.evaluation.freefall import free_fall
 from physgnn.groundtruth.oracles import apex_heights, bounce_ratios
 from physgnn.physics.energy import G
+from physgnn.ranges import number
 from physgnn.rollout import rollout
+
+# A material of the eval's bounce config (conf/eval.yaml: bounce.materials) and its values: the
+# restitution above 0 (the row divides the apex by e²·height), every friction from 0.
+MATERIAL = {
+    "restitution": number(0, 1, above=True, what="the apex is e² of the drop"),
+    "lateral_friction": number(0),
+    "rolling_friction": number(0),
+    "spinning_friction": number(0),
+}
+MATERIAL_FIX = (
+    "e.g. {restitution: 0.5, lateral_friction: 0.5, rolling_friction: 0.01, "
+    "spinning_friction: 0.01}"
+)
+# The eval's bounce settings: drop height (the sphere's bottom), radius and frame step
+SETTINGS = {
+    "height": number(0, above=True, what="m, the sphere's bottom above the ground", example=10.0),
+    "radius": number(0, above=True, what="m", example=0.75),
+    "dt": number(0, above=True, what="s between frames", example=0.1),
+}
+
+
+def check_settings(cfg) -> tuple[list[list[float]], float, float, float] | None:
+    """``(materials [K, 4], height, dt, radius)`` of the eval's ``bounce`` config (None: not
+    measured), each value refused in one line naming its key (:data:`SETTINGS`,
+    :data:`MATERIAL`)."""
+    if cfg is None:
+        return None
+    values = {k: float(a.check(f"bounce.{k}", cfg.get(k))) for k, a in SETTINGS.items()}
+    materials = cfg.get("materials")
+    if not isinstance(materials, Sequence) or isinstance(materials, str):
+        raise ConfigError(
+            f"bounce.materials must be a list of materials ({', '.join(MATERIAL)}), got "
+            f"{materials!r} (the default: bounce.materials=${{bounce.scene.materials}})"
+        )
+    rows = [_material(f"bounce.materials[{i}]", m) for i, m in enumerate(materials)]
+    return rows, values["height"], values["dt"], values["radius"]
+
+
+def _material(key: str, material) -> list[float]:
+    """``[restitution, lateral, rolling, spinning friction]`` of one material of the config."""
+    if not isinstance(material, Mapping) or set(material) != set(MATERIAL):
+        raise ConfigError(
+            f"{key} must be a material of the keys {', '.join(MATERIAL)}, got {material!r} "
+            f"({MATERIAL_FIX})"
+        )
+    return [float(a.check(f"{key}.{k}", material[k], MATERIAL_FIX)) for k, a in MATERIAL.items()]
 
 
 def bounce_rows(

@@ -7,23 +7,27 @@ ddof = 0). The energy uses the engine's velocities (the physics of the data); th
 finite-difference velocities (what a rollout records, so what a perfect model would show, and
 what the ``ground_truth`` rows of ``make eval`` measure) is printed below the table. Prints the
 table beside the report's Blender figures and writes ``<dataset>/report.json``:
-``{"test": {"energy_gain": {"mean": .., "std": ..}, "depth_sphere": {..}, …}, "ood": {..}}``.
+``{"test": {"energy_gain": {"mean": .., "std": ..}, "depth_sphere": {..}, …}, "ood": {..}}``;
+a report.json of the user's (in a folder without ``physgnn-dataset.json``) is never replaced.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
-from omegaconf import DictConfig
+from omegaconf import DictConfig, ListConfig
 from rich.console import Console
 from rich.table import Table
 
-from physgnn.data.dataset import generate_hint, read_split
+from physgnn import CONF_DIR
+from physgnn.data.dataset import DATASET_MARKER, SPLIT_FILES, generate_hint, read_split
 from physgnn.errors import PhysgnnError
 from physgnn.files import write_json
 from physgnn.metrics import PENETRATION_KEYS, MetricError, trajectory_metrics
 from physgnn.physics.trajectory import Trajectory
+from physgnn.ranges import one_of
 from physgnn.report.sections import BLENDER_TABLE1
 from physgnn.report.table import SPLITS
 
@@ -90,10 +94,12 @@ def table(summary: dict) -> Table:
 def data_report(cfg: DictConfig) -> dict:
     """Compute, print and write ``report.json`` for ``cfg.dataset``; returns its content."""
     folder = Path(cfg.dataset)
+    splits = checked_splits(cfg.splits)
     if not folder.is_dir():
-        raise DataReportError(f"dataset folder {folder} not found: {generate_hint(folder)}")
+        raise DataReportError(missing_folder(cfg, folder))
+    check_report_json(folder)
     summary, finite = {}, {}
-    for split in cfg.splits:
+    for split in splits:
         trajectories = read_split(folder / f"{split}.h5")
         try:
             summary[split] = split_summary(trajectories, float(cfg.tol))
@@ -111,3 +117,49 @@ def data_report(cfg: DictConfig) -> dict:
     out = write_json(folder / "report.json", summary)
     print(f"wrote {out}")
     return summary
+
+
+def checked_splits(splits) -> list[str]:
+    """``splits``, a list of split names of a dataset (:data:`SPLIT_FILES`), else one line."""
+    if not isinstance(splits, ListConfig | list) or not splits:
+        raise DataReportError(
+            f"splits must be a list of split names ({', '.join(SPLIT_FILES)}), got {splits!r} "
+            f"(e.g. splits=[{splits if splits in SPLIT_FILES else 'test'}])"
+        )
+    name = one_of(*SPLIT_FILES, what="a dataset's split files")
+    fix = "e.g. splits=[test,ood]"
+    return [name.check(f"splits[{i}]", s, fix, DataReportError) for i, s in enumerate(splits)]
+
+
+def missing_folder(cfg: DictConfig, folder: Path) -> str:
+    """What to say of a dataset folder that is not there: ``preset=`` naming no preset of
+    conf/data (its options), else how to generate it."""
+    presets = sorted(p.stem for p in (Path(CONF_DIR) / "data").glob("*.yaml"))
+    preset = str(cfg.get("preset"))
+    if folder == Path(cfg.paths.data_dir) / preset and preset not in presets:
+        return f"preset={preset}: no {preset!r} in conf/data (options: {', '.join(presets)})"
+    return f"dataset folder {folder} not found: {generate_hint(folder)}"
+
+
+def check_report_json(folder: Path) -> None:
+    """``folder/report.json`` may be written: absent, in a dataset physgnn wrote (its
+    :data:`DATASET_MARKER`), or an earlier report of this command; else one line."""
+    path = folder / "report.json"
+    if not path.exists() or (folder / DATASET_MARKER).is_file() or _a_report(path):
+        return
+    raise DataReportError(
+        f"dataset={folder} holds a report.json that physgnn did not write (no "
+        f"{DATASET_MARKER} there): move it away, or report a copy of the split files in "
+        "another folder"
+    )
+
+
+def _a_report(path: Path) -> bool:
+    """``path`` holds a report.json this command wrote (a Table 1 summary per split)."""
+    try:
+        report = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(report, dict) and all(
+        isinstance(v, dict) and "energy_gain" in v for v in report.values()
+    )

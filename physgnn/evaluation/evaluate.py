@@ -18,6 +18,7 @@ A ``report_dir`` holding files physgnn did not write is refused unless ``overwri
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
 
 from omegaconf import DictConfig, OmegaConf
@@ -26,10 +27,14 @@ from physgnn.data.dataset import write_split
 from physgnn.errors import ConfigError
 from physgnn.evaluation import learned_settings, onestep, rerun_log, same_work
 from physgnn.evaluation.bounce import bounce_rows
-from physgnn.evaluation.freefall import freefall_rows
+from physgnn.evaluation.bounce import check_settings as bounce_settings
+from physgnn.evaluation.freefall import check_frames, freefall_rows
+from physgnn.evaluation.freefall import check_settings as freefall_settings
 from physgnn.evaluation.invariance import invariance_rows
 from physgnn.evaluation.rollouts import (
     Collected,
+    check_hard,
+    check_rollout,
     hard_rows,
     rest_tol,
     roll_all,
@@ -41,6 +46,7 @@ from physgnn.evaluation.rollouts import (
 from physgnn.evaluation.runs import (
     EvalError,
     RunInfo,
+    check_runs,
     constrained_variants,
     load_datasets,
     load_runs,
@@ -51,16 +57,35 @@ from physgnn.evaluation.runs import (
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.files import claim_folder, staged_outputs
 from physgnn.metrics import check_tolerance
-from physgnn.ranges import FLAG, whole
+from physgnn.models.protocol import hooks_of
+from physgnn.ranges import FLAG, Allowed, whole
 from physgnn.report import bounce, figures, freefall, invariance, stability, table
 from physgnn.report import onestep as onestep_report
 from physgnn.report.document import write_report
 from physgnn.rollout import VELOCITY
 
-# What an eval writes into its report_dir (replaced whole by the next eval).
 # The eval's switches: true or false (``save_rollouts=maybe`` is refused, not taken as true).
-FLAGS = ("overwrite", "videos", "save_rollouts", "sleeping_compare", "stability")
-MAX_FRAMES = whole(2, also=(None,), what="whole trajectories", example=100, exact=True)
+FLAGS = (
+    "overwrite",
+    "videos",
+    "save_rollouts",
+    "sleeping_compare",
+    "stability",
+    "compile",
+    "rerun",
+)
+# The eval's other values (conf/eval.yaml)
+VALUES = {
+    "report_dir": Allowed(str, what="a folder", example="outputs/report"),
+    "dataset": Allowed(str, also=(None,), what="null: each run's own", example="outputs/data/tiny"),
+    "max_frames": whole(2, also=(None,), what="whole trajectories", example=100, exact=True),
+    "energy_runs": whole(0, what="learned runs drawn in the OOD energy figure", example=3),
+    "video_frames": whole(1, what="frames of a video at most", example=60),
+}
+# Groups of settings measured only when given (null: not measured)
+GROUPS = ("pybullet", "onestep", "freefall", "bounce", "invariance")
+REST_FRAMES = whole(2, what="frames of the resting grids, the first the start", example=2000)
+# What an eval writes into its report_dir (replaced whole by the next eval).
 REPORT_OUTPUTS = (
     "report.md",
     "metrics.csv",
@@ -73,7 +98,6 @@ REPORT_OUTPUTS = (
     "videos",
     "rollouts",
 )
-MATERIAL_KEYS = ("restitution", "lateral_friction", "rolling_friction", "spinning_friction")
 
 
 def evaluate(cfg: DictConfig) -> Path:
@@ -84,8 +108,8 @@ def evaluate(cfg: DictConfig) -> Path:
     replacing the previous eval's outputs (:data:`REPORT_OUTPUTS`) whole: a report folder
     always holds one eval, and an interrupted eval leaves the last one as it was
     (:func:`physgnn.files.staged_outputs`)."""
-    report_dir = Path(cfg.report_dir)
     check_eval_values(cfg)
+    report_dir = Path(cfg.report_dir)
     if cfg.get("rerun"):
         rerun_log.require()  # before the rollouts, not after them
     ours = report_dir == Path(cfg.paths.report_dir)
@@ -96,16 +120,60 @@ def evaluate(cfg: DictConfig) -> Path:
 
 
 def check_eval_values(cfg: DictConfig) -> None:
-    """``max_frames`` is null or a whole number >= 2 (a rollout needs frames to predict);
-    ``tol`` a number >= 0; each switch true or false; ``pybullet`` null or its substep
-    counts and processes; ``learned_settings`` null or its settings' knobs."""
-    MAX_FRAMES.check("max_frames", cfg.get("max_frames"))
+    """Every value of ``cfg`` before any work, each refused in one line naming its key:
+    ``runs`` (:func:`~physgnn.evaluation.runs.check_runs`), the :data:`VALUES` (``max_frames``
+    null or a whole number >= 2: a rollout needs frames to predict), ``tol`` a number >= 0,
+    each switch true or false, ``rollout`` (its ``threads`` before ``pybullet.processes``,
+    which is it unless given), ``hard`` and the :data:`GROUPS`, ``learned_settings`` null or
+    its settings' knobs."""
+    check_runs(cfg.get("runs"))
+    for key, allowed in VALUES.items():
+        allowed.check(key, cfg.get(key))
     check_tolerance(cfg.get("tol"), ConfigError)
     for key in FLAGS:
         FLAG.check(key, cfg.get(key))
+    check_rollout(cfg)
+    check_hard(cfg)
+    check_groups(cfg)
+    learned_settings.check_settings(cfg.get("learned_settings"))
+
+
+def check_groups(cfg: DictConfig) -> None:
+    """Each of the :data:`GROUPS` null or a mapping of its settings, each checked by its own
+    module (``invariance``: ``rest_frames``, :data:`REST_FRAMES`)."""
+    for key in GROUPS:
+        if cfg.get(key) is not None and not isinstance(cfg.get(key), Mapping):
+            raise ConfigError(
+                f"{key} must be null (not measured) or a mapping of its settings, got "
+                f"{cfg.get(key)!r} (e.g. {key}=null)"
+            )
     same_work.check_settings(cfg.get("pybullet"))
     onestep.check_settings(cfg.get("onestep"))
-    learned_settings.check_settings(cfg.get("learned_settings"))
+    freefall_settings(cfg.get("freefall"))
+    bounce_settings(cfg.get("bounce"))
+    checks = cfg.get("invariance") or {}
+    if not set(checks) <= {"rest_frames"}:
+        raise ConfigError(
+            f"invariance takes rest_frames only, got {checks!r} (the default: "
+            "invariance.rest_frames=2000)"
+        )
+    if "rest_frames" in checks:
+        REST_FRAMES.check("invariance.rest_frames", checks["rest_frames"])
+
+
+def check_seed_frames(cfg: DictConfig, runs: list[RunInfo]) -> None:
+    """Each learned run has frames to predict in every fall of ``freefall`` and the resting
+    grids of ``invariance``: more than its H + 1 seed frames (else a row would measure the
+    seed, not a prediction)."""
+    falls = freefall_settings(cfg.get("freefall"))
+    rest = (cfg.get("invariance") or {}).get("rest_frames")
+    for run in (r for r in runs if r.run_dir is not None):
+        H = hooks_of(run.simulator).history or 0
+        if falls is not None:
+            check_frames(*falls, H, run.name)
+        if rest is not None:
+            what = f"run {run.name} starts from H + 1 = {H + 1} frames, then one to predict"
+            whole(H + 2, what=what, example=2000).check("invariance.rest_frames", rest)
 
 
 def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
@@ -119,6 +187,7 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
         data = {Path(cfg.dataset): load_splits(Path(cfg.dataset), cfg.max_frames)}
     else:
         data, runs = load_datasets(runs, cfg.max_frames, skipped)
+    check_seed_frames(cfg, runs)
     jobs = [ref for d in data for ref in references(d, len(data) > 1)] + runs
     film = pick_video_run(runs, cfg.video_run)
     keep = {r.name for r in runs[: cfg.energy_runs]} | ({film.name} if film else set())
@@ -186,9 +255,9 @@ def onestep_rows(cfg: DictConfig, runs: list[RunInfo], data: dict) -> list[dict]
 def _freefall(runs: list[RunInfo], cfg: DictConfig | None, settings: dict) -> list[dict]:
     """Every learned run dropped from ``cfg.heights`` (:mod:`physgnn.evaluation.freefall`);
     none without a ``freefall`` config."""
-    if cfg is None:
+    args = freefall_settings(cfg)
+    if args is None:
         return []
-    args = list(cfg.heights), float(cfg.seconds), float(cfg.dt), float(cfg.floor)
     rows = []
     for run in runs:
         rows += freefall_rows(run.name, run.simulator, *args, **settings)
@@ -198,10 +267,9 @@ def _freefall(runs: list[RunInfo], cfg: DictConfig | None, settings: dict) -> li
 def _bounce(runs: list[RunInfo], cfg: DictConfig | None, settings: dict) -> list[dict]:
     """Every learned run bouncing with each of ``cfg.materials``
     (:mod:`physgnn.evaluation.bounce`); none without a ``bounce`` config."""
-    if cfg is None:
+    args = bounce_settings(cfg)
+    if args is None:
         return []
-    materials = [[m[k] for k in MATERIAL_KEYS] for m in cfg.materials]
-    args = materials, float(cfg.height), float(cfg.dt), float(cfg.radius)
     rows = []
     for run in runs:
         rows += bounce_rows(run.name, run.simulator, *args, **settings)

@@ -12,15 +12,23 @@ positions (free flight: ``−g·dt``). Rows of ``freefall.csv`` and the report's
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
+from physgnn.errors import ConfigError
 from physgnn.physics.energy import G
 from physgnn.physics.scene import Effects, ground_plane
 from physgnn.physics.trajectory import Trajectory
+from physgnn.ranges import number
 from physgnn.rollout import rollout
 
 DENSITY = 1000.0  # kg/m³, that of the training scenes
+RADIUS = 0.5  # m, the falling sphere's
+# The eval's freefall settings (conf/eval.yaml: freefall); the heights' bound follows floor and dt
+DT = number(0, above=True, what="s between frames", example=0.1)
+FLOOR = number(RADIUS, what="m: the sphere's centre, kept off the ground", example=5.0)
+FIX = "e.g. freefall.heights=[10.0, 100.0, 1000.0]"
 
 
 ANALYTIC = "analytic"  # the truth's engine attribute: exact positions and velocities
@@ -64,7 +72,7 @@ def sphere_mass(radius, density: float = DENSITY) -> np.ndarray:
     return density * 4.0 / 3.0 * np.pi * np.asarray(radius, np.float64) ** 3
 
 
-def free_fall(height: float, seconds: float, dt: float, radius: float = 0.5) -> Trajectory:
+def free_fall(height: float, seconds: float, dt: float, radius: float = RADIUS) -> Trajectory:
     """One sphere of ``radius`` (density 1 000) released at rest at ``height`` m above the
     ground, frames ``k·dt`` for ``k = 0..seconds/dt``, exact positions and velocities."""
     radii = np.full(1, radius)
@@ -84,6 +92,46 @@ def free_seconds(height: float, seconds: float, dt: float, floor: float) -> floa
     """``seconds``, cut to whole frames before the sphere falls below ``floor`` m."""
     frames = math.floor(math.sqrt(2.0 * max(height - floor, 0.0) / G) / dt + 1e-9)
     return min(seconds, frames * dt)
+
+
+def check_settings(cfg) -> tuple[list[float], float, float, float] | None:
+    """``(heights, seconds, dt, floor)`` of the eval's ``freefall`` config (None: not
+    measured), each refused in one line naming its key: ``dt`` > 0, ``floor`` at least the
+    sphere's radius (lower, the fall would reach the ground), ``seconds`` at least one frame
+    and every height at least one frame's fall above ``floor`` (a fall of no frame has nothing
+    to measure)."""
+    if cfg is None:
+        return None
+    dt = float(DT.check("freefall.dt", cfg.get("dt")))
+    floor = float(FLOOR.check("freefall.floor", cfg.get("floor")))
+    seconds = number(dt, what="s: at least one frame of freefall.dt", example=4.0)
+    seconds = float(seconds.check("freefall.seconds", cfg.get("seconds")))
+    heights = cfg.get("heights")
+    if not isinstance(heights, Sequence) or isinstance(heights, str):
+        raise ConfigError(
+            f"freefall.heights must be a list of heights (m), got {heights!r} ({FIX})"
+        )
+    what = f"m: at least one frame's fall, g·dt²/2, above freefall.floor={floor:g}"
+    height = number(floor + 0.5 * G * dt**2, what=what)
+    heights = [height.check(f"freefall.heights[{i}]", h, FIX) for i, h in enumerate(heights)]
+    return [float(h) for h in heights], seconds, dt, floor
+
+
+def check_frames(heights, seconds: float, dt: float, floor: float, history: int, run: str) -> None:
+    """Every fall of :func:`check_settings`'s ``(heights, seconds, dt, floor)`` lasts more
+    frames than the ``history`` + 1 seed frames of ``run`` (else its row would measure the
+    seed, not a prediction); refused in one line naming the height."""
+    for i, height in enumerate(heights):
+        frames = round(free_seconds(height, seconds, dt, floor) / dt)
+        if frames <= history:
+            least = floor + 0.5 * G * ((history + 1) * dt) ** 2
+            raise ConfigError(
+                f"freefall.heights[{i}]={height:g} gives {frames} frame(s) of fall (above "
+                f"freefall.floor={floor:g}, within freefall.seconds={seconds:g}) and run {run} "
+                f"needs {history + 1} (its H + 1 = {history + 1} seed frames, then one to "
+                f"predict): give heights from {least:g} m and freefall.seconds from "
+                f"{(history + 1) * dt:g}"
+            )
 
 
 def freefall_rows(

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -13,7 +14,7 @@ import yaml
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.data.dataset import DatasetError, read_split
-from physgnn.errors import PhysgnnError
+from physgnn.errors import ConfigError, PhysgnnError
 from physgnn.models.baselines import GravityOnlySimulator, StaticSimulator
 from physgnn.models.capture import compile_simulator
 from physgnn.models.constrained import ConstrainedSimulator
@@ -55,6 +56,24 @@ def all_runs(target: str | None, outputs: Path) -> list[Path]:
             return [root]
         roots = [root]
     return sorted({p.parent for r in roots if r.is_dir() for p in r.rglob("run.json")})
+
+
+def check_runs(runs) -> list[str | None]:
+    """The targets ``runs`` names, each for :func:`all_runs`: ``[None]`` for null (every run
+    under the outputs), else one folder (a run or a folder of runs) or each of a non-empty
+    list of them. Anything else is refused in one line naming ``runs``."""
+    if runs is None:
+        return [None]
+    targets = [runs] if isinstance(runs, str) else runs
+    if isinstance(targets, Sequence) and targets and all(isinstance(t, str) and t for t in targets):
+        return list(targets)
+    given = OmegaConf.to_container(runs) if OmegaConf.is_config(runs) else runs
+    raise ConfigError(
+        "runs must be a run folder, a folder of runs or a non-empty list of them (null: every "
+        f"finished run under paths.outputs), got {given!r} (e.g. runs=outputs/runs/default/seed0 "
+        "or 'runs=[outputs/runs/default/seed0,outputs/runs/default/seed1]'; a folder named by "
+        "a number: runs=./5)"
+    )
 
 
 # A truncated run (its step budget cut short by the time guard) is evaluated, and named so.
@@ -148,10 +167,13 @@ def references(dataset: Path, several: bool) -> list[RunInfo]:
 
 
 def load_runs(cfg: DictConfig, outputs: Path) -> tuple[list[RunInfo], list[str]]:
-    """Every finished run with its simulator and dataset, and one note per run left out
-    (not finished, or failing to load: one bad run must not stop the report of the others)."""
-    run_dirs = find_runs(cfg.runs, outputs)
-    skipped = [_not_evaluated(p, outputs) for p in all_runs(cfg.runs, outputs) if p not in run_dirs]
+    """Every finished run of ``cfg.runs`` (:func:`check_runs`) with its simulator and dataset,
+    and one note per run left out (not finished, or failing to load: one bad run must not stop
+    the report of the others)."""
+    targets = check_runs(cfg.runs)
+    run_dirs = _union(find_runs(t, outputs) for t in targets)
+    found = _union(all_runs(t, outputs) for t in targets)
+    skipped = [_not_evaluated(p, outputs) for p in found if p not in run_dirs]
     infos = []
     for run_dir in run_dirs:
         info = run_info(run_dir, outputs)
@@ -170,6 +192,14 @@ def load_runs(cfg: DictConfig, outputs: Path) -> tuple[list[RunInfo], list[str]]
     return infos, skipped
 
 
+def _union(lists) -> list[Path]:
+    """The folders of ``lists`` in order, each once (a folder named twice, or by two paths)."""
+    folders = {}
+    for folder in (p for paths in lists for p in paths):
+        folders.setdefault(folder.resolve(), folder)
+    return list(folders.values())
+
+
 def _not_evaluated(run_dir: Path, outputs: Path) -> str:
     """The note of a run left out: its status and, if it failed or stopped, why."""
     status = training_runs.run_status(run_dir)
@@ -183,7 +213,11 @@ def pick_video_run(runs: list[RunInfo], wanted: str | None) -> RunInfo | None:
     if wanted:
         match = [r for r in learned if r.name == wanted or str(r.run_dir) == wanted]
         if not match:
-            raise EvalError(f"video_run {wanted} is not among the evaluated runs")
+            names = ", ".join(r.name for r in learned) or "no learned run"
+            raise EvalError(
+                f"video_run {wanted} is not among the evaluated runs ({names}): name one of "
+                "them, or leave video_run=null to film the first baseline run"
+            )
         return match[0]
     order = sorted(
         learned,

@@ -21,13 +21,15 @@ from physgnn import metrics
 from physgnn.data.dataset import read_split
 from physgnn.errors import ConfigError
 from physgnn.evaluation.runs import dataset_of
-from physgnn.files import write_json
+from physgnn.files import claim_folder, write_json
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
 from physgnn.training.runs import load_run
 
+# The default out (conf/sleep_study.yaml), under paths.outputs: physgnn's own folder.
+DEFAULT_OUT = "sleep_study"
 COLUMNS = (
     "scene",
     "sleeping",
@@ -90,9 +92,13 @@ def markdown(rows: list[dict]) -> str:
 
 
 def study(cfg: DictConfig) -> list[dict]:
-    """Load ``cfg.run``, compare sleeping off/on on OOD (c) and the pile; write the JSON."""
+    """Load ``cfg.run``, compare sleeping off/on on OOD (c) and the pile; write the JSON. An
+    ``out`` holding files physgnn did not write is refused before the work
+    (:func:`physgnn.files.claim_folder`; the default folder is physgnn's)."""
     if not cfg.run:
         raise ConfigError("pass run=PATH (a finished training run folder)")
+    out = Path(cfg.out)
+    claim_folder(out, "out", overwrite=None, ours=out == Path(cfg.paths.outputs) / DEFAULT_OUT)
     torch.set_num_threads(int(cfg.threads))
     simulator, run_cfg, _ = load_run(cfg.run)
     dataset = Path(cfg.dataset) if cfg.dataset else dataset_of(run_cfg)
@@ -102,7 +108,6 @@ def study(cfg: DictConfig) -> list[dict]:
     scenes.append(resting_pile(cfg))
     sleep = OmegaConf.to_container(cfg.sleep)
     rows = [row for traj in scenes for row in compare(simulator, traj, sleep)]
-    out = Path(cfg.out)
     meta = {"run": str(cfg.run), "dataset": str(dataset), "sleep": sleep}
     write_json(out / "sleep_study.json", {**meta, "rows": rows})
     return rows

@@ -18,12 +18,15 @@ from physgnn.locks import process_alive
 from physgnn.overrides import given, key_of
 from physgnn.training.datamodule import dataset_identity
 from physgnn.training.layout import check_renamed, dotted_model, key_of_today, model_of_today
+from physgnn.training.runlog import LOG_NAME
 from physgnn.training.runs import RUN_JSON, load_checkpoint, read_run_json, run_status
 
 # A run folder in one of these states is resumed from its last.ckpt when trained again (a
 # requeued cluster job; a run killed outright; a run whose restart had a config mistake); any
 # other run with checkpoints (finished, truncated, diverged, debug) is never trained over.
 RESUMABLE = ("interrupted", "running", "failed")
+# What a training's folder holds before its run.json is written: Hydra's config files and log.
+BEFORE_RUN_JSON = (".hydra", LOG_NAME)
 # Every status physgnn writes into a run.json (physgnn/training/train.py, export.py).
 STATUSES = ("running", "finished", "truncated", "interrupted", "diverged", "failed", "debug")
 
@@ -46,9 +49,10 @@ def check_not_running(run_dir: Path) -> None:
 
 def check_run_dir(cfg: DictConfig, run_dir: Path, overrides: list[str] | None = None) -> None:
     """A ``run_dir`` in use by a live training is refused (:func:`check_not_running`), and so
-    is one holding a run.json physgnn did not write; one holding another run's checkpoints is
-    never trained over: only an interrupted run there is resumed, from its own ``last.ckpt``,
-    with the overrides it was started with (``overrides``: this session's, when known)."""
+    is one holding a run.json physgnn did not write, or other files and no run.json
+    (:func:`check_not_users`); one holding another run's checkpoints is never trained over:
+    only an interrupted run there is resumed, from its own ``last.ckpt``, with the overrides
+    it was started with (``overrides``: this session's, when known)."""
     check_not_running(run_dir)
     check_own_run_json(run_dir)
     if overrides is not None:
@@ -57,6 +61,7 @@ def check_run_dir(cfg: DictConfig, run_dir: Path, overrides: list[str] | None = 
     status = run_status(run_dir) if (run_dir / RUN_JSON).exists() else None
     last = run_dir / "checkpoints" / "last.ckpt"
     if not any((run_dir / "checkpoints").glob("*.ckpt")):
+        check_not_users(run_dir)
         return
     explicit = cfg.get("ckpt_path")
     if status not in RESUMABLE or explicit and Path(explicit).resolve() != last.resolve():
@@ -74,6 +79,21 @@ def check_own_run_json(run_dir: Path) -> None:
         raise ConfigError(
             f"run_dir {run_dir} holds a {RUN_JSON} that physgnn did not write (no training "
             "status in it): choose another run_dir (physgnn never replaces it)"
+        )
+
+
+def check_not_users(run_dir: Path) -> None:
+    """A ``run_dir`` without run.json that holds more than what Hydra writes there before it
+    (:data:`BEFORE_RUN_JSON`) is the user's: refused, nothing in it replaced or appended to.
+    An absent or empty folder is trained in."""
+    if (run_dir / RUN_JSON).exists() or not run_dir.is_dir():
+        return
+    others = sorted(p.name for p in run_dir.iterdir() if p.name not in BEFORE_RUN_JSON)
+    if others:
+        more = f" and {len(others) - 1} more" if len(others) > 1 else ""
+        raise ConfigError(
+            f"run_dir {run_dir} is a folder with files that physgnn did not write ({others[0]}"
+            f"{more}; no {RUN_JSON}): choose another run_dir (a new or empty folder)"
         )
 
 
