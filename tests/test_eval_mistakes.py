@@ -1,5 +1,5 @@
 """``make eval``'s mistakes of value: each one line naming the key, the value given and the fix,
-before any run or dataset is read (:func:`physgnn.evaluation.evaluate.check_eval_values`); a
+before any run or dataset is read (:func:`physgnn.evaluation.eval_checks.check_eval_values`); a
 list of run folders is evaluated, each run once."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from physgnn import CONF_DIR
 from physgnn import eval as eval_command
 from physgnn.errors import ConfigError
 from physgnn.evaluation import bounce, freefall
-from physgnn.evaluation.evaluate import check_eval_values
+from physgnn.evaluation.eval_checks import check_eval_values
 from physgnn.evaluation.runs import EvalError
 from physgnn.report.table import read_csv
 

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import multiprocessing as mp
 from types import SimpleNamespace
@@ -15,7 +16,9 @@ from omegaconf import OmegaConf
 from physgnn.data.dataset import read_split
 from physgnn.errors import ConfigError, forked_worker
 from physgnn.evaluation import same_work as engine_work
+from physgnn.evaluation import turns
 from physgnn.evaluation.runs import RunInfo
+from physgnn.models.baselines import GravityOnlySimulator
 from physgnn.physics.trajectory import FRAME_KEYS
 from physgnn.report import same_work
 from physgnn.report.format import fmt_stat
@@ -247,3 +250,40 @@ def test_forked_workers_run_torch_after_the_parent_ran_it_on_two_threads():
     finally:
         torch.set_num_threads(threads)
     assert got == [(1, 400_000.0)] * 2
+
+
+def test_turns_time_each_learned_rollout_and_pybullet_again_and_keep_the_scores(tiny, tiny_dataset):
+    job = RunInfo(
+        name="runs/g",
+        experiment="baseline",
+        run_dir=tiny_dataset,
+        dataset=tiny_dataset,
+        simulator=GravityOnlySimulator(),
+    )
+    engines = engine_work.engine_jobs([job], several=False)
+    fps = turns.timed_in_turns([(job, 1)], engines, tiny, ([1, 2], 1, 2))
+    names = ("runs/g", "pybullet-1", "pybullet-2")
+    assert set(fps) == {(n, s) for n in names for s in ("test", "ood")}
+    assert all(rate > 0 for rate in fps.values())
+    rows = [row("runs/g", "baseline", 0.5, 1.0, split=s) for s in ("test", "ood")]
+    rows.append(row("static", "static", 1.0, 3.0))
+    out = turns.retimed(rows, fps)
+    assert [r["fps"] for r in out] == [fps["runs/g", "test"], fps["runs/g", "ood"], 3.0]
+    assert [r["mse20"] for r in out] == [0.5, 0.5, 1.0]
+
+
+def test_a_rows_rate_in_turns_is_the_median_of_its_rounds(tiny, tiny_dataset, monkeypatch):
+    rates = itertools.cycle([1.0, 50.0, 5.0, 3.0, 60.0, 2.0])  # learned, pybullet; 3 rounds
+    monkeypatch.setattr(turns, "predict_split", lambda *a: [SimpleNamespace(fps=next(rates))])
+    monkeypatch.setattr(turns, "engine_split", lambda *a: [SimpleNamespace(fps=next(rates))])
+    job = learned_run(tiny_dataset, 0)
+    engines = engine_work.engine_jobs([job], several=False)
+    fps = turns.timed_in_turns([(job, 1)], engines, tiny, ([1], 1, 3))
+    assert fps["runs/x", "test"] == fps["runs/x", "ood"] == 5.0  # of 1, 5, 60
+    assert fps["pybullet-1", "test"] == fps["pybullet-1", "ood"] == 3.0  # of 50, 3, 2
+
+
+def test_turns_are_a_whole_number_from_zero():
+    assert turns.check_turns(None) == 0 and turns.check_turns({"turns": 2}) == 2
+    with pytest.raises(ConfigError, match=r"^pybullet.turns must be a whole number >= 0"):
+        turns.check_turns({"turns": -1})

@@ -18,23 +18,20 @@ A ``report_dir`` holding files physgnn did not write is refused unless ``overwri
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
 
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.data.dataset import write_split
-from physgnn.errors import ConfigError
-from physgnn.evaluation import learned_settings, onestep, rerun_log, same_work
+from physgnn.evaluation import learned_settings, onestep, rerun_log, same_work, turns
 from physgnn.evaluation.bounce import bounce_rows
 from physgnn.evaluation.bounce import check_settings as bounce_settings
-from physgnn.evaluation.freefall import check_frames, freefall_rows
+from physgnn.evaluation.eval_checks import check_eval_values, check_seed_frames
 from physgnn.evaluation.freefall import check_settings as freefall_settings
+from physgnn.evaluation.freefall import freefall_rows
 from physgnn.evaluation.invariance import invariance_rows
 from physgnn.evaluation.rollouts import (
     Collected,
-    check_hard,
-    check_rollout,
     hard_rows,
     rest_tol,
     roll_all,
@@ -46,7 +43,6 @@ from physgnn.evaluation.rollouts import (
 from physgnn.evaluation.runs import (
     EvalError,
     RunInfo,
-    check_runs,
     constrained_variants,
     load_datasets,
     load_runs,
@@ -56,35 +52,11 @@ from physgnn.evaluation.runs import (
 )
 from physgnn.evaluation.video3d import render_side_by_side
 from physgnn.files import claim_folder, staged_outputs
-from physgnn.metrics import check_tolerance
-from physgnn.models.protocol import hooks_of
-from physgnn.ranges import FLAG, Allowed, whole
 from physgnn.report import bounce, figures, freefall, invariance, stability, table
 from physgnn.report import onestep as onestep_report
 from physgnn.report.document import write_report
 from physgnn.rollout import VELOCITY
 
-# The eval's switches: true or false (``save_rollouts=maybe`` is refused, not taken as true).
-FLAGS = (
-    "overwrite",
-    "videos",
-    "save_rollouts",
-    "sleeping_compare",
-    "stability",
-    "compile",
-    "rerun",
-)
-# The eval's other values (conf/eval.yaml)
-VALUES = {
-    "report_dir": Allowed(str, what="a folder", example="outputs/report"),
-    "dataset": Allowed(str, also=(None,), what="null: each run's own", example="outputs/data/tiny"),
-    "max_frames": whole(2, also=(None,), what="whole trajectories", example=100, exact=True),
-    "energy_runs": whole(0, what="learned runs drawn in the OOD energy figure", example=3),
-    "video_frames": whole(1, what="frames of a video at most", example=60),
-}
-# Groups of settings measured only when given (null: not measured)
-GROUPS = ("pybullet", "onestep", "freefall", "bounce", "invariance")
-REST_FRAMES = whole(2, what="frames of the resting grids, the first the start", example=2000)
 # What an eval writes into its report_dir (replaced whole by the next eval).
 REPORT_OUTPUTS = (
     "report.md",
@@ -119,63 +91,6 @@ def evaluate(cfg: DictConfig) -> Path:
     return report_dir / "report.md"
 
 
-def check_eval_values(cfg: DictConfig) -> None:
-    """Every value of ``cfg`` before any work, each refused in one line naming its key:
-    ``runs`` (:func:`~physgnn.evaluation.runs.check_runs`), the :data:`VALUES` (``max_frames``
-    null or a whole number >= 2: a rollout needs frames to predict), ``tol`` a number >= 0,
-    each switch true or false, ``rollout`` (its ``threads`` before ``pybullet.processes``,
-    which is it unless given), ``hard`` and the :data:`GROUPS`, ``learned_settings`` null or
-    its settings' knobs."""
-    check_runs(cfg.get("runs"))
-    for key, allowed in VALUES.items():
-        allowed.check(key, cfg.get(key))
-    check_tolerance(cfg.get("tol"), ConfigError)
-    for key in FLAGS:
-        FLAG.check(key, cfg.get(key))
-    check_rollout(cfg)
-    check_hard(cfg)
-    check_groups(cfg)
-    learned_settings.check_settings(cfg.get("learned_settings"))
-
-
-def check_groups(cfg: DictConfig) -> None:
-    """Each of the :data:`GROUPS` null or a mapping of its settings, each checked by its own
-    module (``invariance``: ``rest_frames``, :data:`REST_FRAMES`)."""
-    for key in GROUPS:
-        if cfg.get(key) is not None and not isinstance(cfg.get(key), Mapping):
-            raise ConfigError(
-                f"{key} must be null (not measured) or a mapping of its settings, got "
-                f"{cfg.get(key)!r} (e.g. {key}=null)"
-            )
-    same_work.check_settings(cfg.get("pybullet"))
-    onestep.check_settings(cfg.get("onestep"))
-    freefall_settings(cfg.get("freefall"))
-    bounce_settings(cfg.get("bounce"))
-    checks = cfg.get("invariance") or {}
-    if not set(checks) <= {"rest_frames"}:
-        raise ConfigError(
-            f"invariance takes rest_frames only, got {checks!r} (the default: "
-            "invariance.rest_frames=2000)"
-        )
-    if "rest_frames" in checks:
-        REST_FRAMES.check("invariance.rest_frames", checks["rest_frames"])
-
-
-def check_seed_frames(cfg: DictConfig, runs: list[RunInfo]) -> None:
-    """Each learned run has frames to predict in every fall of ``freefall`` and the resting
-    grids of ``invariance``: more than its H + 1 seed frames (else a row would measure the
-    seed, not a prediction)."""
-    falls = freefall_settings(cfg.get("freefall"))
-    rest = (cfg.get("invariance") or {}).get("rest_frames")
-    for run in (r for r in runs if r.run_dir is not None):
-        H = hooks_of(run.simulator).history or 0
-        if falls is not None:
-            check_frames(*falls, H, run.name)
-        if rest is not None:
-            what = f"run {run.name} starts from H + 1 = {H + 1} frames, then one to predict"
-            whole(H + 2, what=what, example=2000).check("invariance.rest_frames", rest)
-
-
 def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
     """The eval itself, written into ``report_dir`` (the staging folder)."""
     outputs = Path(cfg.paths.outputs)
@@ -199,8 +114,10 @@ def _evaluate_into(cfg: DictConfig, report_dir: Path) -> Path:
     collected.saved = {} if cfg.get("save_rollouts") else None
     threads = rollout_threads(cfg)
     out = roll_all(jobs, data, collected, settings, batched, threads)
-    out.rows += learned_settings.eval_rows(cfg, runs, data, settings, batched)
-    out.rows += engine_rows(cfg, runs, data, batched)
+    rows, setting_jobs = learned_settings.eval_rows(cfg, runs, data, settings, batched)
+    out.rows += rows + engine_rows(cfg, runs, data, batched)
+    if batched:
+        out.rows = in_turns(cfg, runs + setting_jobs, data, settings, out.rows)
     if out.saved:
         write_rollouts(report_dir / "rollouts", out.saved)
     if film is not None and cfg.sleeping_compare and settings["sleep"] is False:
@@ -238,6 +155,27 @@ def engine_rows(cfg: DictConfig, runs: list[RunInfo], data: dict, batched: bool)
     substeps, processes = settings
     jobs = same_work.engine_jobs(runs, len(data) > 1)
     return same_work.engine_rows(jobs, data, substeps, processes if batched else None, cfg.tol)
+
+
+def in_turns(
+    cfg: DictConfig, learned: list[RunInfo], data: dict, settings: dict, rows: list[dict]
+) -> list[dict]:
+    """``rows`` with the learned and pybullet frames/s taken again in ``pybullet.turns``
+    rounds (:mod:`physgnn.evaluation.turns`); as they are without a ``pybullet`` config or
+    with ``turns: 0``. ``learned``: the runs and setting jobs (a setting's own threads)."""
+    engine = same_work.check_settings(cfg.get("pybullet"))
+    rounds = turns.check_turns(cfg.get("pybullet"))
+    if engine is None or not rounds:
+        return rows
+    threads = rollout_threads(cfg)
+    timed = [
+        (job, job.extra.get("knobs", {}).get("threads", threads))
+        for job in learned
+        if job.simulator is not None
+    ]
+    engines = same_work.engine_jobs(learned, len(data) > 1)
+    fps = turns.timed_in_turns(timed, engines, data, (*engine, rounds), settings)
+    return turns.retimed(rows, fps)
 
 
 def onestep_rows(cfg: DictConfig, runs: list[RunInfo], data: dict) -> list[dict]:

@@ -88,14 +88,16 @@ def setting_rows(
     return rows
 
 
-def eval_rows(cfg: DictConfig, runs: list[RunInfo], data: dict, settings: dict, batched: bool):
+def eval_rows(
+    cfg: DictConfig, runs: list[RunInfo], data: dict, settings: dict, batched: bool
+) -> tuple[list[dict], list[RunInfo]]:
     """The rows of every trained run of ``runs`` at each of ``cfg.learned_settings``
-    (:func:`setting_jobs`, :func:`setting_rows`); ``settings``: the rollout's keyword
-    arguments, ``batched``: ``rollout.batch_scenes``; threads: ``rollout.threads`` unless a
-    setting names its own. None with ``learned_settings`` null or ``{}``."""
+    (:func:`setting_jobs`, :func:`setting_rows`) and those jobs; ``settings``: the rollout's
+    keyword arguments, ``batched``: ``rollout.batch_scenes``; threads: ``rollout.threads``
+    unless a setting names its own. None with ``learned_settings`` null or ``{}``."""
     chosen = check_settings(cfg.get(KEY))
     if not chosen:
-        return []
+        return [], []
     cache = OmegaConf.select(cfg, "paths.compile_cache")
     jobs = setting_jobs(runs, chosen, bool(cfg.get("compile")), cache, rollout_threads(cfg))
-    return setting_rows(jobs, data, float(cfg.tol), settings, batched)
+    return setting_rows(jobs, data, float(cfg.tol), settings, batched), jobs

@@ -6,7 +6,6 @@ again with sleeping spheres. Truth and rollouts alike are
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,59 +20,8 @@ from physgnn.groundtruth.hard import hard_split
 from physgnn.models.capture import is_compiled
 from physgnn.models.settings import ALLOWED, torch_threads
 from physgnn.physics.trajectory import Trajectory
-from physgnn.ranges import FLAG, Allowed, check_seed, number, whole
 from physgnn.report.table import COLUMNS, SLEEP_SCENE, SLEEP_SUFFIX
 from physgnn.rollout import rollout
-
-# The eval's rollout settings besides threads (conf/eval.yaml: rollout), and its hard scenes'
-CONSTRAINTS = whole(0, also=(None,), what="iterations of the constraint stage; 0: none", example=0)
-SLEEP = {
-    "threshold": number(0, what="m/s", example=0.05),
-    "k": whole(1, what="still frames", example=3),
-    "touch": number(0, what="a fraction of the radius", example=0.1),
-}
-HARD_DIR = Allowed(str, what="a folder", example="outputs/data/hard")
-REST_TOL = number(0, above=True, what="radii", example=0.01)
-
-
-def check_rollout(cfg: DictConfig) -> None:
-    """``cfg.rollout``: ``threads`` first (``pybullet.processes`` is it unless given), the
-    switches, ``constraints`` and ``sleep`` (null or :data:`SLEEP`'s keys), each refused in
-    one line naming its key."""
-    r = cfg.get("rollout")
-    if not isinstance(r, Mapping):
-        raise ConfigError(
-            "rollout must be the rollouts' settings (batch_scenes, threads, constraints, "
-            f"sleeping, sleep), got {r!r} (set one of them instead, e.g. rollout.threads=1)"
-        )
-    rollout_threads(cfg)
-    FLAG.check("rollout.batch_scenes", r.get("batch_scenes", True))
-    FLAG.check("rollout.sleeping", r.get("sleeping", False))
-    CONSTRAINTS.check("rollout.constraints", r.get("constraints"))
-    sleep = r.get("sleep")
-    if sleep is not None and (not isinstance(sleep, Mapping) or not set(sleep) <= set(SLEEP)):
-        raise ConfigError(
-            f"rollout.sleep must be null or a mapping of {', '.join(SLEEP)}, got {sleep!r} "
-            "(the default: rollout.sleep={threshold: 0.05, k: 3, touch: 0.1})"
-        )
-    for key in sleep or {}:
-        SLEEP[key].check(f"rollout.sleep.{key}", sleep[key])
-
-
-def check_hard(cfg: DictConfig) -> None:
-    """``cfg.hard``, the hard scenes of the stability section: its folder, seed and rest
-    tolerance (null only with ``stability=false``)."""
-    hard = cfg.get("hard")
-    if hard is None and not cfg.get("stability"):
-        return
-    if not isinstance(hard, Mapping):
-        raise ConfigError(
-            f"hard must be the hard scenes' settings (null only with stability=false), got "
-            f"{hard!r} (stability=false leaves the stability section out)"
-        )
-    HARD_DIR.check("hard.dir", hard.get("dir"))
-    check_seed(hard.get("seed"), "hard.seed", "conf/eval.yaml: hard.seed")
-    REST_TOL.check("hard.rest_tol", hard.get("rest_tol"))
 
 
 def sleep_settings(cfg: DictConfig) -> dict:

@@ -30,10 +30,12 @@ def pareto_section(rows: list[dict], fig_dir: Path, root: Path) -> str:
             "the same metrics against the same truth; means over the rollouts. frames/s: as the "
             "learned rollouts were timed (batched scenes: pybullet runs each split's scenes in "
             "pybullet.processes processes, as many as the learned rollouts' threads unless "
-            "set, every row the split's scene-frames per second; one scene at a time: both in "
-            "one process; a simulator's frames/s: its rows' frames over their seconds, so "
-            "that ms/frame is the mean cost of a frame); threads: the cores a row ran on (a "
-            "learned rollout's torch threads, the eval's rollout.threads or its setting's; "
+            "set, every row the split's scene-frames per second, each split timed again in "
+            "pybullet.turns rounds of every learned rollout then every pybullet setting, the "
+            "median; one scene at a time: both in one process; a simulator's frames/s: its "
+            "rows' frames over their seconds, so that ms/frame is the mean cost of a frame); "
+            "threads: the cores a row ran on (a learned rollout's torch threads, the eval's "
+            "rollout.threads or its setting's; "
             "pybullet's processes). pybullet's own curve on the bench pile is in the bench "
             "report (bench.md).",
             same_work.section(rows),
