@@ -12,7 +12,7 @@ import torch
 from omegaconf import OmegaConf
 
 from physgnn.cli import check_outputs_env, command
-from physgnn.data.dataset import DatasetError, generate_hint
+from physgnn.data.dataset import DatasetError, generate_hint, write_marker
 from physgnn.errors import ConfigError
 from physgnn.training.build import check_trainer_config
 from physgnn.training.datamodule import StatePairDataModule
@@ -26,7 +26,7 @@ def test_a_preset_folder_is_named_by_its_preset_with_overwrite_when_it_exists(
     assert generate_hint(folder) == (
         "run `make data PRESET=small` or `python -m physgnn.generate data=small`"
     )
-    folder.mkdir(parents=True)
+    write_marker(folder, "small")  # a dataset: generate replaces it with overwrite=true
     (folder / "train.h5").write_text("x")
     assert generate_hint(folder) == (
         "run `make data PRESET=small ARGS=overwrite=true` or "

@@ -19,25 +19,38 @@ from omegaconf import DictConfig, OmegaConf
 
 from physgnn.ablation.jobs import StudyError
 from physgnn.ablation.runner import lost_job, run_job
+from physgnn.ranges import one_of, whole
+from physgnn.training.ranges import closest
+
+# What runs the jobs, and how many at a time on this machine (checked before any job is listed)
+LAUNCHERS = one_of("local", "slurm", what="this machine, or one SLURM job per run")
+N_JOBS = whole(1, what="jobs at a time on this machine", example=2)
+
+
+def check_launcher(launcher: DictConfig) -> None:
+    """``launcher.name`` is one of :data:`LAUNCHERS` and, for ``local``, ``launcher.n_jobs`` a
+    whole number >= 1, else one line (:class:`StudyError`)."""
+    name = launcher.get("name")
+    fix = closest("launcher.name", name, LAUNCHERS.choices)
+    LAUNCHERS.check("launcher.name", name, fix, StudyError)
+    if launcher.name == "local":
+        N_JOBS.check("launcher.n_jobs", launcher.get("n_jobs"), error=StudyError)
 
 
 def launch(specs: list[dict], launcher: DictConfig, log_dir: Path) -> Iterator[dict]:
     """Yield the record of every spec as its job ends."""
+    check_launcher(launcher)
     if not specs:
         return iter(())
     if launcher.name == "local":
         return _local(specs, int(launcher.n_jobs))
-    if launcher.name == "slurm":
-        return _slurm(specs, launcher, log_dir)
-    raise StudyError(f"launcher.name must be local or slurm, got '{launcher.name}'")
+    return _slurm(specs, launcher, log_dir)
 
 
 def _local(specs: list[dict], n_jobs: int) -> Iterator[dict]:
     """At most ``n_jobs`` job processes (``python -m physgnn.ablation.runner``) at a time, each
     in its own process group; on Ctrl-C or SIGTERM every running job gets SIGINT (its training
     saves ``last.ckpt`` and resumes at the next ``make study``) and is waited for."""
-    if n_jobs < 1:
-        raise StudyError(f"launcher.n_jobs must be >= 1, got {n_jobs}")
     queue, running = list(specs), []
     try:
         while queue or running:

@@ -7,12 +7,20 @@ import subprocess
 import time
 from pathlib import Path
 
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
-from physgnn.ablation.jobs import Job, budget_overrides, study_budget, study_configs, study_jobs
-from physgnn.ablation.launch import launch
+from physgnn import CONF_DIR
+from physgnn.ablation.jobs import (
+    Job,
+    StudyError,
+    budget_overrides,
+    study_budget,
+    study_configs,
+    study_jobs,
+)
+from physgnn.ablation.launch import check_launcher, launch
 from physgnn.ablation.registry import (
     append_record,
     budget_id,
@@ -26,7 +34,9 @@ from physgnn.data.dataset import is_dataset
 from physgnn.errors import PhysgnnError
 from physgnn.groundtruth.generate import generate
 from physgnn.overrides import given
+from physgnn.ranges import SEED, one_of
 from physgnn.training.layout import key_of_today
+from physgnn.training.ranges import closest
 
 
 class StudyFailed(PhysgnnError, RuntimeError):
@@ -99,15 +109,31 @@ def _minutes(seconds: float) -> str:
     return f"{seconds / 60:.0f} min" if seconds >= 90 else f"{seconds:.0f} s"
 
 
+def check_study(cfg: DictConfig) -> None:
+    """The study's own values, before any job is listed (a dry run included): ``seeds`` a list
+    of seeds, ``preset`` a data preset of conf/data/ and the launcher's (each one line)."""
+    seeds = cfg.get("seeds")
+    if not OmegaConf.is_list(seeds) or len(seeds) == 0:
+        raise StudyError(
+            f"seeds must be a list of at least one seed, got {seeds!r} (e.g. seeds=[0,1,2])"
+        )
+    for i, seed in enumerate(seeds):
+        SEED.check(f"seeds[{i}]", seed, "e.g. seeds=[0,1,2]", StudyError)
+    presets = sorted(p.stem for p in (Path(CONF_DIR) / "data").glob("*.yaml"))
+    allowed = one_of(*presets, what="the training data: conf/data/<preset>.yaml")
+    preset = cfg.get("preset")
+    allowed.check("preset", preset, closest("preset", preset, allowed.choices), StudyError)
+    check_launcher(cfg.launcher)
+
+
 def run_study(cfg: DictConfig) -> Path | None:
     """Run what is left of the study; returns the report's path (None for a dry run)."""
+    check_study(cfg)
     console = Console(soft_wrap=True)
     configs = study_configs(list(cfg.sweeps))
     jobs = study_jobs(configs, list(cfg.seeds))
-    common = budget_overrides(cfg.budget) + [
-        f"data={cfg.preset}",
-        f"paths.outputs={cfg.paths.outputs}",
-    ]
+    outputs = f"paths.outputs={cfg.paths.outputs}"
+    common = [*budget_overrides(cfg.budget), f"data={cfg.preset}", outputs]
     rev, budget = commit(), study_budget(cfg)
     specs = [job_spec(job, cfg, common, rev, budget) for job in jobs]
     records = read_registry(cfg.registry)

@@ -47,14 +47,22 @@ def generate_hint(folder: str | Path, preset: str | None = None) -> str:
     """How to (re)make the dataset folder ``folder``: ``run `make data PRESET=x` or `...``
     when it is where that writes (:func:`default_data_dir` of a preset of conf/data/), else the
     generate command with ``data.dir=`` (``preset``, else the one its marker names, else its
-    name when a preset's, else small); with ``overwrite=true`` when it exists."""
+    name when a preset's, else small); with ``overwrite=true`` when it is a dataset (its
+    marker: generate replaces no other folder). A folder with files and no marker is not a
+    dataset: point data.dir at one, or generate into a new folder."""
     folder = Path(folder)
-    again = " overwrite=true" if folder.is_dir() and any(folder.iterdir()) else ""
     preset_file = Path(CONF_DIR) / "data" / f"{folder.name}.yaml"
+    preset = preset or dataset_preset(folder) or (folder.name if preset_file.is_file() else "small")
+    if folder.is_dir() and any(folder.iterdir()) and not is_dataset(folder):
+        return (
+            f"{folder} is not a dataset (no {DATASET_MARKER}): point data.dir at a dataset, or "
+            f"generate into a new folder (`python -m physgnn.generate data={preset} "
+            "data.dir=<a new folder>`)"
+        )
+    again = " overwrite=true" if is_dataset(folder) else ""
     if preset_file.is_file() and folder.resolve() == default_data_dir(folder.name).resolve():
         make = f"make data PRESET={folder.name}" + (f" ARGS={again.strip()}" if again else "")
         return f"run `{make}` or `python -m physgnn.generate data={folder.name}{again}`"
-    preset = preset or dataset_preset(folder) or (folder.name if preset_file.is_file() else "small")
     return f"run `python -m physgnn.generate data={preset} data.dir={folder}{again}`"
 
 

@@ -32,6 +32,7 @@ from physgnn.groundtruth.layouts import (
 from physgnn.groundtruth.resting import ball_vectors, rest_layout
 from physgnn.groundtruth.scenefile import scene_from_dict
 from physgnn.physics.scene import STATIC, Scene, SceneError
+from physgnn.ranges import number, whole
 
 
 def _contact_scene(c: dict, rng: np.random.Generator) -> Scene | None:
@@ -269,3 +270,21 @@ def build_scene(cfg: Mapping | DictConfig, rng: np.random.Generator) -> Scene:
         return BUILDERS[name](c, rng)
     except KeyError as e:
         raise SceneError(f"scene '{name}': missing config key {e}") from None
+
+
+# A trajectory's clock, checked naming its key (the scene's own check names none)
+CLOCK = {
+    "dt": number(0, above=True, what="s per frame", example=0.1),
+    "n_frames": whole(2, what="frames of a trajectory: the first is the start", example=300),
+}
+
+
+def check_clock(data: Mapping | DictConfig) -> None:
+    """``dt`` and ``n_frames`` of each scene of the preset ``data`` (``data.scene``,
+    ``data.fit_scene``, ``data.ood.<name>``) in :data:`CLOCK`, else one line naming the key."""
+    scenes = {"data.scene": data.get("scene"), "data.fit_scene": data.get("fit_scene")}
+    scenes |= {f"data.ood.{name}": scene for name, scene in (data.get("ood") or {}).items()}
+    for where, scene in scenes.items():
+        for key, allowed in CLOCK.items():
+            if scene is not None and key in scene:
+                allowed.check(f"{where}.{key}", scene[key])

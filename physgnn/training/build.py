@@ -11,7 +11,9 @@ into that strategy; a DDP strategy that does not look for them is refused in one
 from __future__ import annotations
 
 import logging
+import re
 import typing
+from datetime import timedelta
 
 import lightning as L
 import torch
@@ -22,14 +24,16 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import InterpolationResolutionError
 
 from physgnn.errors import ConfigError
-from physgnn.ranges import whole
+from physgnn.ranges import check_seed, whole
 from physgnn.training.checkpoint_io import AtomicCheckpointIO
 from physgnn.training.checks import (
     check_arguments,
     check_budget,
+    check_ckpt_path,
     check_monitors,
     check_optimizer,
 )
+from physgnn.training.ranges import check_range
 from physgnn.training.schedule import check_scheduler
 from physgnn.training.tracking import log_config
 
@@ -37,17 +41,25 @@ NUMERIC_TRAINER_KEYS = ("max_epochs", "max_steps", "gradient_clip_val", "log_eve
 FINDS_UNUSED = "_find_unused_parameters_true"
 # What Lightning's Trainer takes for precision (it fails deep inside, wrapped by Hydra, else)
 PRECISIONS = [v for part in typing.get_args(_PRECISION_INPUT) for v in typing.get_args(part)]
+# What Lightning's Timer takes for max_time: a string DD:HH:MM:SS, or a mapping of timedelta's
+DURATION = re.compile(r"(\d+):(\d\d):(\d\d):(\d\d)")
+DEVICE_LIST = re.compile(r"\d+(,\d+)*,?")  # "0,1", "0,": device indices
 
 
 log = logging.getLogger(__name__)
 
 
 def check_trainer_config(trainer_cfg: DictConfig) -> None:
-    """Catch a non-numeric value before Lightning fails on it deep inside ``fit``."""
+    """Catch a value Lightning would fail on deep inside ``fit`` (or that Hydra's "Error in
+    call to target" would wrap), or would take silently: a non-numeric number, the devices, the
+    clock guard, the gradient clipping, the accelerator, the precision and the strategy."""
     for key in NUMERIC_TRAINER_KEYS:
         value = trainer_cfg.get(key)
         if value is not None and not isinstance(value, int | float):
             raise ConfigError(f"trainer.{key} must be a number, got {value!r}")
+    check_range("trainer.gradient_clip_val", trainer_cfg.get("gradient_clip_val"))
+    check_devices(trainer_cfg.get("devices"), trainer_cfg.get("accelerator"))
+    check_max_time(trainer_cfg.get("max_time"))
     if trainer_cfg.get("accelerator") in ("gpu", "cuda") and not torch.cuda.is_available():
         raise ConfigError(
             f"trainer.accelerator={trainer_cfg.accelerator} needs a CUDA GPU and torch sees "
@@ -67,6 +79,74 @@ def check_trainer_config(trainer_cfg: DictConfig) -> None:
                 f"network skips the MLPs a batch lacks): leave trainer.strategy=auto (DDP is "
                 f"chosen for several devices) or set trainer.strategy={fix}"
             )
+
+
+def check_devices(devices, accelerator=None) -> None:
+    """``trainer.devices`` is what Lightning takes: a whole number >= 1 or ``auto``; besides,
+    on an accelerator other than the CPU, -1 (all GPUs), a list of device indices or a string
+    of them (``"0,1"``)."""
+    cpu = accelerator == "cpu"
+    if devices is None or devices == "auto" or _names_devices(devices, cpu):
+        return
+    more = "" if cpu else ", -1 (all GPUs), or a list of device indices ([0, 1] or '0,1')"
+    where = " on the CPU (trainer.accelerator=cpu)" if cpu else ""
+    raise ConfigError(
+        f"trainer.devices must be a whole number >= 1, auto{more}{where}, got "
+        f"{_written(devices)!r} (e.g. trainer.devices=1)"
+    )
+
+
+def _names_devices(devices, cpu: bool) -> bool:
+    """Whether ``devices`` (not ``auto``) names at least one device (``cpu``: a count only)."""
+    if OmegaConf.is_list(devices) or isinstance(devices, list | tuple):
+        return not cpu and len(devices) > 0 and all(_whole(d) and d >= 0 for d in devices)
+    if isinstance(devices, str):
+        text = devices.replace(" ", "")
+        if not cpu and "," in text and DEVICE_LIST.fullmatch(text):
+            return True
+        devices = int(text) if re.fullmatch(r"-?\d+", text) else None
+    return _whole(devices) and (devices >= 1 or devices == -1 and not cpu)
+
+
+def _whole(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _written(value):
+    """``value`` as plain Python (a list, not a ListConfig), for a message."""
+    return OmegaConf.to_container(value) if OmegaConf.is_config(value) else value
+
+
+def check_max_time(max_time) -> None:
+    """``trainer.max_time`` (the clock guard) is null or a duration Lightning's Timer takes, of
+    more than 0 s: ``DD:HH:MM:SS``, or a mapping of ``days``, ``hours``, ``minutes``,
+    ``seconds`` ... (Python's ``timedelta``)."""
+    if max_time is None:
+        return
+    value = _written(max_time)
+    seconds = _seconds(value)
+    if seconds is None or seconds <= 0:
+        raise ConfigError(
+            "trainer.max_time must be a duration > 0 written DD:HH:MM:SS (days, hours, minutes, "
+            "seconds) or a mapping of days, hours, minutes, seconds, or null (no clock guard), "
+            f"got {value!r} (e.g. trainer.max_time=00:04:00:00: 4 hours)"
+        )
+
+
+def _seconds(value) -> float | None:
+    """The seconds of a duration of :func:`check_max_time`, None when it is none."""
+    if isinstance(value, str):
+        found = DURATION.fullmatch(value.strip())
+        if not found:
+            return None
+        days, hours, minutes, seconds = map(int, found.groups())
+        return timedelta(days=days, hours=hours, minutes=minutes, seconds=seconds).total_seconds()
+    if isinstance(value, dict):
+        try:
+            return timedelta(**value).total_seconds()
+        except TypeError:  # a key timedelta does not take, a value not a number
+            return None
+    return None
 
 
 def several_processes(trainer_cfg: DictConfig) -> bool:
@@ -116,6 +196,15 @@ def check_val_rollout(cfg: DictConfig) -> None:
         whole(least[key], exact=True).check(name, value)
 
 
+def check_rollout_values(cfg: DictConfig) -> None:
+    """The rollout callback's other values (``every_n_epochs``, the score's weights) in their
+    :data:`~physgnn.training.ranges.RANGES`."""
+    node = OmegaConf.select(cfg, "callbacks.rollout")
+    for key in ("every_n_epochs", "w_depth", "w_tunnel", "w_rest"):
+        if node is not None and key in node:
+            check_range(f"callbacks.rollout.{key}", node[key])
+
+
 def check_trainer(cfg: DictConfig) -> None:
     """The trainer's values and the callbacks' monitors and sizes (before Lightning fails on
     them)."""
@@ -123,6 +212,20 @@ def check_trainer(cfg: DictConfig) -> None:
     check_budget(cfg.trainer)
     check_monitors(cfg.get("callbacks"))
     check_val_rollout(cfg)
+    check_rollout_values(cfg)
+
+
+def check_config(cfg: DictConfig) -> None:
+    """Every value of a composed training config that :func:`build` checks, and the seed and
+    the checkpoint it starts from: what can be told wrong before anything is built (Hydra's
+    config too, before Hydra makes the run folder)."""
+    check_arguments(cfg)
+    check_optimizer(cfg.get("lit"))
+    check_scheduler(cfg.get("lit"))
+    check_trainer(cfg)
+    check_matmul_precision(cfg.get("matmul_precision", "highest"))
+    check_seed(cfg.get("seed"))
+    check_ckpt_path(cfg.get("ckpt_path"))
 
 
 def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
@@ -150,11 +253,8 @@ def build_trainer(cfg: DictConfig, extra_callbacks=()) -> L.Trainer:
 
 def build(cfg: DictConfig, extra_callbacks=()):
     """``(datamodule, LitSimulator, trainer)`` of a composed training config, every value
-    checked before anything is built."""
-    check_arguments(cfg)
-    check_optimizer(cfg.get("lit"))
-    check_scheduler(cfg.get("lit"))
-    check_trainer(cfg)
+    checked before anything is built (:func:`check_config`)."""
+    check_config(cfg)
     set_matmul_precision(cfg.get("matmul_precision", "highest"))
     datamodule = instantiate(cfg.datamodule)
     simulator = instantiate(cfg.model, stats=datamodule.stats())
@@ -167,13 +267,18 @@ def build(cfg: DictConfig, extra_callbacks=()):
 MATMUL_PRECISIONS = ("highest", "high", "medium")
 
 
-def set_matmul_precision(value: str) -> None:
-    """``torch.set_float32_matmul_precision``: ``high`` lets fp32 matrix products use TF32 on
-    GPUs that have it; a one-line error for another value."""
+def check_matmul_precision(value: str) -> None:
+    """``matmul_precision`` is one of :data:`MATMUL_PRECISIONS`, else one line."""
     if value not in MATMUL_PRECISIONS:
         raise ConfigError(
             f"matmul_precision must be one of {list(MATMUL_PRECISIONS)}, got {value!r}"
         )
+
+
+def set_matmul_precision(value: str) -> None:
+    """``torch.set_float32_matmul_precision``: ``high`` lets fp32 matrix products use TF32 on
+    GPUs that have it; a one-line error for another value."""
+    check_matmul_precision(value)
     torch.set_float32_matmul_precision(value)
 
 

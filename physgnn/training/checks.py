@@ -1,7 +1,8 @@
 """Checks of a training config's values before anything is built or trained, each failing in
 one line that names the key: values against the types and ranges of the constructor arguments
-they feed, the learning rate, the step budget and the callbacks' monitors. The run folder and
-the checkpoint a training starts from are checked by :mod:`physgnn.training.resume_checks`."""
+they feed, the learning rate, the step budget, the callbacks' monitors and that ``ckpt_path``
+names a checkpoint. The run folder and whether the checkpoint a training starts from reads
+whole and fits the model are checked by :mod:`physgnn.training.resume_checks`."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import dataclasses
 import inspect
 import types
 import typing
+from pathlib import Path
 
 from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
@@ -40,6 +42,8 @@ PASSED = (
     "progress",
     "last_epoch",
 )
+# The first bytes of a file torch.save writes: a zip, or a pickle (before torch 1.6)
+CHECKPOINT_MAGIC = (b"PK", b"\x80")
 LEARNING_RATE = number(0, above=True)
 BUDGET = whole(1, also=(-1, None), what="-1 or null: no limit", example=10, exact=True)
 WORDS = {int: "a whole number", float: "a number", bool: "true or false", str: "a string"}
@@ -139,3 +143,32 @@ def check_monitors(callbacks_cfg: DictConfig | None) -> None:
                 f"callbacks.{name}.monitor={watched} is logged by the rollout callback only: "
                 f"keep callbacks.rollout, or set callbacks.{name}.monitor=val/loss"
             )
+
+
+def not_a_checkpoint(path: Path) -> bool:
+    """Whether the file ``path`` holds something else than ``torch.save`` writes (text, an
+    image ...); an empty file or one cut short is a checkpoint, truncated."""
+    try:
+        with open(path, "rb") as f:
+            start = f.read(2)
+    except OSError:
+        return False  # torch.load says what
+    return bool(start) and not start.startswith(CHECKPOINT_MAGIC)
+
+
+def check_ckpt_path(ckpt_path) -> None:
+    """``ckpt_path``, when given, is a file that ``torch.save`` wrote (a zip; a text file or a
+    run folder is not one), else one line with the fix."""
+    if not ckpt_path:
+        return
+    fix = "give a run's .ckpt (<run>/checkpoints/last.ckpt)"
+    if not Path(str(ckpt_path)).is_file():
+        raise ConfigError(
+            f"ckpt_path={ckpt_path}: no such file (a run keeps its checkpoints in "
+            "<run_dir>/checkpoints/, last.ckpt the latest)"
+        )
+    if not_a_checkpoint(Path(str(ckpt_path))):
+        raise ConfigError(
+            f"ckpt_path={ckpt_path} is not a checkpoint (torch.save writes a zip, this file is "
+            f"not one): {fix}"
+        )

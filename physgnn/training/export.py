@@ -28,6 +28,7 @@ import torch
 
 from physgnn.errors import DISK_WORDS, PhysgnnError, one_line
 from physgnn.files import atomic_path, claim_folder, portable, staged_outputs, write_text
+from physgnn.training.checks import not_a_checkpoint
 from physgnn.training.runs import (
     PRETRAINED_DIR,
     WEIGHTS_FORMAT,
@@ -68,8 +69,13 @@ def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path |
             f"RUN_DIR and OUT_DIR are the same folder ({portable(out_dir)}): name the run to "
             "export (make ship RUN=<a finished run folder>)"
         )
+    if not run_dir.is_dir():
+        raise PhysgnnError(
+            f"RUN_DIR {run_dir} does not exist: give the folder of a finished run "
+            "(outputs/runs/<experiment>/<time>)"
+        )
     check_done(run_dir, "ship it")
-    source = Path(checkpoint) if checkpoint else checkpoint_of(run_dir)
+    source = own_checkpoint(run_dir, Path(checkpoint)) if checkpoint else checkpoint_of(run_dir)
     full = load_checkpoint(
         source, "export {other} (CHECKPOINT=...), or train the run again", weights_only=True
     )
@@ -92,6 +98,31 @@ def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path |
             "there, or choose another OUT_DIR"
         )
     return out_dir / name
+
+
+def own_checkpoint(run_dir: Path, checkpoint: Path) -> Path:
+    """``checkpoint``, a file of ``run_dir/checkpoints`` (the package's run.json names the run
+    it comes from: another run's weights would be shipped under this run's name), else one
+    line naming CHECKPOINT and the fix."""
+    folder = run_dir / "checkpoints"
+    if not checkpoint.is_file():
+        raise PhysgnnError(
+            f"CHECKPOINT {checkpoint} does not exist: give one of RUN_DIR's checkpoints "
+            f"({portable(folder)}/last.ckpt or best-*.ckpt), or leave it out (its best)"
+        )
+    if checkpoint.resolve().parent != folder.resolve():
+        raise PhysgnnError(
+            f"CHECKPOINT {checkpoint} is not one of RUN_DIR's checkpoints (in "
+            f"{portable(folder)}): the package's run.json names RUN_DIR as the run its weights "
+            "come from; give a checkpoint of that folder, or ship the checkpoint's own run "
+            "(physgnn ship <its run folder> OUT_DIR CHECKPOINT)"
+        )
+    if not_a_checkpoint(checkpoint):
+        raise PhysgnnError(
+            f"CHECKPOINT {checkpoint} is not a checkpoint (torch.save writes a zip, this file is "
+            "not one): give one of RUN_DIR's .ckpt files, or leave it out (its best)"
+        )
+    return checkpoint
 
 
 class ShipError(PhysgnnError, OSError):

@@ -7,6 +7,7 @@ No Lightning here: evaluation loads runs without importing the trainer.
 from __future__ import annotations
 
 import copy
+import difflib
 import json
 import socket
 import zipfile
@@ -29,16 +30,26 @@ PRETRAINED = "pretrained"
 PRETRAINED_DIR = Path(__file__).resolve().parents[1] / "pretrained"
 # The layout of an exported run's weights; a run of another layout is refused in one line.
 WEIGHTS_FORMAT = 1
+GIVE_A_RUN = f"give a run folder (outputs/runs/<experiment>/<time>) or {PRETRAINED}"
 
 
 class RunError(PhysgnnError, ValueError):
     """A run folder's weights cannot be loaded by this physgnn (one-line message)."""
 
 
+class RunMissing(RunError, FileNotFoundError):
+    """A run folder, or the files a run needs, not there (one-line message)."""
+
+
 def resolve_run(run: str | Path) -> Path:
     """The run folder ``run`` names: the shipped weights for ``pretrained`` (a one-line error
-    where this checkout has none), else the path."""
+    where this checkout has none, or for a misspelt ``pretrained`` that is no folder), else the
+    path."""
     if str(run) != PRETRAINED:
+        if not Path(run).exists() and difflib.get_close_matches(str(run), [PRETRAINED]):
+            raise RunMissing(
+                f"run folder {run} does not exist: did you mean {PRETRAINED}? Else " + GIVE_A_RUN
+            )
         return Path(run)
     if not (PRETRAINED_DIR / RUN_JSON).is_file():
         raise RunError(
@@ -119,9 +130,7 @@ def checkpoint_of(run_dir: Path) -> Path:
         return best[-1]
     if last.exists():
         return last
-    raise FileNotFoundError(
-        f"no checkpoint in {run_dir / 'checkpoints'} (did the run finish an epoch?)"
-    )
+    raise RunMissing(f"no checkpoint in {run_dir / 'checkpoints'} (did the run finish an epoch?)")
 
 
 def _own_score(path: Path) -> float:
@@ -148,7 +157,8 @@ def load_run(run_dir: str | Path) -> tuple[LearnedSimulator, DictConfig, dict]:
     run_dir = resolve_run(run_dir)
     config = run_dir / ".hydra" / "config.yaml"
     if not config.exists():
-        raise FileNotFoundError(f"{run_dir} is not a training run (no .hydra/config.yaml)")
+        what = "is not a training run (no .hydra/config.yaml)" if run_dir.is_dir() else ""
+        raise RunMissing(f"run folder {run_dir} {what or 'does not exist'}: {GIVE_A_RUN}")
     check_not_training(run_dir, "load it")
     info = read_run_json(run_dir)
     _check_format(run_dir, info.get("weights_format", WEIGHTS_FORMAT))
