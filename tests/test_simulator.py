@@ -248,7 +248,7 @@ def test_history_mismatch_raises():
         sim(batch([trajectory(2, seed=0)], t=3, H=1))
 
 
-def test_material_embedding_changes_the_prediction():
+def test_material_embedding_changes_the_prediction(monkeypatch):
     # the report's model: the default one's gravity prior ignores the network in free flight
     sim = report(num_materials=3, material_dim=4)
     state = batch([trajectory(3, seed=9)])
@@ -256,5 +256,6 @@ def test_material_embedding_changes_the_prediction():
     state.material = torch.tensor([2, 1, 0])
     assert not torch.equal(sim(state)[0], before)
     state.material = torch.tensor([0, 0, 3])
+    monkeypatch.setenv("PHYSGNN_CHECKS", "1")  # the range check reads back: debug only
     with pytest.raises(ValueError, match="material id 3 out of range"):
         sim(state)
