@@ -43,6 +43,7 @@ def compiled_pair(stats):
     return eager, compiled
 
 
+@pytest.mark.slow  # 30 s of dynamo's compiles of a rollout's shapes: make test-slow
 def test_a_compiled_simulator_rolls_out_as_the_eager_one(tiny_train):
     trajectories, stats = tiny_train
     eager, compiled = (s.eval() for s in compiled_pair(stats))
