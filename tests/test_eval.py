@@ -1,5 +1,6 @@
 """physgnn.eval: run discovery, the CLI's errors, and the whole eval on fake run folders."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -23,6 +24,7 @@ from physgnn.evaluation import runs as eval_runs
 from physgnn.evaluation import video3d
 from physgnn.evaluation.data_report import split_summary
 from physgnn.evaluation.rerun_log import RerunMissing
+from physgnn.evaluation.runs import GIVE_RUNS
 from physgnn.report import table as report_table
 from physgnn.report.table import read_csv
 from physgnn.rollout import rollout
@@ -53,7 +55,7 @@ def test_find_runs_of_a_multirun_folder_and_of_one_run(outputs):
 @pytest.mark.parametrize(
     "target, message",
     [
-        ("does/not/exist", "run folder does/not/exist does not exist"),
+        ("does/not/exist", f"run folder does/not/exist does not exist: {GIVE_RUNS}"),
         ("runs/baseline/2026-01-01_00-00-01", "has not finished"),
         ("runs/nothing", "no finished run"),
     ],
@@ -61,7 +63,7 @@ def test_find_runs_of_a_multirun_folder_and_of_one_run(outputs):
 def test_find_runs_errors_are_one_line(outputs, target, message):
     (outputs / "runs" / "nothing").mkdir()
     path = target if target.startswith("does") else str(outputs / target)
-    with pytest.raises(eval_runs.EvalError, match=message) as err:
+    with pytest.raises(eval_runs.EvalError, match=re.escape(message)) as err:
         eval_runs.find_runs(path, outputs)
     assert "\n" not in str(err.value)
 
@@ -90,7 +92,8 @@ def test_main_on_a_missing_run_folder_prints_one_line_and_exits_2(tmp_path, caps
     with pytest.raises(SystemExit) as exit_:
         eval_command.main.__wrapped__(cfg)  # the Hydra task itself, without the process around it
     assert exit_.value.code == 2
-    assert capsys.readouterr().err.strip() == "error: run folder /no/such/run does not exist"
+    missing = f"error: run folder /no/such/run does not exist: {GIVE_RUNS}"
+    assert capsys.readouterr().err.strip() == missing
 
 
 @pytest.mark.slow
@@ -103,7 +106,7 @@ def test_cli_on_a_missing_run_folder_prints_one_line_and_exits_2(tmp_path):
         timeout=300,
     )
     assert proc.returncode == 2
-    assert proc.stderr.strip() == "error: run folder /no/such/run does not exist"
+    assert proc.stderr.strip() == f"error: run folder /no/such/run does not exist: {GIVE_RUNS}"
 
 
 # ------------------------------------------------------------------ the whole eval, fake runs

@@ -51,7 +51,7 @@ def all_runs(target: str | None, outputs: Path) -> list[Path]:
     else:
         root = training_runs.resolve_run(target)
         if not root.is_dir():
-            raise EvalError(f"run folder {target} does not exist")
+            raise EvalError(f"run folder {target} does not exist: {GIVE_RUNS}")
         if (root / "run.json").exists():
             return [root]
         roots = [root]
@@ -78,6 +78,11 @@ def check_runs(runs) -> list[str | None]:
 
 # A truncated run (its step budget cut short by the time guard) is evaluated, and named so.
 EVALUATED = training_runs.DONE
+# The fix for a runs= that names no folder
+GIVE_RUNS = (
+    "give runs= a run folder or a folder of runs (outputs/runs/<experiment>/<time>, "
+    f"outputs/multirun/<sweep>/<time>) or {training_runs.PRETRAINED}"
+)
 
 
 def find_runs(target: str | None, outputs: Path) -> list[Path]:

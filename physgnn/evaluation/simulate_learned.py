@@ -19,7 +19,7 @@ from physgnn.models.constrained import ConstrainedSimulator
 from physgnn.models.settings import torch_threads
 from physgnn.physics.trajectory import Trajectory
 from physgnn.rollout import rollout
-from physgnn.training.runs import load_run, resolve_run
+from physgnn.training.runs import GIVE_A_RUN, load_run, resolve_run
 
 # Above this many sphere-frames a simulation shows its progress (it takes more than seconds).
 LONG = 100_000
@@ -44,7 +44,7 @@ def learned(
     "constraints", "threads", "ms_per_frame", "compile_s", "cfg"}``."""
     folder = resolve_run(run_dir)
     if not folder.is_dir():
-        raise SimulateError(f"run folder {run_dir} does not exist")
+        raise SimulateError(f"run folder {run_dir} does not exist: {GIVE_A_RUN}")
     simulator, cfg, info = load_run(folder)
     history = int(simulator.H)
     fresh = compile_cache is not None and not any(Path(compile_cache).glob("*"))
