@@ -21,6 +21,7 @@ it checks) and OmegaConf would answer with its own message, not this line.
 
 from __future__ import annotations
 
+import difflib
 import math
 import numbers
 from dataclasses import MISSING, dataclass, field, fields
@@ -91,6 +92,12 @@ class Allowed:
         high = self.most is None or (value < self.most if self.below else value <= self.most)
         return low and high
 
+    def _closest(self, key: str, value) -> str:
+        """``did you mean key=<the choice most like value>?``, or ``""`` (no choices, or none
+        is close)."""
+        like = difflib.get_close_matches(str(value), [str(c) for c in self.choices], n=1)
+        return f"did you mean {key}={like[0]}?" if like else ""
+
     def some_value(self):
         """A value the option takes (:attr:`example`, else one read off the bounds)."""
         if self.example is not None:
@@ -110,9 +117,11 @@ class Allowed:
 
     def check(self, key: str, value, fix: str = "", error: type = ConfigError):
         """``value`` of ``key`` (a whole number as ``int``), else :func:`refuse` naming
-        ``key``; ``fix``: the way out (``e.g. key=<a value it takes>`` if not given)."""
+        ``key``; ``fix``: the way out (if not given, the choice most like a misspelt value,
+        ``did you mean key=<it>?``, else ``e.g. key=<a value it takes>``)."""
         if not self.admits(value):
-            raise error(refusal(key, value, self, fix or f"e.g. {key}={self.some_value()}"))
+            fix = fix or self._closest(key, value) or f"e.g. {key}={self.some_value()}"
+            raise error(refusal(key, value, self, fix))
         if self.kind is int and value not in self.also and not self.choices:
             return int(value)
         return value

@@ -20,7 +20,6 @@ from omegaconf import DictConfig, OmegaConf
 from physgnn.ablation.jobs import StudyError
 from physgnn.ablation.runner import lost_job, run_job
 from physgnn.ranges import one_of, whole
-from physgnn.training.ranges import closest
 
 # What runs the jobs, and how many at a time on this machine (checked before any job is listed)
 LAUNCHERS = one_of("local", "slurm", what="this machine, or one SLURM job per run")
@@ -30,9 +29,7 @@ N_JOBS = whole(1, what="jobs at a time on this machine", example=2)
 def check_launcher(launcher: DictConfig) -> None:
     """``launcher.name`` is one of :data:`LAUNCHERS` and, for ``local``, ``launcher.n_jobs`` a
     whole number >= 1, else one line (:class:`StudyError`)."""
-    name = launcher.get("name")
-    fix = closest("launcher.name", name, LAUNCHERS.choices)
-    LAUNCHERS.check("launcher.name", name, fix, StudyError)
+    LAUNCHERS.check("launcher.name", launcher.get("name"), error=StudyError)
     if launcher.name == "local":
         N_JOBS.check("launcher.n_jobs", launcher.get("n_jobs"), error=StudyError)
 

@@ -11,7 +11,6 @@ from omegaconf import DictConfig, OmegaConf
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
-from physgnn import CONF_DIR
 from physgnn.ablation.jobs import (
     Job,
     StudyError,
@@ -30,13 +29,12 @@ from physgnn.ablation.registry import (
 )
 from physgnn.ablation.report import write_study_report
 from physgnn.cli import compose_config
-from physgnn.data.dataset import is_dataset
+from physgnn.data.dataset import is_dataset, presets
 from physgnn.errors import PhysgnnError
 from physgnn.groundtruth.generate import generate
 from physgnn.overrides import given
 from physgnn.ranges import SEED, one_of
 from physgnn.training.layout import key_of_today
-from physgnn.training.ranges import closest
 
 
 class StudyFailed(PhysgnnError, RuntimeError):
@@ -119,10 +117,8 @@ def check_study(cfg: DictConfig) -> None:
         )
     for i, seed in enumerate(seeds):
         SEED.check(f"seeds[{i}]", seed, "e.g. seeds=[0,1,2]", StudyError)
-    presets = sorted(p.stem for p in (Path(CONF_DIR) / "data").glob("*.yaml"))
-    allowed = one_of(*presets, what="the training data: conf/data/<preset>.yaml")
-    preset = cfg.get("preset")
-    allowed.check("preset", preset, closest("preset", preset, allowed.choices), StudyError)
+    allowed = one_of(*presets(), what="the training data: conf/data/<preset>.yaml")
+    allowed.check("preset", cfg.get("preset"), error=StudyError)
     check_launcher(cfg.launcher)
 
 

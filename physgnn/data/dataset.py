@@ -66,6 +66,11 @@ def generate_hint(folder: str | Path, preset: str | None = None) -> str:
     return f"run `python -m physgnn.generate data={preset} data.dir={folder}{again}`"
 
 
+def presets() -> list[str]:
+    """The data presets of conf/data/, sorted (``paper``, ``small``, ``tiny``)."""
+    return sorted(p.stem for p in (Path(CONF_DIR) / "data").glob("*.yaml"))
+
+
 def default_data_dir(preset: str) -> Path:
     """Where ``make data PRESET=preset`` writes: ``$PHYSGNN_OUTPUTS`` or outputs, /data/preset."""
     return Path(os.environ.get("PHYSGNN_OUTPUTS") or "outputs") / "data" / preset

@@ -21,8 +21,13 @@ from omegaconf import DictConfig, ListConfig
 from rich.console import Console
 from rich.table import Table
 
-from physgnn import CONF_DIR
-from physgnn.data.dataset import DATASET_MARKER, SPLIT_FILES, generate_hint, read_split
+from physgnn.data.dataset import (
+    DATASET_MARKER,
+    SPLIT_FILES,
+    generate_hint,
+    presets,
+    read_split,
+)
 from physgnn.errors import PhysgnnError
 from physgnn.files import write_json
 from physgnn.metrics import PENETRATION_KEYS, MetricError, trajectory_metrics
@@ -134,10 +139,9 @@ def checked_splits(splits) -> list[str]:
 def missing_folder(cfg: DictConfig, folder: Path) -> str:
     """What to say of a dataset folder that is not there: ``preset=`` naming no preset of
     conf/data (its options), else how to generate it."""
-    presets = sorted(p.stem for p in (Path(CONF_DIR) / "data").glob("*.yaml"))
-    preset = str(cfg.get("preset"))
-    if folder == Path(cfg.paths.data_dir) / preset and preset not in presets:
-        return f"preset={preset}: no {preset!r} in conf/data (options: {', '.join(presets)})"
+    preset, options = str(cfg.get("preset")), presets()
+    if folder == Path(cfg.paths.data_dir) / preset and preset not in options:
+        return f"preset={preset}: no {preset!r} in conf/data (options: {', '.join(options)})"
     return f"dataset folder {folder} not found: {generate_hint(folder)}"
 
 

@@ -33,7 +33,7 @@ from physgnn.data.state import TrajectoryFrames, layout_of
 from physgnn.errors import ConfigError
 from physgnn.evaluation.rollouts import progress
 from physgnn.evaluation.runs import SPLITS, RunInfo
-from physgnn.evaluation.same_work import engine_jobs, engine_of
+from physgnn.evaluation.same_work import engine_jobs, engine_name, engine_of
 from physgnn.groundtruth.engine import one_frame_from
 from physgnn.metrics.regimes import regime_labels, regime_rows, tally
 from physgnn.models.protocol import hooks_of, motion_of
@@ -41,7 +41,6 @@ from physgnn.physics import integrator
 from physgnn.physics.scene import EFFECT_NAMES, GRAVITY
 from physgnn.physics.trajectory import Trajectory, scene_at
 from physgnn.ranges import whole
-from physgnn.report.table import ENGINE
 
 ROTATION = EFFECT_NAMES.index("rotation")
 NODES = 4096  # spheres per batch of frames of one trajectory
@@ -140,7 +139,7 @@ def onestep_rows(
         for r in learned
     ] + [
         (
-            f"{ENGINE}-{k}{job.name}",
+            engine_name(k, job),
             job.dataset,
             job.extra["H"],
             partial(engine_positions, substeps=k),

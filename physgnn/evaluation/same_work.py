@@ -76,6 +76,17 @@ def engine_split(trajs: list[Trajectory], H: int, substeps: int, processes: int 
     return [continued(t, run, H, fps) for t, (run, _) in zip(trajs, runs, strict=True)]
 
 
+def engine_name(k: int, reference: RunInfo) -> str:
+    """The rows' name of pybullet at ``k`` substeps for a reference of :func:`engine_jobs`:
+    ``pybullet-<k><its suffix>``."""
+    return f"{ENGINE}-{k}{reference.name}"
+
+
+def seeded(trajs: list[Trajectory], H: int) -> list[Trajectory]:
+    """The trajectories with a frame to predict after their ``H + 1`` seed frames."""
+    return [t for t in trajs if t.n_frames > H + 1]
+
+
 def engine_jobs(runs: list[RunInfo], several: bool) -> list[RunInfo]:
     """One reference per dataset and history H of the learned runs (``simulator`` None: the
     rows are made here, not rolled out); ``extra`` holds the dataset's H."""
@@ -133,11 +144,11 @@ def engine_rows(
         for job, k in ((job, k) for job in jobs for k in substeps):
             H = job.extra["H"]
             info = dataclasses.replace(
-                job, name=f"{ENGINE}-{k}{job.name}", overrides=f"substeps={k} H={H} {job.overrides}"
+                job, name=engine_name(k, job), overrides=f"substeps={k} H={H} {job.overrides}"
             )
             for split in SPLITS:
                 bar.update(task, description=f"{info.name} · {split}")
-                trajs = [t for t in data[job.dataset][split] if t.n_frames > H + 1]
+                trajs = seeded(data[job.dataset][split], H)
                 preds = engine_split(trajs, H, k, processes)
                 for truth, pred in zip(trajs, preds, strict=True):
                     row = metrics_row(info, split, truth, pred, tol, threads=processes or 1)

@@ -18,10 +18,9 @@ from statistics import median
 
 from physgnn.evaluation.rollouts import predict_split, progress
 from physgnn.evaluation.runs import SPLITS, RunInfo
-from physgnn.evaluation.same_work import engine_split
+from physgnn.evaluation.same_work import engine_name, engine_split, seeded
 from physgnn.models.settings import torch_threads
 from physgnn.ranges import whole
-from physgnn.report.table import ENGINE
 
 TURNS = whole(0, what="rounds of timing in turns; 0: as first timed", example=1)
 
@@ -58,7 +57,7 @@ def timed_in_turns(
                 for engine in (e for e in engines if e.dataset == dataset):
                     for k in substeps:
                         rate = _engine_rate(trajs, engine.extra["H"], k, processes)
-                        fps[f"{ENGINE}-{k}{engine.name}", split].append(rate)
+                        fps[engine_name(k, engine), split].append(rate)
                 bar.advance(task)
     return {key: median(rates) for key, rates in fps.items() if None not in rates}
 
@@ -66,7 +65,7 @@ def timed_in_turns(
 def _engine_rate(trajs: list, H: int, k: int, processes: int) -> float | None:
     """pybullet's frames/s at ``k`` substeps on the split ``trajs`` from frame ``H`` (None:
     no trajectory long enough)."""
-    preds = engine_split([t for t in trajs if t.n_frames > H + 1], H, k, processes)
+    preds = engine_split(seeded(trajs, H), H, k, processes)
     return preds[0].fps if preds else None
 
 

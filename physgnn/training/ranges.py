@@ -7,8 +7,6 @@ declared here, by config key, as the groups declare theirs beside each field
 
 from __future__ import annotations
 
-import difflib
-
 from physgnn.ranges import Allowed, number, one_of, whole
 
 # The graph builder's choices (physgnn.graph.rules.CONNECTIVITIES, physgnn.graph.neighbors.
@@ -51,11 +49,4 @@ def check_range(key: str, value) -> None:
     (``did you mean model.graph.connectivity=epsilon?``). The option groups (``lit.noise``
     ..., ``model.inputs``, ``model.contacts``) check their own ranges."""
     if key in RANGES and value is not None:
-        allowed = RANGES[key]
-        allowed.check(key, value, closest(key, value, allowed.choices))
-
-
-def closest(key: str, value, choices: tuple) -> str:
-    """``did you mean key=<the choice most like value>?``, or ``""`` (none is close)."""
-    like = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1)
-    return f"did you mean {key}={like[0]}?" if like else ""
+        RANGES[key].check(key, value)
