@@ -11,6 +11,7 @@ import json
 import math
 import os
 import shutil
+import subprocess
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -59,6 +60,27 @@ def portable(path: str | Path) -> str:
         return str(path.resolve().relative_to(Path.cwd().resolve()))
     except ValueError:
         return str(path)
+
+
+def code_commit() -> str | None:
+    """The git commit of the physgnn code that runs, ``+`` appended when its checkout has
+    uncommitted changes to tracked files: what a result needs besides its seed and thread count
+    to be made again. None for an installed wheel (no checkout of physgnn's own) or without
+    git."""
+    package = Path(__file__).resolve().parent
+
+    def git(*args: str) -> str:
+        command = ["git", "-C", str(package), *args]
+        return subprocess.run(command, capture_output=True, text=True, check=True).stdout.strip()
+
+    try:
+        if (Path(git("rev-parse", "--show-toplevel")) / "physgnn").resolve() != package:
+            return None  # a checkout of another project that holds this package
+        rev = git("rev-parse", "--short=12", "HEAD")
+        dirty = git("status", "--porcelain", "--untracked-files=no")
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return rev + ("+" if dirty else "")
 
 
 def write_text(path: str | Path, text: str) -> Path:

@@ -17,6 +17,7 @@ import torch
 from trainkit import SHORT, config, outputs_of, run_main
 
 from physgnn.data.dataset import read_split
+from physgnn.files import code_commit
 from physgnn.metrics import trajectory_metrics
 from physgnn.rollout import rollout
 from physgnn.training.build import build
@@ -38,6 +39,7 @@ def test_fast_dev_run(tiny_dataset, tmp_path):
     saved = json.loads((tmp_path / "run.json").read_text())
     assert saved["status"] == "debug" and saved["seed"] == 0
     assert saved["threads"] == torch.get_num_threads()  # results depend on it: recorded
+    assert saved["commit"] == code_commit()  # and on the code: recorded too
     assert info["checkpoints"] == {"best": None, "last": None}
     assert not list(tmp_path.rglob("*.ckpt"))  # nothing eval could take for a trained model
 

@@ -22,9 +22,8 @@ import numpy as np
 from physgnn.ablation.aggregate import by_config, seed_value
 from physgnn.ablation.jobs import current_fingerprint
 from physgnn.ablation.registry import read_registry
-from physgnn.ablation.study import commit
 from physgnn.errors import PhysgnnError
-from physgnn.files import portable, write_text
+from physgnn.files import code_commit, portable, write_text
 from physgnn.report.format import fmt
 
 REGISTRY = "docs/results/registry.jsonl"
@@ -109,7 +108,7 @@ def _spread(values: tuple[float, ...]) -> str:
 
 def write_default_table(registry: str, out: str, key: str = "baseline", steps=None) -> Path:
     records = records_of(read_registry(registry), key, int(steps) if steps else None)
-    head = commit()
+    head = code_commit()
     shown, current = {r["budget"].get("defaults") for r in records}, current_fingerprint()
     which = (
         "The default model"

@@ -3,7 +3,6 @@ the report (:func:`run_study`)."""
 
 from __future__ import annotations
 
-import subprocess
 import time
 from pathlib import Path
 
@@ -31,6 +30,7 @@ from physgnn.ablation.report import write_study_report
 from physgnn.cli import compose_config
 from physgnn.data.dataset import is_dataset, presets
 from physgnn.errors import PhysgnnError
+from physgnn.files import code_commit
 from physgnn.groundtruth.generate import generate
 from physgnn.overrides import given
 from physgnn.ranges import SEED, one_of
@@ -41,20 +41,6 @@ class StudyFailed(PhysgnnError, RuntimeError):
     """Some jobs failed; the others ran and the report was written."""
 
     exit_code = 1
-
-
-def commit() -> str | None:
-    """The code's git commit (``+`` when the work tree has changes), None outside git."""
-    try:
-        rev = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
-    return rev + ("+" if dirty else "")
 
 
 def job_spec(job: Job, cfg: DictConfig, common: list[str], rev: str | None, budget: dict) -> dict:
@@ -130,7 +116,7 @@ def run_study(cfg: DictConfig) -> Path | None:
     jobs = study_jobs(configs, list(cfg.seeds))
     outputs = f"paths.outputs={cfg.paths.outputs}"
     common = [*budget_overrides(cfg.budget), f"data={cfg.preset}", outputs]
-    rev, budget = commit(), study_budget(cfg)
+    rev, budget = code_commit(), study_budget(cfg)
     specs = [job_spec(job, cfg, common, rev, budget) for job in jobs]
     records = read_registry(cfg.registry)
     done = done_ids(records)

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import errno
 import platform
-import subprocess
 import sys
 from datetime import datetime
 from pathlib import Path
@@ -27,7 +26,14 @@ from pathlib import Path
 import torch
 
 from physgnn.errors import DISK_WORDS, PhysgnnError, one_line
-from physgnn.files import atomic_path, claim_folder, portable, staged_outputs, write_text
+from physgnn.files import (
+    atomic_path,
+    claim_folder,
+    code_commit,
+    portable,
+    staged_outputs,
+    write_text,
+)
 from physgnn.training.checks import not_a_checkpoint
 from physgnn.training.runs import (
     PRETRAINED_DIR,
@@ -153,20 +159,11 @@ def _write_package(folder: Path, run_dir: Path, name: Path, loaded: tuple) -> No
         "weights_format": WEIGHTS_FORMAT,
         "checkpoint_step": step,
         "exported_from": f"{portable(run_dir)} ({source.name})",
-        "commit": _commit(),
+        "commit": code_commit(),
         "machine": f"{platform.machine()} {platform.processor() or platform.system()}",
         "exported": datetime.now().isoformat(timespec="seconds"),
     }
     write_run_json(folder, info)
-
-
-def _commit() -> str | None:
-    """The commit of the working folder's checkout, when there is one."""
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True)
-    except OSError:
-        return None
-    return out.stdout.strip() or None
 
 
 USAGE = "usage: physgnn ship RUN_DIR [OUT_DIR] [CHECKPOINT]   (python -m physgnn.ship; --help)"

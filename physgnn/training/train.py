@@ -25,7 +25,7 @@ from lightning.pytorch.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
 from physgnn.errors import ConfigError, Interrupted, one_line, signal_name
-from physgnn.files import write_text
+from physgnn.files import code_commit, write_text
 from physgnn.ranges import check_seed
 from physgnn.training.build import build
 from physgnn.training.datamodule import dataset_identity
@@ -101,6 +101,7 @@ def _start(cfg: DictConfig, run_dir: Path) -> dict:
         "started": datetime.now().isoformat(timespec="seconds"),
         "host": socket.gethostname(),
         "pid": os.getpid(),
+        "commit": code_commit(),
         # CPU results are reproducible for a seed *and* a thread count: record it.
         "threads": torch.get_num_threads(),
     }
