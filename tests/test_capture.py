@@ -11,9 +11,15 @@ from handmade import scene
 from simdata import learned
 from torch.testing import assert_close
 
-from physgnn.models.capture import ShapeBoundCall, compile_in_place, recompile_limit
+from physgnn.models.capture import (
+    ShapeBoundCall,
+    compile_in_place,
+    compile_simulator,
+    recompile_limit,
+)
 from physgnn.nn.epd import EncodeProcessDecode, Widths
 from physgnn.nn.padding import bucket, pad_graph
+from physgnn.training.runs import load_run
 
 
 def test_buckets_cover_every_size_with_at_most_a_fifth_of_padding():
@@ -125,3 +131,24 @@ def test_dynamos_limit_grows_with_every_compiled_module():
         compile_in_place(torch.nn.Linear(2, 2), "default", True, 5, backend="eager")
     assert ShapeBoundCall.bounds == before + 15
     assert recompile_limit() >= ShapeBoundCall.bounds
+
+
+@pytest.mark.slow
+def test_the_shipped_step_traces_without_a_word_from_dynamo():
+    # dynamo warns where it may trace something other than what runs eager (a cache wrapper
+    # it ignores, a graph break); the shipped step, compiled as simulate and eval compile it
+    sim = load_run("pretrained")[0].eval()
+    compile_simulator(sim, backend="eager")  # tracing alone, no code generation
+    state = scene(
+        [[0, 0, 0.5], [0.9, 0, 0.5], [3, 0, 2.0]],
+        [[1, 0, 0], [-1, 0, 0], [0, 0, -2]],
+        [0.5, 0.5, 0.5],
+    )
+    eager = load_run("pretrained")[0].eval()
+    with warnings.catch_warnings(record=True) as caught, torch.no_grad():
+        warnings.simplefilter("always")
+        compiled = sim(state)
+    assert [str(w.message) for w in caught] == []
+    with torch.no_grad():
+        for a, b in zip(compiled, eager(state), strict=True):
+            assert_close(a, b)

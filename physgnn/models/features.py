@@ -19,8 +19,6 @@ Edge inputs: the graph's blocks (:data:`~physgnn.graph.edges.PP`,
 
 from __future__ import annotations
 
-import functools
-
 import torch
 
 from physgnn.graph.edges import PS, Layout, pp_inputs, ps_inputs
@@ -28,7 +26,6 @@ from physgnn.models import boundary, contact_inputs
 from physgnn.models.options import ModelInputs
 
 
-@functools.cache
 def node_layout(H: int, inputs: ModelInputs) -> Layout:
     """The blocks of the node input of a model with history ``H`` (module doc)."""
     blocks = [("vel", 3 * (H + 1)), ("angvel", 3 * (H + 1)), ("radius", 1)]

@@ -66,7 +66,6 @@ def pair_outputs(engine_state: bool = False) -> Layout:
     return PAIR_ENGINE if engine_state else PAIR
 
 
-@functools.cache
 def regression(layout: Layout) -> Layout:
     """The blocks of ``layout`` that the regression loss compares with a target (every block
     but the rest logit)."""
