@@ -155,6 +155,26 @@ def claim_folder(
     return folder
 
 
+@contextmanager
+def claimed(
+    folder: str | Path, key: str, overwrite: bool | None = False, ours: bool = False
+) -> Iterator[Path]:
+    """:func:`claim_folder` for the block. Where ``folder`` was absent or empty and the block
+    fails (a refused value, a missing run, an interrupt) before anything but the marker lies
+    in it, the folder goes again: a command that wrote nothing leaves no folder behind. A
+    folder that held anything keeps it."""
+    folder = Path(folder)
+    fresh = not folder.is_dir() or not any(folder.iterdir())
+    claim_folder(folder, key, overwrite, ours)
+    try:
+        yield folder
+    except BaseException:
+        if fresh and [p.name for p in folder.iterdir()] == [OUTPUT_MARKER]:
+            (folder / OUTPUT_MARKER).unlink()
+            folder.rmdir()
+        raise
+
+
 def file_in_the_way(folder: str | Path) -> Path | None:
     """The file where ``folder`` should be, or where one of the folders it lies in should be
     (it cannot be made); None where nothing is in the way."""

@@ -38,7 +38,7 @@ from physgnn.errors import ConfigError, interrupt_signal, sigterm_interrupts
 from physgnn.evaluation.data_report import DataReportError, data_report
 from physgnn.evaluation.evaluate import evaluate
 from physgnn.evaluation.runs import EvalError, find_runs, load_runs
-from physgnn.files import OUTPUT_MARKER, portable
+from physgnn.files import OUTPUT_MARKER, claim_folder, portable
 from physgnn.training.progress import StopOnSignal
 from physgnn.training.runs import read_run_json
 from physgnn.training.train import TrainingInterrupted, train
@@ -180,12 +180,16 @@ def test_eval_writes_over_no_report_dir_it_did_not_write(tmp_path, capsys):
         eval_command.main.__wrapped__(compose_eval(tmp_path, f"report_dir={folder}"))
     assert exit_info.value.code == 2 and capsys.readouterr().err == refusal("report_dir", folder)
     assert [p.name for p in folder.iterdir()] == ["metrics.json"]
-    for report_dir, overwrite in [(folder, "true"), (tmp_path / "new", "false")] * 2:
+    new = tmp_path / "new"
+    for report_dir, overwrite in [(folder, "true"), (new, "false")] * 2:
         cfg = compose_eval(tmp_path, f"report_dir={report_dir}", f"overwrite={overwrite}")
         with pytest.raises(EvalError, match="no finished run"):  # the check passed
             evaluate(cfg)
+        if not report_dir.exists():  # a failed eval leaves no folder it made; an earlier one's:
+            claim_folder(report_dir, "report_dir")
         (report_dir / "report.md").write_text("an earlier report")
-    assert not (folder / OUTPUT_MARKER).exists() and (tmp_path / "new" / OUTPUT_MARKER).is_file()
+    assert not (folder / OUTPUT_MARKER).exists() and (new / OUTPUT_MARKER).is_file()
+    assert (new / "report.md").read_text() == "an earlier report"
     folder_of_mine(tmp_path / "report")  # the default report_dir, unmarked: physgnn's own
     with pytest.raises(EvalError, match="no finished run"):
         evaluate(compose_eval(tmp_path))

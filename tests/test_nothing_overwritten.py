@@ -17,6 +17,7 @@ import physgnn.benchmark.run as bench_run
 from physgnn import CONF_DIR
 from physgnn import bench as bench_command
 from physgnn import eval as eval_command
+from physgnn import simulate as simulate_command
 from physgnn import sleep_study as sleep_study_command
 from physgnn import train as train_command
 from physgnn.benchmark.source import BenchError
@@ -24,7 +25,7 @@ from physgnn.data.dataset import DATASET_MARKER, write_split
 from physgnn.errors import ConfigError
 from physgnn.evaluation.data_report import DataReportError, data_report
 from physgnn.evaluation.sleep_study import study
-from physgnn.files import OUTPUT_MARKER, claim_folder
+from physgnn.files import OUTPUT_MARKER, claim_folder, claimed
 from physgnn.training.resume_checks import check_run_dir
 
 
@@ -288,3 +289,41 @@ def test_score_refuses_a_prediction_of_another_scene():
         "pred has 2 spheres, truth 4: score a prediction of truth's own scene "
         "(roll_out(model, truth))"
     )
+
+
+# --- a command that fails before it writes leaves no folder -----------------------------------
+
+
+def test_a_claimed_folder_goes_again_when_the_block_fails_before_writing(tmp_path, mine):
+    new = tmp_path / "new"
+    with pytest.raises(ValueError), claimed(new, "out"):
+        assert (new / OUTPUT_MARKER).is_file()
+        raise ValueError("refused")
+    assert not new.exists()
+    with claimed(new, "out"):  # done: the folder stays, marked
+        pass
+    assert (new / OUTPUT_MARKER).is_file()
+    (new / "report.md").write_text("an earlier run's")
+    with pytest.raises(KeyboardInterrupt), claimed(new, "out"):
+        raise KeyboardInterrupt
+    assert (new / "report.md").read_text() == "an earlier run's"  # it held something: kept
+    (mine / "notes.txt").write_text("mine")
+    before = _snapshot(mine)
+    with pytest.raises(ValueError), claimed(mine, "out", overwrite=True):
+        raise ValueError("refused")
+    assert _snapshot(mine) == before
+
+
+def test_a_refused_eval_simulate_or_sleep_study_leaves_no_folder(tmp_path, capsys):
+    folder = tmp_path / "report"
+    line = _error_line(capsys, eval_command.main, "runs=no/such/run", f"report_dir={folder}")
+    assert line.startswith("error: run folder no/such/run does not exist")
+    out = tmp_path / "throw"
+    line = _error_line(
+        capsys, simulate_command.main, "scene=throw", "run=no/such/run", f"out={out}"
+    )
+    assert "no/such/run" in line
+    study_out = tmp_path / "sleep"
+    with pytest.raises(Exception, match="no/such/run"):
+        study(_cfg("sleep_study", "run=no/such/run", f"out={study_out}"))
+    assert not folder.exists() and not out.exists() and not study_out.exists()

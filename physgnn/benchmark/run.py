@@ -41,7 +41,7 @@ from physgnn.benchmark.markdown import ACCURACY_FIGURE, write_markdown
 from physgnn.benchmark.pybullet import accuracy_sweep, pybullet_rows, pybullet_runs
 from physgnn.benchmark.source import BenchError, learned_source
 from physgnn.data.stats import compute_stats
-from physgnn.files import claim_folder, write_json, write_text
+from physgnn.files import claimed, write_json, write_text
 from physgnn.ranges import FLAG, whole
 from physgnn.report.pareto import bench_figure
 
@@ -74,7 +74,13 @@ def bench(cfg: DictConfig) -> dict:
     cfg = merged_config(cfg, command_line())
     check_settings(cfg)
     ours = Path(cfg.out_dir) == Path(cfg.paths.bench_dir)
-    claim_folder(cfg.out_dir, "out_dir", overwrite=bool(cfg.get("overwrite")), ours=ours)
+    overwrite = bool(cfg.get("overwrite"))
+    with claimed(cfg.out_dir, "out_dir", overwrite, ours):  # a failed bench leaves no folder
+        return _measured(cfg)
+
+
+def _measured(cfg: DictConfig) -> dict:
+    """:func:`bench`'s measurements, written into ``cfg.out_dir``; bench.json's dict."""
     torch.set_num_threads(int(cfg.threads))
     torch.manual_seed(int(cfg.seed))
     start = time.perf_counter()

@@ -12,7 +12,8 @@ Every learned run also falls freely from ``freefall.heights`` (:mod:`physgnn.eva
 ``bounce.csv``). Writes metrics.csv, report.md, figures and videos into ``report_dir``; with
 ``rerun=true`` also ``videos/<ood scene>.rrd``, the filmed run's rollouts as Rerun recordings.
 A ``report_dir`` holding files physgnn did not write is refused unless ``overwrite=true``
-(:func:`physgnn.files.claim_folder`).
+(:func:`physgnn.files.claim_folder`); an eval that fails before it writes leaves no folder it
+made (:func:`physgnn.files.claimed`).
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ from physgnn.evaluation.runs import (
     references,
 )
 from physgnn.evaluation.video3d import render_side_by_side
-from physgnn.files import claim_folder, staged_outputs
+from physgnn.files import claimed, staged_outputs
 from physgnn.report import bounce, figures, freefall, invariance, stability, table
 from physgnn.report import onestep as onestep_report
 from physgnn.report.document import write_report
@@ -85,8 +86,11 @@ def evaluate(cfg: DictConfig) -> Path:
     if cfg.get("rerun"):
         rerun_log.require()  # before the rollouts, not after them
     ours = report_dir == Path(cfg.paths.report_dir)
-    claim_folder(report_dir, "report_dir", overwrite=bool(cfg.get("overwrite")), ours=ours)
-    with staged_outputs(report_dir, "report_dir", REPORT_OUTPUTS) as staging:
+    overwrite = bool(cfg.get("overwrite"))
+    with (
+        claimed(report_dir, "report_dir", overwrite, ours),
+        staged_outputs(report_dir, "report_dir", REPORT_OUTPUTS) as staging,
+    ):
         _evaluate_into(cfg, staging)
     return report_dir / "report.md"
 

@@ -24,7 +24,8 @@ The options are one typed group checked before any work (:class:`SimulateOptions
 learned rollout, compiled on request, is :mod:`physgnn.evaluation.simulate_learned`.
 
 A folder ``out`` that holds files physgnn did not write is refused unless ``overwrite=true``
-(:func:`physgnn.files.claim_folder`; the folders it makes carry its marker). One simulate
+(:func:`physgnn.files.claim_folder`; the folders it makes carry its marker, and go again when it
+fails before writing, :func:`physgnn.files.claimed`). One simulate
 writes into an ``out`` at a time, through a staging folder: ``out`` holds one scene's files,
 whole, and an interrupted run leaves it as it was.
 """
@@ -49,7 +50,7 @@ from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.simulate_learned import LONG, learned
 from physgnn.evaluation.simulate_options import SimulateOptions
 from physgnn.evaluation.video3d import render_side_by_side
-from physgnn.files import claim_folder, staged_outputs, write_json
+from physgnn.files import claimed, staged_outputs, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.scenefile import load_scene, scene_file, scene_to_dict
@@ -100,8 +101,10 @@ def simulate(cfg: DictConfig) -> dict:
     if options.rerun:
         rerun_log.require()  # before the work, not after it
     out = Path(options.out or Path(options.outputs) / "simulate" / scene.name)
-    claim_folder(out, "out", overwrite=options.overwrite, ours=not options.out)
-    with staged_outputs(out, "out", SIMULATE_OUTPUTS) as staging:
+    with (
+        claimed(out, "out", overwrite=options.overwrite, ours=not options.out),
+        staged_outputs(out, "out", SIMULATE_OUTPUTS) as staging,
+    ):
         return _simulate_into(options, Scenario(scene, text), Folders(staging, out))
 
 

@@ -21,7 +21,7 @@ from physgnn import metrics
 from physgnn.data.dataset import read_split
 from physgnn.errors import ConfigError
 from physgnn.evaluation.runs import dataset_of
-from physgnn.files import claim_folder, write_json
+from physgnn.files import claimed, write_json
 from physgnn.groundtruth.engine import simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.physics.trajectory import Trajectory
@@ -94,11 +94,17 @@ def markdown(rows: list[dict]) -> str:
 def study(cfg: DictConfig) -> list[dict]:
     """Load ``cfg.run``, compare sleeping off/on on OOD (c) and the pile; write the JSON. An
     ``out`` holding files physgnn did not write is refused before the work
-    (:func:`physgnn.files.claim_folder`; the default folder is physgnn's)."""
+    (:func:`physgnn.files.claim_folder`; the default folder is physgnn's); a study that fails
+    leaves no folder it made (:func:`physgnn.files.claimed`)."""
     if not cfg.run:
         raise ConfigError("pass run=PATH (a finished training run folder)")
     out = Path(cfg.out)
-    claim_folder(out, "out", overwrite=None, ours=out == Path(cfg.paths.outputs) / DEFAULT_OUT)
+    with claimed(out, "out", overwrite=None, ours=out == Path(cfg.paths.outputs) / DEFAULT_OUT):
+        return _study_into(cfg, out)
+
+
+def _study_into(cfg: DictConfig, out: Path) -> list[dict]:
+    """:func:`study`'s work, its JSON written into ``out``."""
     torch.set_num_threads(int(cfg.threads))
     simulator, run_cfg, _ = load_run(cfg.run)
     dataset = Path(cfg.dataset) if cfg.dataset else dataset_of(run_cfg)

@@ -28,7 +28,7 @@ import torch
 from physgnn.errors import DISK_WORDS, PhysgnnError, one_line
 from physgnn.files import (
     atomic_path,
-    claim_folder,
+    claimed,
     code_commit,
     portable,
     staged_outputs,
@@ -90,8 +90,10 @@ def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path |
     name = Path("checkpoints") / f"best-step{step:06d}.ckpt"  # one set of weights per folder
     failed = None
     try:
-        claim_folder(out_dir, "OUT_DIR", overwrite=None)  # ship takes no overwrite=true
-        with staged_outputs(out_dir, "OUT_DIR", SHIPPED) as staging:
+        with (
+            claimed(out_dir, "OUT_DIR", overwrite=None),  # ship takes no overwrite=true
+            staged_outputs(out_dir, "OUT_DIR", SHIPPED) as staging,
+        ):
             _write_package(staging, run_dir, name, (full, weights, step, source))
     except (PhysgnnError, FileExistsError):
         raise
