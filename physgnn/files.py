@@ -175,6 +175,20 @@ def claimed(
         raise
 
 
+@contextmanager
+def claimed_outputs(
+    folder: str | Path,
+    key: str,
+    outputs: Iterable[str],
+    overwrite: bool | None = False,
+    ours: bool = False,
+) -> Iterator[Path]:
+    """:func:`claimed` and :func:`staged_outputs` of one ``folder``: yields the staging folder
+    of a command that writes its ``outputs`` whole into a folder it may write into."""
+    with claimed(folder, key, overwrite, ours), staged_outputs(folder, key, outputs) as staging:
+        yield staging
+
+
 def file_in_the_way(folder: str | Path) -> Path | None:
     """The file where ``folder`` should be, or where one of the folders it lies in should be
     (it cannot be made); None where nothing is in the way."""

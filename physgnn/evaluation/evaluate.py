@@ -52,7 +52,7 @@ from physgnn.evaluation.runs import (
     references,
 )
 from physgnn.evaluation.video3d import render_side_by_side
-from physgnn.files import claimed, staged_outputs
+from physgnn.files import claimed_outputs
 from physgnn.report import bounce, figures, freefall, invariance, stability, table
 from physgnn.report import onestep as onestep_report
 from physgnn.report.document import write_report
@@ -87,10 +87,7 @@ def evaluate(cfg: DictConfig) -> Path:
         rerun_log.require()  # before the rollouts, not after them
     ours = report_dir == Path(cfg.paths.report_dir)
     overwrite = bool(cfg.get("overwrite"))
-    with (
-        claimed(report_dir, "report_dir", overwrite, ours),
-        staged_outputs(report_dir, "report_dir", REPORT_OUTPUTS) as staging,
-    ):
+    with claimed_outputs(report_dir, "report_dir", REPORT_OUTPUTS, overwrite, ours) as staging:
         _evaluate_into(cfg, staging)
     return report_dir / "report.md"
 

@@ -50,7 +50,7 @@ from physgnn.evaluation.ood import outside, warning_text
 from physgnn.evaluation.simulate_learned import LONG, learned
 from physgnn.evaluation.simulate_options import SimulateOptions
 from physgnn.evaluation.video3d import render_side_by_side
-from physgnn.files import claimed, staged_outputs, write_json
+from physgnn.files import claimed_outputs, write_json
 from physgnn.groundtruth.engine import simulate as engine_simulate
 from physgnn.groundtruth.families import build_scene
 from physgnn.groundtruth.scenefile import load_scene, scene_file, scene_to_dict
@@ -101,10 +101,8 @@ def simulate(cfg: DictConfig) -> dict:
     if options.rerun:
         rerun_log.require()  # before the work, not after it
     out = Path(options.out or Path(options.outputs) / "simulate" / scene.name)
-    with (
-        claimed(out, "out", overwrite=options.overwrite, ours=not options.out),
-        staged_outputs(out, "out", SIMULATE_OUTPUTS) as staging,
-    ):
+    overwrite, ours = options.overwrite, not options.out
+    with claimed_outputs(out, "out", SIMULATE_OUTPUTS, overwrite, ours) as staging:
         return _simulate_into(options, Scenario(scene, text), Folders(staging, out))
 
 

@@ -28,10 +28,9 @@ import torch
 from physgnn.errors import DISK_WORDS, PhysgnnError, one_line
 from physgnn.files import (
     atomic_path,
-    claimed,
+    claimed_outputs,
     code_commit,
     portable,
-    staged_outputs,
     write_text,
 )
 from physgnn.training.checks import not_a_checkpoint
@@ -90,10 +89,8 @@ def export_run(run_dir: Path, out_dir: Path = PRETRAINED_DIR, checkpoint: Path |
     name = Path("checkpoints") / f"best-step{step:06d}.ckpt"  # one set of weights per folder
     failed = None
     try:
-        with (
-            claimed(out_dir, "OUT_DIR", overwrite=None),  # ship takes no overwrite=true
-            staged_outputs(out_dir, "OUT_DIR", SHIPPED) as staging,
-        ):
+        # ship takes no overwrite=true
+        with claimed_outputs(out_dir, "OUT_DIR", SHIPPED, overwrite=None) as staging:
             _write_package(staging, run_dir, name, (full, weights, step, source))
     except (PhysgnnError, FileExistsError):
         raise

@@ -101,9 +101,9 @@ def _start(cfg: DictConfig, run_dir: Path) -> dict:
         "started": datetime.now().isoformat(timespec="seconds"),
         "host": socket.gethostname(),
         "pid": os.getpid(),
-        "commit": code_commit(),
-        # CPU results are reproducible for a seed *and* a thread count: record it.
+        # CPU results are reproducible for a seed, a thread count and the code: record them.
         "threads": torch.get_num_threads(),
+        "commit": code_commit(),
     }
 
 
